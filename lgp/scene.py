@@ -1,0 +1,294 @@
+"""Scenes of 1-inch cubes on a table: blocks, fixed obstacles, and the checks a
+stimulus must pass before anything plans or simulates on it.
+
+Frames follow Drake's monogram notation: W is the world frame on the table top
+(z = 0 is the table surface, x away from the agent, y to its left); B is a block's
+body frame at its centre; `p_WB` is the block centre in W and `yaw` its rotation
+about z, so X_WB = RigidTransform(RotationMatrix.MakeZRotation(yaw), p_WB).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Iterable
+
+import numpy as np
+
+#: Edge of a 1-inch wooden cube [paper], metres.
+BLOCK_SIZE = 0.0254
+#: Colours a block may have (stimuli-spec.md).
+COLOURS = ("natural", "green", "yellow", "blue", "red")
+#: Two solids may interpenetrate by at most this much (m) and still count as
+#: touching: trial files are written to 0.1 mm, and a touching pair computed in
+#: floating point overlaps by ~1e-17 m.
+OVERLAP_TOLERANCE = 1e-4
+#: A block rests on a surface when its bottom face is within this distance (m) of
+#: that surface's top face (and their footprints overlap by more than
+#: MIN_SUPPORT_AREA).
+CONTACT_TOLERANCE = 1e-4
+#: Smallest footprint overlap (m^2) that counts as support: 1 mm x 1 mm.
+MIN_SUPPORT_AREA = 1e-6
+#: Name of the table in support graphs.
+TABLE = "table"
+
+
+class StimulusError(ValueError):
+    """A trial, state or block breaks a rule of the stimulus format.
+
+    The message names the trial and state (e.g. ``7H-B``), the block and the rule.
+    """
+
+
+@dataclass(frozen=True)
+class Block:
+    """A cuboid block: name, centre `p_WB`, yaw about world z, colour, size (m)."""
+
+    name: str
+    p_WB: np.ndarray
+    yaw: float = 0.0
+    colour: str = "natural"
+    size: np.ndarray = field(default_factory=lambda: np.full(3, BLOCK_SIZE))
+
+    def __post_init__(self):
+        object.__setattr__(self, "p_WB", np.asarray(self.p_WB, dtype=float).reshape(3))
+        object.__setattr__(self, "size", np.asarray(self.size, dtype=float).reshape(3))
+        object.__setattr__(self, "yaw", float(self.yaw))
+
+    @property
+    def X_WB(self):
+        """Pose of the block frame in the world, as a Drake RigidTransform."""
+        from pydrake.math import RigidTransform, RotationMatrix
+
+        return RigidTransform(RotationMatrix.MakeZRotation(self.yaw), self.p_WB)
+
+    @property
+    def bottom(self) -> float:
+        return float(self.p_WB[2] - self.size[2] / 2)
+
+    @property
+    def top(self) -> float:
+        return float(self.p_WB[2] + self.size[2] / 2)
+
+    def footprint(self) -> np.ndarray:
+        """Corners (4, 2) of the block's outline seen from above, counter-clockwise."""
+        return _rectangle(self.p_WB[:2], self.size[:2], self.yaw)
+
+    def moved_to(self, p_WB, yaw: float | None = None) -> "Block":
+        return replace(self, p_WB=np.asarray(p_WB, float), yaw=self.yaw if yaw is None else yaw)
+
+
+@dataclass(frozen=True)
+class FixedBox:
+    """An axis-aligned box that never moves (a wall or the floor of the bucket).
+
+    `name` is the obstacle it belongs to (several boxes may share it, e.g. the five
+    boxes of the bucket); `p_WO` is the box centre and `size` its full extents.
+    """
+
+    name: str
+    p_WO: np.ndarray
+    size: np.ndarray
+
+    def __post_init__(self):
+        object.__setattr__(self, "p_WO", np.asarray(self.p_WO, dtype=float).reshape(3))
+        object.__setattr__(self, "size", np.asarray(self.size, dtype=float).reshape(3))
+
+    @property
+    def bottom(self) -> float:
+        return float(self.p_WO[2] - self.size[2] / 2)
+
+    @property
+    def top(self) -> float:
+        return float(self.p_WO[2] + self.size[2] / 2)
+
+    def footprint(self) -> np.ndarray:
+        return _rectangle(self.p_WO[:2], self.size[:2], 0.0)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Blocks plus fixed obstacles; `label` says where it came from (``7H-B``)."""
+
+    blocks: tuple[Block, ...]
+    fixed: tuple[FixedBox, ...] = ()
+    label: str = "scene"
+
+    def __post_init__(self):
+        object.__setattr__(self, "blocks", tuple(self.blocks))
+        object.__setattr__(self, "fixed", tuple(self.fixed))
+
+    def __len__(self) -> int:
+        return len(self.blocks)
+
+    def __iter__(self):
+        return iter(self.blocks)
+
+    @property
+    def names(self) -> list[str]:
+        return [b.name for b in self.blocks]
+
+    def block(self, name: str) -> Block:
+        for b in self.blocks:
+            if b.name == name:
+                return b
+        raise KeyError(f"{self.label}: no block named {name!r}")
+
+    def with_blocks(self, blocks: Iterable[Block]) -> "Scene":
+        return replace(self, blocks=tuple(blocks))
+
+    @property
+    def positions(self) -> np.ndarray:
+        """Block centres p_WB, shape (n, 3), in block order."""
+        return np.array([b.p_WB for b in self.blocks]).reshape(-1, 3)
+
+    def validate(self) -> "Scene":
+        """Raise StimulusError on the first broken rule; return self when valid."""
+        validate_scene(self)
+        return self
+
+
+# ----------------------------------------------------------------------------- geometry
+
+
+def _rectangle(center, size, yaw) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    R = np.array([[c, -s], [s, c]])
+    hx, hy = size[0] / 2, size[1] / 2
+    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+    return local @ R.T + np.asarray(center)[:2]
+
+
+def _polygon_area(P: np.ndarray) -> float:
+    x, y = P[:, 0], P[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def _clip(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
+    """Sutherland-Hodgman clipping of convex polygon `subject` by convex `clip` (CCW)."""
+    out = list(subject)
+    n = len(clip)
+    for i in range(n):
+        a, b = clip[i], clip[(i + 1) % n]
+        edge = b - a
+        inp, out = out, []
+        if not inp:
+            break
+
+        def inside(p):
+            return edge[0] * (p[1] - a[1]) - edge[1] * (p[0] - a[0]) >= -1e-15
+
+        def cross(p, q):
+            d = q - p
+            den = edge[0] * d[1] - edge[1] * d[0]
+            t = (edge[1] * (p[0] - a[0]) - edge[0] * (p[1] - a[1])) / den
+            return p + t * d
+
+        for j in range(len(inp)):
+            p, q = inp[j], inp[(j + 1) % len(inp)]
+            if inside(q):
+                if not inside(p):
+                    out.append(cross(p, q))
+                out.append(q)
+            elif inside(p):
+                out.append(cross(p, q))
+    return np.array(out).reshape(-1, 2)
+
+
+def footprint_overlap_area(a, b) -> float:
+    """Area (m^2) shared by the outlines seen from above of two blocks/boxes."""
+    P = _clip(a.footprint(), b.footprint())
+    return abs(_polygon_area(P)) if len(P) >= 3 else 0.0
+
+
+def horizontal_penetration(a, b) -> float:
+    """Depth (m) by which two outlines seen from above interpenetrate.
+
+    Separating-axis test on the two rectangles: the smallest overlap over the four
+    candidate axes; <= 0 means separated (its magnitude is the gap along that axis
+    only when the rectangles are aligned).
+    """
+    A, B = a.footprint(), b.footprint()
+    depth = np.inf
+    for P in (A, B):
+        for i in range(2):
+            axis = P[i + 1] - P[i]
+            axis = axis / np.linalg.norm(axis)
+            pa, pb = A @ axis, B @ axis
+            depth = min(depth, min(pa.max(), pb.max()) - max(pa.min(), pb.min()))
+    return float(depth)
+
+
+def penetration(a, b) -> float:
+    """Depth (m) by which two solids interpenetrate; <= 0 when they are apart."""
+    vertical = min(a.top, b.top) - max(a.bottom, b.bottom)
+    return min(vertical, horizontal_penetration(a, b))
+
+
+def rests_on(upper: Block, lower, tol: float = CONTACT_TOLERANCE) -> bool:
+    """True when `upper`'s bottom face lies on `lower`'s top face over a real area."""
+    return abs(upper.bottom - lower.top) <= tol and footprint_overlap_area(upper, lower) > MIN_SUPPORT_AREA
+
+
+# ----------------------------------------------------------------------------- validation
+
+
+def validate_scene(scene: Scene) -> None:
+    """Check the rules every stimulus state obeys (see stimuli/README.md)."""
+    label = scene.label
+    seen: set[str] = set()
+    for b in scene.blocks:
+        if b.name in seen:
+            raise StimulusError(f"{label}: duplicate block name {b.name!r}")
+        seen.add(b.name)
+        if not (np.all(np.isfinite(b.p_WB)) and np.isfinite(b.yaw) and np.all(np.isfinite(b.size))):
+            raise StimulusError(f"{label} block {b.name}: pose or size is not finite (p_WB={b.p_WB}, yaw={b.yaw})")
+        if np.any(b.size <= 0):
+            raise StimulusError(f"{label} block {b.name}: size must be positive, got {b.size}")
+        if b.colour not in COLOURS:
+            raise StimulusError(f"{label} block {b.name}: unknown colour {b.colour!r} (known: {', '.join(COLOURS)})")
+        if b.bottom < -CONTACT_TOLERANCE:
+            raise StimulusError(f"{label} block {b.name}: lies under the table (bottom at z = {b.bottom * 1000:.1f} mm)")
+    solids = list(scene.blocks)
+    for i, a in enumerate(solids):
+        for b in solids[i + 1:]:
+            depth = penetration(a, b)
+            if depth > OVERLAP_TOLERANCE:
+                raise StimulusError(f"{label} block {a.name} overlaps {b.name} by {depth * 1000:.1f} mm")
+        for f in scene.fixed:
+            depth = penetration(a, f)
+            if depth > OVERLAP_TOLERANCE:
+                raise StimulusError(f"{label} block {a.name} overlaps fixed {f.name} by {depth * 1000:.1f} mm")
+    for b in scene.blocks:
+        on_table = abs(b.bottom) <= CONTACT_TOLERANCE
+        if not on_table and not any(rests_on(b, o) for o in (*scene.blocks, *scene.fixed) if o is not b):
+            raise StimulusError(
+                f"{label} block {b.name}: floats (bottom at z = {b.bottom * 1000:.1f} mm rests on neither the table nor another solid)"
+            )
+
+
+# ----------------------------------------------------------------------------- support graph
+
+
+def support_graph(scene: Scene, tol: float = CONTACT_TOLERANCE) -> dict[str, list[str]]:
+    """Which solids each block rests on: {block: [supporters]}.
+
+    A supporter is another block, a fixed obstacle's name (e.g. ``bucket``) or
+    ``"table"``. Contact means the bottom face is within `tol` (m) of the
+    supporter's top face and the outlines share more than MIN_SUPPORT_AREA.
+    """
+    graph: dict[str, list[str]] = {}
+    for b in scene.blocks:
+        under = [o.name for o in scene.blocks if o is not b and rests_on(b, o, tol)]
+        under += sorted({f.name for f in scene.fixed if rests_on(b, f, tol)})
+        if abs(b.bottom) <= tol:
+            under.append(TABLE)
+        graph[b.name] = under
+    return graph
+
+
+def supported_by(graph: dict[str, list[str]]) -> dict[str, list[str]]:
+    """Invert a support graph: {solid: [blocks resting on it]}."""
+    above: dict[str, list[str]] = {name: [] for name in graph}
+    for upper, lowers in graph.items():
+        for lower in lowers:
+            above.setdefault(lower, []).append(upper)
+    return above
