@@ -1,0 +1,236 @@
+"""Step 2 of the model: the symbolic (logic) layer.
+
+The paper finds "an ordering of blocks by which State B will be constructed from
+blocks in State A ... from the ground up, making sure that each block to be placed
+has its support already in place", with two primitives, Grasp(Obj) and
+Place(Obj1, Obj2). Because pairs 6, 9 and 10 start from structures, the ordering
+must also respect the support graph of A: a block can only be grasped when nothing
+rests on it. The geometric layer (KOMO) meets this layer only through the skeleton,
+a list of (phase, action).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lgp.scene import CONTACT_TOLERANCE, OVERLAP_TOLERANCE, TABLE, Scene, penetration, support_graph, supported_by
+
+
+class IllegalActionError(ValueError):
+    """An action cannot be applied in the current state; the message names both."""
+
+
+class SymbolicPlanningError(ValueError):
+    """No legal order of grasp/place actions reaches the target."""
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """Pick up `block` (a name in A) with the single hand."""
+
+    block: str
+
+    def __str__(self) -> str:
+        return f"Grasp({self.block})"
+
+
+@dataclass(frozen=True)
+class Place:
+    """Put the held `block` at its target pose (p_WB, yaw), resting on `onto`.
+
+    `onto` names what it rests on once placed: blocks of A (already placed), the
+    table, or a fixed obstacle.
+    """
+
+    block: str
+    onto: tuple[str, ...]
+    p_WB: np.ndarray = field(compare=False)
+    yaw: float = field(default=0.0, compare=False)
+
+    def __str__(self) -> str:
+        return f"Place({self.block}, {'+'.join(self.onto)})"
+
+
+Action = Grasp | Place
+
+
+@dataclass(frozen=True)
+class PlanState:
+    """Block poses (as a Scene of A's block names) and the block in hand, if any."""
+
+    scene: Scene
+    held: str | None = None
+
+
+#: Two poses are the same when centres agree to 0.1 mm and yaw agrees modulo the
+#: cube's quarter-turn symmetry to 1 mrad.
+POSITION_TOLERANCE = 1e-4
+YAW_TOLERANCE = 1e-3
+
+
+def same_pose(p_a, yaw_a, p_b, yaw_b) -> bool:
+    d_yaw = (yaw_a - yaw_b + np.pi / 4) % (np.pi / 2) - np.pi / 4
+    return bool(np.linalg.norm(np.asarray(p_a) - np.asarray(p_b)) <= POSITION_TOLERANCE and abs(d_yaw) <= YAW_TOLERANCE)
+
+
+def apply(action: Action, state: PlanState) -> PlanState:
+    """The state after `action`; raises IllegalActionError if it is not allowed.
+
+    Rules: one hand, so Grasp needs an empty hand and Place the block in hand; a
+    block can be grasped only when nothing rests on it; a placed block must not
+    overlap another block or obstacle and must rest on exactly what `onto` says.
+    """
+    scene = state.scene
+    if action.block not in scene.names:
+        raise IllegalActionError(f"{action} in {scene.label}: no block {action.block!r}")
+    if isinstance(action, Grasp):
+        if state.held is not None:
+            raise IllegalActionError(f"{action} in {scene.label}: the hand already holds {state.held}")
+        above = supported_by(support_graph(scene))[action.block]
+        if above:
+            raise IllegalActionError(f"{action} in {scene.label}: {', '.join(above)} rests on {action.block}")
+        return PlanState(scene, held=action.block)
+    if isinstance(action, Place):
+        if state.held != action.block:
+            raise IllegalActionError(f"{action} in {scene.label}: the hand holds {state.held}, not {action.block}")
+        moved = scene.block(action.block).moved_to(action.p_WB, action.yaw)
+        new = scene.with_blocks(moved if b.name == action.block else b for b in scene.blocks)
+        for other in (*new.blocks, *new.fixed):
+            if other.name == moved.name:
+                continue
+            depth = penetration(moved, other)
+            if depth > OVERLAP_TOLERANCE:
+                raise IllegalActionError(f"{action} in {scene.label}: {moved.name} would overlap {other.name} by {depth * 1000:.1f} mm")
+        rests = set(support_graph(new, CONTACT_TOLERANCE)[moved.name])
+        if rests != set(action.onto):
+            raise IllegalActionError(
+                f"{action} in {scene.label}: {moved.name} would rest on {sorted(rests) or 'nothing'}, not {sorted(action.onto)}"
+            )
+        return PlanState(new, held=None)
+    raise IllegalActionError(f"unknown action {action!r}")
+
+
+@dataclass(frozen=True)
+class SymbolicPlan:
+    """A legal sequence of Grasp/Place actions taking `initial` to `target`."""
+
+    initial: Scene
+    target: Scene
+    assignment: dict[str, str]
+    actions: tuple[Action, ...]
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+    @property
+    def moved(self) -> list[str]:
+        """Names (in A) of the blocks the plan moves, in the order they move."""
+        return [a.block for a in self.actions if isinstance(a, Grasp)]
+
+    def skeleton(self) -> list[tuple[float, Action]]:
+        """(phase, action) pairs on KOMO's phase clock: action k at phase k."""
+        return [(float(k + 1), a) for k, a in enumerate(self.actions)]
+
+    def states(self) -> list[PlanState]:
+        """The state after each action (checked by `apply`)."""
+        state, out = PlanState(self.initial), []
+        for action in self.actions:
+            state = apply(action, state)
+            out.append(state)
+        return out
+
+    def final_scene(self) -> Scene:
+        return self.states()[-1].scene if self.actions else self.initial
+
+    def __str__(self) -> str:
+        return " -> ".join(map(str, self.actions))
+
+
+def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> SymbolicPlan:
+    """Order grasp/place actions so B is built from the ground up.
+
+    Greedy over legal moves: a block may move when nothing rests on it (support
+    graph of the current state), every block it rests on in B is already in place,
+    and its target volume is free. Among legal moves the lowest target goes first,
+    ties broken by A's block order. When the distance-minimising assignment admits
+    no legal move (relocating a tower, pair 10: the bottom block of A is assigned
+    the bottom of B), a clear block of the same colour swaps targets with the
+    covered one; the returned plan carries the assignment it executed. Blocks already at their target pose, on
+    supports that also stay, are not moved (pair 9-E moves 2 blocks).
+    """
+    target_of = {a: target.block(b) for a, b in assignment.items()}
+    block_of_target = {b: a for a, b in assignment.items()}
+    support_A = support_graph(initial)
+    support_B = support_graph(target)
+    fixed_names = {f.name for f in initial.fixed} | {TABLE}
+
+    stays: dict[str, bool] = {}
+
+    def stays_put(a: str) -> bool:
+        if a not in stays:
+            stays[a] = False  # guards against cycles while recursing
+            block, goal = initial.block(a), target_of.get(a)
+            stays[a] = (
+                goal is not None
+                and same_pose(block.p_WB, block.yaw, goal.p_WB, goal.yaw)
+                and all(s in fixed_names or stays_put(s) for s in support_A[a])
+            )
+        return stays[a]
+
+    to_move = [a for a in initial.names if a in target_of and not stays_put(a)]
+    in_place = {a for a in target_of if stays_put(a)}
+
+    def onto(a: str) -> tuple[str, ...]:
+        return tuple(s if s in fixed_names else block_of_target[s] for s in support_B[target_of[a].name])
+
+    state, actions = PlanState(initial), []
+    while to_move:
+        current = state.scene
+        above = supported_by(support_graph(current))
+        clear = [a for a in to_move if not above[a]]
+        ready = []  # (target height, A order, block assigned to a target that can be built now)
+        for order, a in enumerate(to_move):
+            goal = target_of[a]
+            if not all(s in fixed_names or s in in_place for s in onto(a)):
+                continue
+            goal_block = current.block(a).moved_to(goal.p_WB, goal.yaw)
+            if any(penetration(goal_block, o) > OVERLAP_TOLERANCE for o in current.blocks if o.name != a):
+                continue
+            ready.append((goal.p_WB[2], order, a))
+        legal = [r for r in ready if r[2] in clear]
+        if legal:
+            _, _, a = min(legal)
+        elif ready:
+            # Repair (the paper's footnote: distance and support are handled
+            # separately): the block assigned to the lowest ready target is covered,
+            # so a clear block of the same colour takes its role, the pair that adds
+            # the least distance swapping targets.
+            _, _, covered = min(ready)
+            swaps = [c for c in clear if initial.block(c).colour == initial.block(covered).colour]
+            if not swaps:
+                raise SymbolicPlanningError(
+                    f"{initial.label} -> {target.label}: {covered} must go to {target_of[covered].name} next but is covered, "
+                    "and no clear block of its colour can take its place"
+                )
+
+            def added(c):
+                pc, pa = initial.block(c).p_WB, initial.block(covered).p_WB
+                return np.linalg.norm(pc - target_of[covered].p_WB) + np.linalg.norm(pa - target_of[c].p_WB)
+
+            a = min(swaps, key=added)
+            target_of[a], target_of[covered] = target_of[covered], target_of[a]
+            block_of_target[target_of[a].name], block_of_target[target_of[covered].name] = a, covered
+        else:
+            raise SymbolicPlanningError(
+                f"{initial.label} -> {target.label}: no legal move for blocks {', '.join(to_move)} "
+                "(none has its support in B in place with its target volume free)"
+            )
+        goal = target_of[a]
+        for action in (Grasp(a), Place(a, onto(a), goal.p_WB.copy(), goal.yaw)):
+            state = apply(action, state)
+            actions.append(action)
+        to_move.remove(a)
+        in_place.add(a)
+    assignment = {a: g.name for a, g in target_of.items()}
+    return SymbolicPlan(initial, target, dict(assignment), tuple(actions))

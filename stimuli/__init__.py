@@ -1,0 +1,299 @@
+"""The 24 construction trials of the paper (Figure 1) as data files, and their loader.
+
+Each trial is a YAML file in ``stimuli/trials/`` (format: ``stimuli/README.md``).
+``load_trial("7H")`` returns a validated :class:`Trial`; ``load_all()`` the 24 trials
+in order 1E, 1H, ..., 12H plus any extra trial file a user drops in (sorted after).
+"""
+from __future__ import annotations
+
+import hashlib
+import re
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from lgp.assignment import colour_shortfall
+from lgp.scene import BLOCK_SIZE, Block, FixedBox, Scene, StimulusError, horizontal_penetration
+
+TRIAL_DIR = Path(__file__).parent / "trials"
+TRIAL_ID = re.compile(r"^(\d+)([EH])$")
+
+#: Attempts to place one scattered block before the whole layout is redrawn, and
+#: redraws before the region is declared too small.
+_TRIES_PER_BLOCK = 2000
+_LAYOUT_REDRAWS = 50
+
+_TRIAL_KEYS = {"id", "pair", "level", "dimension", "description", "build_site", "provenance", "fixed", "initial", "target"}
+_INITIAL_KEYS = {"blocks", "scattered", "recolour"}
+_SCATTER_KEYS = {"count", "colour", "colours", "region", "min_gap", "clearance", "prefix"}
+_BLOCK_KEYS = {"name", "p_WB", "yaw", "colour", "size"}
+
+
+@dataclass(frozen=True)
+class ScatterRegion:
+    """Where scattered blocks may lie: a rectangle in x, y, optionally limited to a
+    band of distances r_S from the build site S."""
+
+    x: tuple[float, float]
+    y: tuple[float, float]
+    r_S: tuple[float, float] | None = None
+
+    def contains(self, p, build_site) -> bool:
+        inside = self.x[0] <= p[0] <= self.x[1] and self.y[0] <= p[1] <= self.y[1]
+        if inside and self.r_S is not None:
+            r = float(np.hypot(p[0] - build_site[0], p[1] - build_site[1]))
+            inside = self.r_S[0] <= r <= self.r_S[1]
+        return inside
+
+
+@dataclass(frozen=True)
+class StartState:
+    """State A: blocks of fixed structures, plus blocks scattered at random.
+
+    `blocks` are the blocks whose poses the trial fixes (structures, the bucket's
+    contents); `scattered` are (name, colour) of blocks drawn anew for each sample,
+    uniformly in `region`, with random yaw, at least `min_gap` (m) from each other
+    and at least `clearance` (m) from the target's footprint and fixed structures.
+    `recolour` = (count, colour): that many of `blocks`, chosen at random per sample,
+    take that colour (pair 12's blue/red blocks in the bucket).
+    """
+
+    label: str
+    blocks: tuple[Block, ...]
+    fixed: tuple[FixedBox, ...]
+    scattered: tuple[tuple[str, str], ...] = ()
+    region: ScatterRegion | None = None
+    min_gap: float = 0.01
+    clearance: float = 0.02
+    recolour: tuple[int, str] | None = None
+    build_site: tuple[float, float] = (0.35, 0.0)
+    keep_clear: tuple = ()
+
+    @property
+    def is_random(self) -> bool:
+        return bool(self.scattered) or self.recolour is not None
+
+    def colour_counts(self) -> dict[str, int]:
+        """Most blocks of each colour a sample can hold."""
+        counts: dict[str, int] = {}
+        for _, c in self.scattered:
+            counts[c] = counts.get(c, 0) + 1
+        for b in self.blocks:
+            counts[b.colour] = counts.get(b.colour, 0) + 1
+        if self.recolour:
+            n, c = self.recolour
+            counts[c] = counts.get(c, 0) + n
+        return counts
+
+    def sample(self, rng: np.random.Generator) -> Scene:
+        """A concrete layout of A; the same Generator state gives the same layout."""
+        blocks = list(self.blocks)
+        if self.scattered:
+            blocks += self._scatter(rng)
+        if self.recolour:
+            n, colour = self.recolour
+            chosen = set(rng.choice(len(self.blocks), size=n, replace=False).tolist())
+            blocks = [replace(b, colour=colour) if i in chosen else b for i, b in enumerate(blocks)]
+        return Scene(blocks, self.fixed, self.label).validate()
+
+    def _scatter(self, rng: np.random.Generator) -> list[Block]:
+        d = BLOCK_SIZE
+        obstacles = [*self.blocks, *self.fixed]
+        for _ in range(_LAYOUT_REDRAWS):
+            placed: list[Block] = []
+            for name, colour in self.scattered:
+                for _ in range(_TRIES_PER_BLOCK):
+                    p = np.array([rng.uniform(*self.region.x), rng.uniform(*self.region.y), d / 2])
+                    yaw = rng.uniform(0.0, np.pi / 2)  # a cube looks the same every quarter turn
+                    if not self.region.contains(p, self.build_site):
+                        continue
+                    # Inflate the candidate: gaps are measured between outlines.
+                    cand_gap = Block(name, p, yaw, colour, size=np.full(3, d + 2 * self.min_gap))
+                    cand_clear = Block(name, p, yaw, colour, size=np.full(3, d + 2 * self.clearance))
+                    if any(horizontal_penetration(cand_gap, o) > 0 for o in placed):
+                        continue
+                    if any(horizontal_penetration(cand_clear, o) > 0 for o in (*obstacles, *self.keep_clear)):
+                        continue
+                    placed.append(Block(name, p, yaw, colour))
+                    break
+                else:
+                    break
+            if len(placed) == len(self.scattered):
+                return placed
+        raise StimulusError(f"{self.label}: cannot scatter {len(self.scattered)} blocks in region {self.region} (too small)")
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One construction task: start state A, target state B, and where facts come from."""
+
+    id: str
+    pair: int
+    level: str
+    dimension: str
+    description: str
+    initial: StartState
+    target: Scene
+    provenance: dict = field(default_factory=dict)
+    path: Path | None = None
+
+    def sample_initial(self, rng: np.random.Generator) -> Scene:
+        """Draw a concrete A (scattered blocks at random), validated."""
+        return self.initial.sample(rng)
+
+    @property
+    def digest(self) -> str:
+        """Hash of the trial file's bytes: keys caches of results computed from it."""
+        return hashlib.sha256(self.path.read_bytes()).hexdigest()[:16] if self.path else ""
+
+    def __repr__(self) -> str:
+        return f"Trial({self.id}: {self.description})"
+
+
+# ----------------------------------------------------------------------------- parsing
+
+
+def _check_keys(where: str, data: dict, allowed: set[str]) -> None:
+    if not isinstance(data, dict):
+        raise StimulusError(f"{where}: expected a mapping, got {type(data).__name__}")
+    unknown = set(data) - allowed
+    if unknown:
+        raise StimulusError(f"{where}: unknown field(s) {', '.join(sorted(unknown))} (allowed: {', '.join(sorted(allowed))})")
+
+
+def _vector(where: str, value, n: int) -> np.ndarray:
+    try:
+        v = np.asarray(value, dtype=float).reshape(n)
+    except (TypeError, ValueError):
+        raise StimulusError(f"{where}: expected {n} numbers, got {value!r}") from None
+    return v
+
+
+def _block(where: str, data: dict) -> Block:
+    _check_keys(where, data, _BLOCK_KEYS)
+    if "name" not in data or "p_WB" not in data:
+        raise StimulusError(f"{where}: a block needs a name and p_WB")
+    where = f"{where} block {data['name']}"
+    size = _vector(where + " size", data.get("size", [BLOCK_SIZE] * 3), 3)
+    return Block(str(data["name"]), _vector(where + " p_WB", data["p_WB"], 3), float(data.get("yaw", 0.0)), str(data.get("colour", "natural")), size)
+
+
+def _fixed(where: str, data: list) -> tuple[FixedBox, ...]:
+    boxes = []
+    for obstacle in data or []:
+        _check_keys(where, obstacle, {"name", "boxes"})
+        for box in obstacle["boxes"]:
+            _check_keys(f"{where} {obstacle['name']}", box, {"p_WO", "size"})
+            boxes.append(FixedBox(obstacle["name"], _vector(where, box["p_WO"], 3), _vector(where, box["size"], 3)))
+    return tuple(boxes)
+
+
+def parse_trial(data: dict, path: Path | None = None) -> Trial:
+    """Build and validate a Trial from the mapping in a trial file."""
+    where = str(data.get("id", path)) if isinstance(data, dict) else str(path)
+    _check_keys(where, data, _TRIAL_KEYS)
+    tid = str(data.get("id", ""))
+    m = TRIAL_ID.match(tid)
+    if not m:
+        raise StimulusError(f"{path}: trial id {tid!r} is not of the form <pair><E|H>, e.g. 7H")
+    if int(data.get("pair", -1)) != int(m.group(1)) or data.get("level") != m.group(2):
+        raise StimulusError(f"{tid}: pair/level fields disagree with the id")
+    fixed = _fixed(f"{tid} fixed", data.get("fixed"))
+    build_site = tuple(_vector(f"{tid} build_site", data.get("build_site", [0.35, 0.0]), 2))
+
+    target_data = data.get("target") or {}
+    _check_keys(f"{tid}-B", target_data, {"blocks"})
+    target = Scene([_block(f"{tid}-B", b) for b in target_data.get("blocks", [])], fixed, f"{tid}-B").validate()
+    if not target.blocks:
+        raise StimulusError(f"{tid}-B: the target has no blocks")
+
+    init = data.get("initial") or {}
+    _check_keys(f"{tid}-A", init, _INITIAL_KEYS)
+    fixed_blocks = tuple(_block(f"{tid}-A", b) for b in init.get("blocks", []))
+    Scene(fixed_blocks, fixed, f"{tid}-A").validate()
+    scattered, region, kw = (), None, {}
+    if "scattered" in init:
+        s = init["scattered"]
+        _check_keys(f"{tid}-A scattered", s, _SCATTER_KEYS)
+        colours = s.get("colours") or [s.get("colour", "natural")] * int(s.get("count", 0))
+        prefix = s.get("prefix", "s")
+        scattered = tuple((f"{prefix}{i + 1}", str(c)) for i, c in enumerate(colours))
+        r = s.get("region") or {}
+        _check_keys(f"{tid}-A scattered region", r, {"x", "y", "r_S"})
+        try:
+            region = ScatterRegion(tuple(map(float, r["x"])), tuple(map(float, r["y"])), tuple(map(float, r["r_S"])) if "r_S" in r else None)
+        except (KeyError, TypeError, ValueError):
+            raise StimulusError(f"{tid}-A scattered region: needs x: [min, max] and y: [min, max]") from None
+        kw = {k: float(s[k]) for k in ("min_gap", "clearance") if k in s}
+    recolour = None
+    if "recolour" in init:
+        rc = init["recolour"]
+        _check_keys(f"{tid}-A recolour", rc, {"count", "colour"})
+        recolour = (int(rc["count"]), str(rc["colour"]))
+        if recolour[0] > len(fixed_blocks):
+            raise StimulusError(f"{tid}-A recolour: {recolour[0]} blocks asked, only {len(fixed_blocks)} listed")
+    names = [b.name for b in fixed_blocks] + [n for n, _ in scattered]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise StimulusError(f"{tid}-A: duplicate block name {sorted(dup)[0]!r}")
+    start = StartState(f"{tid}-A", fixed_blocks, fixed, scattered, region, recolour=recolour, build_site=build_site, keep_clear=target.blocks, **kw)
+
+    have = start.colour_counts()
+    for colour, need in _count_colours(target).items():
+        if need > have.get(colour, 0):
+            raise StimulusError(f"{tid}-B: needs {need} {colour} blocks but {tid}-A has {have.get(colour, 0)}")
+    trial = Trial(tid, int(m.group(1)), m.group(2), str(data.get("dimension", "")), str(data.get("description", "")), start, target, data.get("provenance") or {}, path)
+    # One draw proves the region can hold the scattered blocks and A is valid.
+    sample = trial.sample_initial(np.random.default_rng(0))
+    if colour_shortfall(sample, target):
+        raise StimulusError(f"{tid}: a sample of A lacks colours for B: {colour_shortfall(sample, target)}")
+    return trial
+
+
+def _count_colours(scene: Scene) -> dict[str, int]:
+    counts: dict[str, int] = {}
+    for b in scene.blocks:
+        counts[b.colour] = counts.get(b.colour, 0) + 1
+    return counts
+
+
+def load_file(path: str | Path) -> Trial:
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise StimulusError(f"{path}: not valid YAML: {e}") from None
+    return parse_trial(data, path)
+
+
+def _sort_key(tid: str):
+    m = TRIAL_ID.match(tid)
+    return (int(m.group(1)), m.group(2)) if m else (10**6, tid)
+
+
+def trial_ids(directory: Path = TRIAL_DIR) -> list[str]:
+    return sorted((p.stem for p in directory.glob("*.yaml")), key=_sort_key)
+
+
+_cache: dict[tuple[str, str], Trial] = {}
+
+
+def load_trial(trial_id: str, directory: str | Path = TRIAL_DIR) -> Trial:
+    """The trial ``trial_id`` (e.g. ``"7H"``) from ``directory``, validated."""
+    path = Path(directory) / f"{trial_id}.yaml"
+    if not path.exists():
+        raise StimulusError(f"no trial {trial_id!r}: {path} does not exist (known: {', '.join(trial_ids(Path(directory)))})")
+    key = (str(path), hashlib.sha256(path.read_bytes()).hexdigest())
+    if key not in _cache:
+        trial = load_file(path)
+        if trial.id != trial_id:
+            raise StimulusError(f"{path}: file name says {trial_id} but the id field says {trial.id}")
+        _cache[key] = trial
+    return _cache[key]
+
+
+def load_all(directory: str | Path = TRIAL_DIR) -> list[Trial]:
+    """Every trial in ``directory``: 1E, 1H, ..., 12H, then any others."""
+    return [load_trial(t, directory) for t in trial_ids(Path(directory))]
