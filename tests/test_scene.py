@@ -1,0 +1,51 @@
+"""Scene geometry and the support graph against hand-worked answers."""
+import numpy as np
+import pytest
+
+import stimuli
+from lgp.scene import BLOCK_SIZE as d
+from lgp.scene import Block, FixedBox, Scene, footprint_overlap_area, penetration, support_graph, supported_by
+
+h = d / 2
+
+
+def test_rotated_footprint_overlap_matches_closed_form():
+    # A unit square and the same square turned 45 degrees about the same centre
+    # share an octagon of area 2(sqrt 2 - 1) s^2.
+    a = Block("a", [0, 0, h])
+    b = Block("b", [0, 0, 3 * h], yaw=np.pi / 4)
+    assert footprint_overlap_area(a, b) == pytest.approx(2 * (np.sqrt(2) - 1) * d * d, rel=1e-9)
+
+
+def test_offset_blocks_share_the_overlapping_strip():
+    a, b = Block("a", [0, 0, h]), Block("b", [0.3 * d, 0.1 * d, 3 * h])
+    assert footprint_overlap_area(a, b) == pytest.approx(0.7 * d * 0.9 * d)
+
+
+def test_penetration_of_side_by_side_blocks():
+    a = Block("a", [0, 0, h])
+    assert penetration(a, Block("b", [d, 0, h])) == pytest.approx(0.0, abs=1e-12)
+    assert penetration(a, Block("b", [0.9 * d, 0, h])) == pytest.approx(0.1 * d)
+    assert penetration(a, Block("b", [1.2 * d, 0, h])) < 0
+
+
+def test_support_graph_of_the_pyramid():
+    g = support_graph(stimuli.load_trial("5E").target)
+    assert g == {"b1": ["table"], "b2": ["table"], "b3": ["table"], "b4": ["b1", "b2"], "b5": ["b2", "b3"], "b6": ["b4", "b5"]}
+    assert supported_by(g)["b2"] == ["b4", "b5"]
+
+
+def test_support_graph_of_the_bridge_span_rests_on_both_pillars():
+    g = support_graph(stimuli.load_trial("5H").target)
+    assert sorted(g["b5"]) == ["b2", "b4"] and g["b6"] == ["b5"]
+
+
+def test_blocks_in_the_bucket_rest_on_the_bucket():
+    floor = FixedBox("bucket", [0, 0, 0.0025], [0.1, 0.1, 0.005])
+    s = Scene([Block("a", [0, 0, 0.005 + h])], [floor])
+    assert support_graph(s) == {"a": ["bucket"]}
+
+
+def test_block_touching_only_at_an_edge_is_not_supported():
+    s = Scene([Block("a", [0, 0, h]), Block("b", [d, 0, 3 * h])])
+    assert support_graph(s)["b"] == []
