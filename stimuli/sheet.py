@@ -1,0 +1,87 @@
+"""Contact sheet of the trials: start state A and target state B side by side.
+
+    python -m stimuli.sheet --out stimuli.png [--seed 0] [--trials 7E 7H]
+
+Scattered blocks are drawn in one random layout (the seed's); a person can check
+the structures at a glance against the paper's Figure 1.
+"""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+import stimuli
+from lgp.scene import Scene
+
+FACE_COLOURS = {"natural": "#d9b27c", "green": "#3a9b48", "yellow": "#f0cf2c", "blue": "#3563c9", "red": "#cc3333"}
+
+
+def _box_faces(p, size, yaw):
+    c, s = np.cos(yaw), np.sin(yaw)
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    corners = np.array([[x, y, z] for z in (-1, 1) for y in (-1, 1) for x in (-1, 1)]) * np.asarray(size) / 2
+    v = corners @ R.T + p
+    idx = [(0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5)]
+    return [v[list(f)] for f in idx]
+
+
+def _fit_limits(scene: Scene, margin: float = 0.03):
+    """A cube of view around everything in the scene, so small structures stay visible."""
+    P = np.vstack([scene.positions] + [f.p_WO[None] for f in scene.fixed])
+    lo, hi = P.min(axis=0) - margin, P.max(axis=0) + margin
+    half = max((hi - lo)[:2].max() / 2, (hi[2] + margin) / 2, 0.06)
+    cx, cy = (lo[:2] + hi[:2]) / 2
+    return (cx - half, cx + half), (cy - half, cy + half), (0.0, max(hi[2] + margin, 2 * half * 0.5))
+
+
+def draw_scene(ax, scene: Scene, title: str = "", limits=None) -> None:
+    """Draw blocks (coloured) and fixed boxes (translucent grey) on a 3-D axis."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    for b in scene.blocks:
+        ax.add_collection3d(Poly3DCollection(_box_faces(b.p_WB, b.size, b.yaw), facecolor=FACE_COLOURS[b.colour], edgecolor="k", linewidths=0.3))
+    for f in scene.fixed:
+        ax.add_collection3d(Poly3DCollection(_box_faces(f.p_WO, f.size, 0.0), facecolor=(0.5, 0.5, 0.5, 0.08), edgecolor=(0.3, 0.3, 0.3, 0.4), linewidths=0.2))
+    (x0, x1), (y0, y1), (z0, z1) = limits or _fit_limits(scene)
+    ax.set_xlim(x0, x1), ax.set_ylim(y0, y1), ax.set_zlim(z0, z1)
+    ax.set_box_aspect((x1 - x0, y1 - y0, z1 - z0))
+    ax.view_init(elev=22, azim=-160)  # looking from the agent's side, slightly above
+    ax.set_xticks([]), ax.set_yticks([]), ax.set_zticks([])
+    ax.set_title(title, fontsize=8)
+
+
+def contact_sheet(trials, seed: int = 0, out: str = "stimuli.png") -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cols = 4  # trials per row, each as A | B
+    rows = int(np.ceil(len(trials) / cols))
+    fig = plt.figure(figsize=(cols * 5.0, rows * 2.6))
+    for k, trial in enumerate(trials):
+        A = trial.sample_initial(np.random.default_rng(seed))
+        r, c = divmod(k, cols)
+        for j, (scene, state) in enumerate(((A, "A"), (trial.target, "B"))):
+            ax = fig.add_subplot(rows, 2 * cols, r * 2 * cols + 2 * c + j + 1, projection="3d")
+            draw_scene(ax, scene, f"{trial.id}-{state}" + (f": {trial.dimension}" if state == "A" else ""))
+    fig.suptitle(f"The {len(trials)} trials (A: start, one random layout, seed {seed}; B: finish; each panel zoomed to its content)", fontsize=12)
+    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.95, wspace=0.02, hspace=0.12)
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+    return out
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", default="stimuli.png")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--trials", nargs="*", help="trial ids (default: all)")
+    args = parser.parse_args(argv)
+    trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
+    print(contact_sheet(trials, args.seed, args.out))
+
+
+if __name__ == "__main__":
+    main()
