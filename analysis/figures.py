@@ -1,0 +1,225 @@
+"""Figures of the Results section, written as PNG and PDF.
+
+* `plot_trial_means`: Figure 3 analog, mean z-scored responses per trial with
+  95% bootstrap intervals and the fitted model (easy red, hard blue).
+* `plot_model_correlations`: Figure 4 analog, bootstrap correlations of the
+  three models per dataset.
+* `plot_sigma_profile`: RMSE of Eq. 1 against sigma.
+* `plot_effort_risk`: effort, risk and (optionally) full-model cost per easy/hard
+  pair; needs no human data.
+
+Figures from simulated participants (datasets ``simulated-...``) say
+"SIMULATED participants (not human data)" in the title and have "simulated" in
+their file names. Drawing uses matplotlib's object API with the Agg canvas, so
+importing this module never changes the caller's pyplot backend.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+from analysis.data import PAIRS, TRIAL_IDS, is_simulated_dataset, ordered_datasets
+from analysis.models import MODEL_LABELS, MODELS, effort_per_trial, full_model_cost, risk_at_sigma
+from analysis.pairs import pair_table
+
+EASY_COLOUR = "tab:red"
+HARD_COLOUR = "tab:blue"
+MODEL_COLOURS = {"full": "black", "effort": "tab:green", "risk": "tab:orange"}
+SIMULATED_TITLE = "SIMULATED participants (not human data)"
+DATASET_LABELS = {"difficulty": "Estimated Difficulty", "time": "Estimated Time",
+                  "build": "Build Time"}
+
+
+def dataset_label(dataset: str) -> str:
+    """'time' -> 'Estimated Time'; 'simulated-time' -> 'SIMULATED Estimated Time'."""
+    if is_simulated_dataset(dataset):
+        base = dataset.split("-", 1)[1]
+        return f"SIMULATED {DATASET_LABELS.get(base, base)}"
+    return DATASET_LABELS.get(dataset, dataset)
+
+
+def plot_trial_means(means: pd.DataFrame, predictions: pd.DataFrame, out_dir: str | Path,
+                     model: str = "full", stem: str = "fig3_trial_means") -> list[Path]:
+    """Figure 3 analog: one panel per dataset.
+
+    `means` has columns dataset, trial, mean_z, ci_low, ci_high
+    (`trial_mean_intervals`); `predictions` columns dataset, model, sigma, trial,
+    predicted (`fit_models`). Human means are large points joined by solid lines
+    within each pair, with 95% CI bars; the `model` fit small points joined by
+    dotted lines; easy trials red, hard blue. Returns the PNG and PDF paths.
+    """
+    datasets = ordered_datasets(means["dataset"].unique())
+    fig = Figure(figsize=(11, 2.9 * len(datasets) + 0.6))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(datasets), 1, squeeze=False)[:, 0]
+    x = _trial_x()
+    for ax, dataset in zip(axes, datasets):
+        m = means[means["dataset"] == dataset].set_index("trial").reindex(list(TRIAL_IDS))
+        p = predictions[(predictions["dataset"] == dataset) & (predictions["model"] == model)]
+        p = p.set_index("trial").reindex(list(TRIAL_IDS))
+        sigma = p["sigma"].iloc[0] if "sigma" in p and len(p) else np.nan
+        r = np.corrcoef(p["predicted"], m["mean_z"])[0, 1]
+        for k, pair in enumerate(PAIRS):
+            sl = slice(2 * k, 2 * k + 2)
+            ax.plot(x[sl], m["mean_z"].to_numpy()[sl], "-", color="0.45", lw=1.2, zorder=1)
+            ax.plot(x[sl] + 0.18, p["predicted"].to_numpy()[sl], ":", color="0.2", lw=1.2, zorder=1)
+        for level, colour in (("E", EASY_COLOUR), ("H", HARD_COLOUR)):
+            idx = [i for i, t in enumerate(TRIAL_IDS) if t.endswith(level)]
+            mm = m["mean_z"].to_numpy()[idx]
+            err = np.vstack([mm - m["ci_low"].to_numpy()[idx], m["ci_high"].to_numpy()[idx] - mm])
+            ax.errorbar(x[idx], mm, yerr=err, fmt="o", ms=7, color=colour, ecolor=colour,
+                        elinewidth=1.2, capsize=2.5, zorder=3)
+            ax.plot(x[idx] + 0.18, p["predicted"].to_numpy()[idx], "o", ms=3.5, color=colour,
+                    markeredgecolor="black", markeredgewidth=0.4, zorder=4)
+        ax.axhline(0, color="0.85", lw=0.8, zorder=0)
+        ax.set_xticks(x, list(TRIAL_IDS), fontsize=8)
+        ax.set_xlim(x[0] - 0.7, x[-1] + 0.9)
+        ax.set_ylabel("mean z-score")
+        ax.set_title(f"{dataset_label(dataset)}: {MODEL_LABELS.get(model, model)} model, "
+                     f"sigma = {sigma:g} d, r = {r:.2f}", fontsize=10)
+    handles = [
+        Line2D([], [], marker="o", ms=7, color=EASY_COLOUR, ls="", label="easy trial (mean, 95% CI)"),
+        Line2D([], [], marker="o", ms=7, color=HARD_COLOUR, ls="", label="hard trial (mean, 95% CI)"),
+        Line2D([], [], marker="o", ms=3.5, color="0.5", ls=":", markeredgecolor="black",
+               label="model fit"),
+    ]
+    axes[-1].set_xlabel("trial")
+    axes[-1].legend(handles=handles, fontsize=8, loc="upper center", ncol=3, frameon=False,
+                    bbox_to_anchor=(0.5, -0.28))
+    title = "Mean z-scored responses per trial and fitted model"
+    return _finish(fig, title, datasets, out_dir, stem)
+
+
+def plot_model_correlations(summary: pd.DataFrame, out_dir: str | Path,
+                            stem: str = "fig4_model_correlations") -> list[Path]:
+    """Figure 4 analog: per dataset, the median bootstrap correlation of each
+    model (filled circle) with the 2.5-97.5 percentile interval.
+
+    `summary` has columns dataset, model, r_median, r_low, r_high
+    (`summarize_bootstrap`). Returns the PNG and PDF paths.
+    """
+    datasets = ordered_datasets(summary["dataset"].unique())
+    models = [m for m in MODELS if m in set(summary["model"])]
+    fig = Figure(figsize=(2.4 * len(datasets) + 3.0, 4.2))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    offsets = np.linspace(-0.22, 0.22, len(models)) if len(models) > 1 else np.zeros(1)
+    for off, model in zip(offsets, models):
+        s = summary[summary["model"] == model].set_index("dataset").reindex(datasets)
+        xs = np.arange(len(datasets)) + off
+        med = s["r_median"].to_numpy()
+        err = np.vstack([med - s["r_low"].to_numpy(), s["r_high"].to_numpy() - med])
+        ax.errorbar(xs, med, yerr=err, fmt="o", ms=8, capsize=3, color=MODEL_COLOURS[model],
+                    label=MODEL_LABELS[model])
+    ax.axhline(0, color="0.85", lw=0.8, zorder=0)
+    ax.set_xticks(np.arange(len(datasets)), [dataset_label(d) for d in datasets], fontsize=9)
+    ax.set_ylabel("correlation with mean z-scores (r)")
+    ax.set_xlim(-0.6, len(datasets) - 0.4)
+    ax.set_ylim(min(0.0, float(np.nanmin(summary["r_low"])) - 0.05), 1.02)
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
+    n_boot = int(summary["n_boot"].iloc[0]) if "n_boot" in summary else 0
+    title = f"Model correlations: median and 95% interval over {n_boot} bootstrap resamples"
+    return _finish(fig, title, datasets, out_dir, stem)
+
+
+def plot_sigma_profile(profile: pd.DataFrame, out_dir: str | Path,
+                       choice: pd.DataFrame | None = None, stem: str = "sigma_profile") -> list[Path]:
+    """RMSE of the full model against sigma, one line per dataset and their mean
+    (dashed), with the pooled choice (`choose_sigma`) marked. Returns PNG and PDF
+    paths."""
+    datasets = ordered_datasets(profile["dataset"].unique())
+    fig = Figure(figsize=(6.5, 4.2))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    for dataset in datasets:
+        g = profile[profile["dataset"] == dataset].sort_values("sigma")
+        ax.plot(g["sigma"], g["rmse"], "o-", ms=4, label=dataset_label(dataset))
+    mean = profile.groupby("sigma")["rmse"].mean().sort_index()
+    ax.plot(mean.index, mean.to_numpy(), "k--", lw=1.5, label="mean over datasets")
+    if choice is not None:
+        pooled = choice[choice["dataset"] == "pooled"]
+        if len(pooled):
+            s = float(pooled["sigma"].iloc[0])
+            ax.axvline(s, color="0.4", lw=1, ls=":")
+            ax.text(s, 0.02, f" chosen sigma = {s:g} d", fontsize=8, va="bottom",
+                    transform=ax.get_xaxis_transform())
+    ax.set_xlabel("sigma (units of block length d)")
+    ax.set_ylabel("RMSE of Eq. 1 fit (z units)")
+    ax.legend(fontsize=8, frameon=False, loc="best")
+    return _finish(fig, "Full-model fit error against risk noise sigma", datasets, out_dir, stem)
+
+
+def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
+                     out_dir: str | Path,
+                     betas: Sequence[float] | Mapping[str, Sequence[float]] | None = None,
+                     stem: str = "effort_risk_pairs") -> list[Path]:
+    """Per-pair effort, risk and full-model cost, easy (red) against hard (blue).
+
+    Works without human data. `effort_by_trial` is anything `effort_per_trial`
+    accepts (a trial/sample/effort table is averaged over samples);
+    `risk_table` has columns trial, sigma, risk and is read at `sigma`.
+    `betas`, one (b0, b1, b2) or {name: (b0, b1, b2)} (e.g. fitted per dataset),
+    adds one panel of Eq. 1 cost per entry. Each panel's title counts the pairs
+    whose easy trial is strictly lower; reversed pairs are shaded grey.
+    Returns the PNG and PDF paths.
+    """
+    E = effort_per_trial(effort_by_trial)
+    R = risk_at_sigma(risk_table, sigma)
+    panels = [("physical effort E (J)", E), (f"physical risk R at sigma = {sigma:g} d", R)]
+    if betas is not None:
+        named = betas if isinstance(betas, Mapping) else {"": betas}
+        for name, b in named.items():
+            label = f", {dataset_label(name)} fit" if name else ""
+            b_text = ", ".join(f"{v:.3g}" for v in b)
+            panels.append((f"Eq. 1 cost{label}, b = ({b_text})", full_model_cost(E, R, b)))
+    fig = Figure(figsize=(9, 2.5 * len(panels) + 0.6))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(panels), 1, squeeze=False, sharex=True)[:, 0]
+    pairs = np.array(PAIRS, dtype=float)
+    for ax, (label, values) in zip(axes, panels):
+        table = pair_table(values)
+        for k, row in table.iterrows():
+            if not row["E_lt_H"]:
+                ax.axvspan(row["pair"] - 0.45, row["pair"] + 0.45, color="0.88", zorder=0)
+            ax.plot([row["pair"] - 0.15, row["pair"] + 0.15], [row["cost_E"], row["cost_H"]],
+                    "-", color="0.5", lw=1, zorder=1)
+        ax.plot(pairs - 0.15, table["cost_E"], "o", color=EASY_COLOUR, label="easy (E)", zorder=2)
+        ax.plot(pairs + 0.15, table["cost_H"], "o", color=HARD_COLOUR, label="hard (H)", zorder=2)
+        n_ok = int(table["E_lt_H"].sum())
+        reversed_pairs = table.loc[~table["E_lt_H"], "pair"].tolist()
+        rev = f"; not: {', '.join(map(str, reversed_pairs))}" if reversed_pairs else ""
+        ax.set_title(f"{label}: E < H in {n_ok}/12 pairs{rev}", fontsize=9)
+    axes[0].legend(fontsize=8, frameon=False, loc="upper left")
+    axes[-1].set_xticks(pairs, [str(p) for p in PAIRS])
+    axes[-1].set_xlabel("pair (grey: easy trial not lower than hard)")
+    from_fits = list(betas) if isinstance(betas, Mapping) else []
+    return _finish(fig, "Model quantities per easy/hard pair", from_fits, out_dir, stem)
+
+
+def _trial_x() -> np.ndarray:
+    """x positions of the 24 trials: E and H of a pair 1 apart, pairs 2.6 apart."""
+    return np.array([2.6 * (int(t[:-1]) - 1) + (t[-1] == "H") for t in TRIAL_IDS], dtype=float)
+
+
+def _finish(fig: Figure, title: str, datasets: Iterable[str], out_dir: str | Path,
+            stem: str) -> list[Path]:
+    """Label simulated figures, save PNG and PDF, return their paths."""
+    simulated = any(is_simulated_dataset(d) for d in datasets)
+    if simulated:
+        title = f"{SIMULATED_TITLE}\n{title}"
+        if "simulated" not in stem:
+            stem = f"simulated_{stem}"
+    fig.suptitle(title, fontsize=11, color="darkred" if simulated else "black")
+    fig.tight_layout()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = [out_dir / f"{stem}.png", out_dir / f"{stem}.pdf"]
+    fig.savefig(paths[0], dpi=150)
+    fig.savefig(paths[1])
+    return paths

@@ -1,0 +1,168 @@
+"""The Results section end to end: from human responses and the effort and risk
+tables to fits, sigma profile, bootstrap, tests, pair table and figures."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from analysis.bootstrap import bootstrap_model_correlations, bootstrap_tests, summarize_bootstrap
+from analysis.data import (exclude_constant_participants, is_simulated, load_human_data,
+                           resample_trial_means, trial_mean_intervals, validate_human_data,
+                           zscore_responses)
+from analysis.figures import (plot_effort_risk, plot_model_correlations, plot_sigma_profile,
+                              plot_trial_means)
+from analysis.models import effort_per_trial, fit_models, risk_at_sigma, risk_sigmas
+from analysis.pairs import pair_table
+from analysis.sigma import PAPER_SIGMA, choose_sigma, sigma_profile
+
+
+def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
+                 risk_table: pd.DataFrame, out_dir: str | Path, seed: int,
+                 n_boot: int = 1000, jobs: int = 2, sigma: float | None = None,
+                 sigmas=None, figures: bool = True) -> dict[str, pd.DataFrame]:
+    """Run the paper's analysis and write tidy CSVs and figures into `out_dir`.
+
+    Parameters
+    ----------
+    human_df : validated or raw responses (columns dataset, participant, trial,
+        response), a path to such a CSV (read with `load_human_data`, which
+        refuses simulated datasets), or None for the model-only outputs.
+        A DataFrame may hold simulated participants (`simulate_participants`);
+        then every output file name starts with ``simulated_`` and figure
+        titles say "SIMULATED participants (not human data)".
+    effort_by_trial : effort per trial, e.g. columns trial, sample, effort
+        (averaged over samples), or a Series indexed by trial id.
+    risk_table : columns trial, sigma (units of block length d), risk; one row
+        per (trial, sigma).
+    out_dir : directory for CSVs and figures (created).
+    seed : seeds the numpy Generator of the participant bootstrap.
+    n_boot : bootstrap resamples per dataset (the paper used 1000).
+    jobs : processes for the bootstrap refits; results do not depend on it.
+    sigma : fix sigma (e.g. the paper's 0.065) instead of choosing the pooled
+        least-mean-RMSE sigma. Without human data it defaults to 0.065 if the
+        risk table has it, else the table's sigma nearest to 0.065.
+    sigmas : sigmas for the RMSE profile (default: all in the risk table).
+    figures : write figures (PNG and PDF) as well as CSVs.
+
+    Returns
+    -------
+    dict of DataFrames, each also written as ``<key>.csv``:
+    settings (one row: seed, n_boot, sigma used and why, z-score SD ...),
+    pairs (dataset, source, pair, cost_E, cost_H, E_lt_H; source is effort,
+    risk, human or a model name) and, with human data, excluded_participants,
+    zscored, trial_means (mean_z with 95% CI), sigma_profile, sigma_choice,
+    fits, predictions, bootstrap_correlations, bootstrap_summary,
+    bootstrap_tests; plus files (kind, path) listing everything written.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    E = effort_per_trial(effort_by_trial)
+    available = risk_sigmas(risk_table)
+    results: dict[str, pd.DataFrame] = {}
+    figure_paths: list[Path] = []
+
+    if human_df is None:
+        if sigma is None:
+            sigma = float(available[np.argmin(np.abs(available - PAPER_SIGMA))])
+            rule = "paper's sigma (or nearest in risk table); no human data to fit"
+        else:
+            rule = "given by caller"
+        R = risk_at_sigma(risk_table, sigma)
+        results["pairs"] = _model_pairs(E, R)
+        results["settings"] = pd.DataFrame([{
+            "human_data": False, "simulated": False, "seed": seed, "n_boot": 0, "jobs": jobs,
+            "sigma": sigma, "sigma_rule": rule}])
+        if figures:
+            figure_paths += plot_effort_risk(E, risk_table, sigma, out_dir)
+        return _write(results, out_dir, "", figure_paths)
+
+    if isinstance(human_df, (str, Path)):
+        responses = load_human_data(human_df)
+    else:
+        responses = validate_human_data(human_df, allow_simulated=True)
+    simulated = is_simulated(responses)
+    prefix = "simulated_" if simulated else ""
+
+    kept, excluded = exclude_constant_participants(responses)
+    zscored = zscore_responses(kept, ddof=0)
+    rng = np.random.default_rng(seed)
+    boot_means = resample_trial_means(zscored, n_boot, rng)
+    means = trial_mean_intervals(zscored, boot_means)
+
+    profile = sigma_profile(means, E, risk_table, sigmas)
+    choice = choose_sigma(profile)
+    if sigma is None:
+        sigma = float(choice.loc[choice["dataset"] == "pooled", "sigma"].iloc[0])
+        rule = "pooled: least mean RMSE of Eq. 1 across datasets"
+    else:
+        rule = "given by caller"
+    R = risk_at_sigma(risk_table, sigma)
+    fits, predictions = fit_models(means, E, R, sigma)
+    boot = bootstrap_model_correlations(boot_means, E, R, jobs=jobs)
+
+    pairs = [_model_pairs(E, R)]
+    for dataset, group in means.groupby("dataset", sort=True):
+        pairs.append(pair_table(group.set_index("trial")["mean_z"]).assign(
+            dataset=dataset, source="simulated" if simulated else "human"))
+        for model, p in predictions[predictions["dataset"] == dataset].groupby("model", sort=False):
+            pairs.append(pair_table(p.set_index("trial")["predicted"]).assign(
+                dataset=dataset, source=model))
+    counts = zscored.groupby("dataset")["participant"].nunique()
+
+    results.update({
+        "settings": pd.DataFrame([{
+            "human_data": not simulated, "simulated": simulated, "seed": seed, "n_boot": n_boot,
+            "jobs": jobs, "sigma": sigma, "sigma_rule": rule, "zscore_sd": "population (ddof=0)",
+            "participants": "; ".join(f"{d}={n}" for d, n in counts.items()),
+            "excluded": len(excluded)}]),
+        "excluded_participants": excluded,
+        "zscored": zscored.drop(columns=["line"], errors="ignore"),
+        "trial_means": means,
+        "sigma_profile": profile,
+        "sigma_choice": choice,
+        "fits": fits,
+        "predictions": predictions,
+        "bootstrap_correlations": boot,
+        "bootstrap_summary": summarize_bootstrap(boot, fits),
+        "bootstrap_tests": bootstrap_tests(boot, fits),
+        "pairs": _tidy_pairs(pd.concat(pairs, ignore_index=True)),
+    })
+    if figures:
+        full = fits[fits["model"] == "full"].set_index("dataset")[["b0", "b1", "b2"]]
+        figure_paths += plot_trial_means(means, predictions, out_dir, stem=f"{prefix}fig3_trial_means")
+        figure_paths += plot_model_correlations(results["bootstrap_summary"], out_dir,
+                                                stem=f"{prefix}fig4_model_correlations")
+        figure_paths += plot_sigma_profile(profile, out_dir, choice, stem=f"{prefix}sigma_profile")
+        figure_paths += plot_effort_risk(
+            E, risk_table, sigma, out_dir,
+            betas={d: tuple(row) for d, row in full.iterrows()},
+            stem=f"{prefix}effort_risk_pairs")
+    return _write(results, out_dir, prefix, figure_paths)
+
+
+def _model_pairs(E: pd.Series, R: pd.Series) -> pd.DataFrame:
+    """Pair tables of effort and risk alone (no human data needed)."""
+    return _tidy_pairs(pd.concat([pair_table(E).assign(dataset="", source="effort"),
+                                  pair_table(R).assign(dataset="", source="risk")],
+                                 ignore_index=True))
+
+
+def _tidy_pairs(table: pd.DataFrame) -> pd.DataFrame:
+    return table[["dataset", "source", "pair", "cost_E", "cost_H", "E_lt_H"]]
+
+
+def _write(results: dict[str, pd.DataFrame], out_dir: Path, prefix: str,
+           figure_paths: list[Path]) -> dict[str, pd.DataFrame]:
+    written = []
+    for key, table in results.items():
+        path = out_dir / f"{prefix}{key}.csv"
+        table.to_csv(path, index=False)
+        written.append(("table", str(path)))
+    written += [("figure", str(p)) for p in figure_paths]
+    files_path = out_dir / f"{prefix}files.csv"
+    written.append(("table", str(files_path)))
+    results["files"] = pd.DataFrame(written, columns=["kind", "path"])
+    results["files"].to_csv(files_path, index=False)
+    return results
