@@ -148,3 +148,10 @@ def test_region_too_small_is_rejected():
 def test_unknown_trial_id_names_the_known_ones():
     with pytest.raises(StimulusError, match=r"no trial '13X'.*1E, 1H"):
         stimuli.load_trial("13X")
+
+
+def test_contact_sheet_draws_the_trials(tmp_path):
+    from stimuli.sheet import contact_sheet
+
+    out = contact_sheet([stimuli.load_trial("12E"), stimuli.load_trial("5H")], out=str(tmp_path / "s.png"))
+    assert (tmp_path / "s.png").stat().st_size > 10_000 and out.endswith("s.png")
