@@ -249,8 +249,8 @@ def resample_trial_means(zscored: pd.DataFrame, n_boot: int, rng: np.random.Gene
     """Bootstrap trial means by resampling participants with replacement.
 
     For each dataset in `ordered_datasets` order, draws ``rng.integers(0, n, size=(n_boot, n))``
-    (n = participants in that dataset) and averages the resampled participants'
-    z-scores. Returns {dataset: array (n_boot, 24)}, columns in TRIAL_IDS order.
+    (n = participants in that dataset, indexed in sorted participant-id order)
+    and averages the resampled participants' z-scores. Returns {dataset: array (n_boot, 24)}, columns in TRIAL_IDS order.
     """
     out = {}
     for dataset, (_, Z) in participant_matrices(zscored).items():

@@ -220,6 +220,9 @@ def _finish(fig: Figure, title: str, datasets: Iterable[str], out_dir: str | Pat
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [out_dir / f"{stem}.png", out_dir / f"{stem}.pdf"]
-    fig.savefig(paths[0], dpi=150)
-    fig.savefig(paths[1])
+    # The title is also stored as file metadata, so a reader (or a test) can check
+    # the simulated label without looking at pixels.
+    flat_title = title.replace("\n", ": ")
+    fig.savefig(paths[0], dpi=150, metadata={"Title": flat_title})
+    fig.savefig(paths[1], metadata={"Title": flat_title})
     return paths

@@ -203,14 +203,13 @@ def pearson_r(a: np.ndarray, b: np.ndarray, what: str = "model") -> float:
     """Pearson correlation of two vectors. If either is constant r is undefined:
     returns NaN and warns naming `what` (e.g. a risk-only model whose risk is the
     same on every trial)."""
-    a = np.asarray(a, dtype=float) - np.mean(a)
-    b = np.asarray(b, dtype=float) - np.mean(b)
-    denom = np.sqrt(np.dot(a, a) * np.dot(b, b))
-    if denom == 0 or not np.isfinite(denom):
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if _is_constant(a) or _is_constant(b):
         warnings.warn(f"Pearson r of the {what} is undefined (constant predictions or data); "
                       "reported as NaN", RuntimeWarning, stacklevel=2)
         return float("nan")
-    return float(np.dot(a, b) / denom)
+    a, b = a - a.mean(), b - b.mean()
+    return float(np.dot(a, b) / np.sqrt(np.dot(a, a) * np.dot(b, b)))
 
 
 def batch_predictions(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
@@ -228,7 +227,14 @@ def rowwise_pearson(P: np.ndarray, Y: np.ndarray) -> np.ndarray:
     denom = np.sqrt((Pc * Pc).sum(axis=1) * (Yc * Yc).sum(axis=1))
     with np.errstate(invalid="ignore", divide="ignore"):
         r = (Pc * Yc).sum(axis=1) / denom
-    return np.where(denom > 0, r, np.nan)
+    return np.where(_is_constant(P, axis=1) | _is_constant(Y, axis=1), np.nan, r)
+
+
+def _is_constant(x: np.ndarray, axis=None):
+    """Spread no larger than rounding error: the mean of 24 equal floats need not
+    equal them exactly, so centring alone would leave ~1e-16 noise to correlate."""
+    spread = np.ptp(x, axis=axis)
+    return spread <= 1e-12 * np.max(np.abs(x), axis=axis)
 
 
 def _trial_vector(y) -> np.ndarray:
