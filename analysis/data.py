@@ -117,7 +117,8 @@ def validate_human_data(
 ) -> pd.DataFrame:
     """Validate a human-response table and return it cleaned (see `load_human_data`).
 
-    `lines` gives the CSV line of each row for error messages; by default row k
+    `lines` gives the CSV line of each row for error messages; by default the
+    table's own ``line`` column (as `load_human_data` returns), else row k
     (0-based) is reported as line k + 2, the line it occupies in a CSV written
     with a header and no index (``DataFrame.to_csv(index=False)``).
     """
@@ -126,7 +127,10 @@ def validate_human_data(
         raise HumanDataError(f"{source}: line 1 (header): missing column(s) {', '.join(missing)}; "
                              f"found {', '.join(map(str, responses.columns)) or 'none'}", line=1)
     table = responses.copy().reset_index(drop=True)
-    table["line"] = (np.arange(len(table)) + 2) if lines is None else list(lines)
+    if lines is not None:
+        table["line"] = list(lines)
+    elif "line" not in table.columns:  # a table from load_human_data keeps its CSV lines
+        table["line"] = np.arange(len(table)) + 2
     for column in ("dataset", "participant", "trial"):
         table[column] = table[column].map(lambda v: "" if _is_missing(v) else str(v).strip())
     table["trial"] = table["trial"].str.upper()

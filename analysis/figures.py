@@ -171,7 +171,7 @@ def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
     """
     E = effort_per_trial(effort_by_trial)
     R = risk_at_sigma(risk_table, sigma)
-    panels = [("physical effort E (J)", E), (f"physical risk R at sigma = {sigma:g} d", R)]
+    panels = [("physical effort E", E), (f"physical risk R at sigma = {sigma:g} d", R)]
     if betas is not None:
         named = betas if isinstance(betas, Mapping) else {"": betas}
         for name, b in named.items():

@@ -230,3 +230,12 @@ def test_bootstrap_is_reproducible_for_a_seed_and_differs_across_seeds():
     other = resample_trial_means(z, 50, np.random.default_rng(8))["build"]
     np.testing.assert_array_equal(one, two)
     assert not np.allclose(one, other)
+
+
+def test_revalidating_a_loaded_table_keeps_its_csv_lines(tmp_path):
+    lines = valid_lines()
+    lines.insert(2, "")  # a blank line 3: p1's 1H is on line 4
+    table = load_human_data(write(tmp_path, lines))
+    again = validate_human_data(table)
+    assert again["line"].tolist() == table["line"].tolist()
+    assert again.loc[again["trial"] == "1H", "line"].tolist()[0] == 4

@@ -148,3 +148,10 @@ def test_effort_risk_figure_with_fitted_betas_is_written_as_png_and_pdf(tmp_path
     assert [p.name for p in paths] == ["er.png", "er.pdf"]
     with Image.open(paths[0]) as image:
         assert image.size[0] > 600 and image.size[1] > 600
+
+
+def test_run_analysis_refuses_a_csv_of_simulated_participants_as_human_data(tmp_path):
+    path = tmp_path / "responses.csv"
+    simulate(0.075, 3, 1.0, seed=6).to_csv(path, index=False)
+    with pytest.raises(HumanDataError, match="simulated participants are not human data"):
+        run_analysis(path, E, RISK, tmp_path / "out", seed=0, n_boot=10, jobs=1)
