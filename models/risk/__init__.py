@@ -1,0 +1,24 @@
+"""Physical risk (paper, "Modeling physical risk"): how likely a Finish state B is
+to fall when every block is nudged by Gaussian noise and the scene is simulated
+for 4 s. See docs/risk.md for the noise rule, the fall rule and the engines.
+
+    >>> from models.risk import physical_risk, risk_table
+    >>> physical_risk(scene, sigma=0.065, n=100, seed=0)      # fraction of falls
+    >>> risk_table(stimuli.load_all(), SIGMA_GRID, n=100)     # tidy (trial, sigma) table
+"""
+from models.risk.core import (  # noqa: F401
+    DEFAULT_ENGINE,
+    N_RUNS,
+    SIGMA_GRID,
+    UnstableSceneError,
+    check_stable,
+    fall_threshold,
+    physical_risk,
+    risk_curve,
+    risk_table,
+    run_grid,
+    summarise,
+)
+from models.risk.engine import DURATION, ENGINES, FALL_THRESHOLD, Rollout, get_engine  # noqa: F401
+from models.risk.noise import draw_normals, perturb, perturb_from_normals  # noqa: F401
+from models.risk.static import static_stable  # noqa: F401

@@ -1,0 +1,99 @@
+"""MuJoCo engine of the risk model (settings from physics-notes.md, re-measured in
+docs/risk.md): stiff, critically damped box contacts, pyramidal friction cone,
+Newton solver, implicit-fast integration at 2 ms, and island sleeping."""
+from __future__ import annotations
+
+import numpy as np
+
+from lgp.scene import Scene
+from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds, layout_key
+
+TIMESTEP = 0.002
+SOLREF = "0.004 1"
+SOLIMP = "0.95 0.99 0.001 0.5 2"
+
+_MJCF = """<mujoco model="{name}">
+  <option timestep="{timestep}" integrator="implicitfast" cone="pyramidal" solver="Newton"
+          iterations="100" tolerance="1e-8">
+    <flag sleep="{sleep}"/>
+  </option>
+  <default>
+    <geom condim="3" friction="{friction} 0.005 0.0001" solref="{solref}" solimp="{solimp}"/>
+  </default>
+  <worldbody>
+    <geom name="table" type="plane" size="0 0 1"/>
+{fixed}
+{blocks}
+  </worldbody>
+</mujoco>
+"""
+
+
+def mjcf(scene: Scene, sleep: bool = True) -> str:
+    """MJCF text of the scene's layout; blocks sit at their poses in `scene`."""
+    fixed = "\n".join(
+        f'    <geom name="{f.name}_{k}" type="box" pos="{_v(f.p_WO)}" size="{_v(f.size / 2)}"/>'
+        for k, f in enumerate(scene.fixed)
+    )
+    blocks = "\n".join(
+        f'    <body name="{b.name}" pos="{_v(b.p_WB)}" euler="0 0 {b.yaw!r}">'
+        f'<freejoint/><geom type="box" size="{_v(b.size / 2)}" density="{DENSITY}"/></body>'
+        for b in scene.blocks
+    )
+    return _MJCF.format(
+        name=scene.label, timestep=TIMESTEP, sleep="enable" if sleep else "disable", friction=FRICTION,
+        solref=SOLREF, solimp=SOLIMP, fixed=fixed, blocks=blocks,
+    )
+
+
+def _v(x) -> str:
+    return " ".join(repr(float(c)) for c in x)
+
+
+class MujocoEngine(Engine):
+    name = "mujoco"
+
+    def __init__(self, sleep: bool = True):
+        import mujoco
+
+        self._mj = mujoco
+        self.sleep = sleep
+        self._models: dict[str, tuple] = {}
+
+    def settings(self) -> dict:
+        return {
+            "engine": "mujoco", "version": self._mj.__version__, "timestep": TIMESTEP,
+            "integrator": "implicitfast", "cone": "pyramidal", "solver": "Newton",
+            "solref": SOLREF, "solimp": SOLIMP, "sleep": self.sleep,
+        }
+
+    def _load(self, scene: Scene) -> None:
+        mj = self._mj
+        key = layout_key(scene)
+        if key not in self._models:
+            model = mj.MjModel.from_xml_string(mjcf(scene, self.sleep))
+            self._models[key] = (model, mj.MjData(model))
+        self.model, self.data = self._models[key]
+        m, d = self.model, self.data
+        mj.mj_resetData(m, d)
+        n = len(scene)
+        qpos = d.qpos.reshape(n, 7)
+        qpos[:, :3] = scene.positions
+        yaw = np.array([b.yaw for b in scene.blocks])
+        qpos[:, 3:] = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=1)
+        mj.mj_forward(m, d)
+        self._sizes = np.array([b.size for b in scene.blocks])
+        self._n = n
+
+    def _advance(self, t: float) -> None:
+        m, d, step = self.model, self.data, self._mj.mj_step
+        while d.time < t - 0.5 * m.opt.timestep:
+            step(m, d)
+
+    def _state(self):
+        qpos = self.data.qpos.reshape(self._n, 7)
+        qvel = self.data.qvel.reshape(self._n, 6)
+        return qpos[:, :3].copy(), block_speeds(qvel[:, :3], qvel[:, 3:], self._sizes)
+
+    def _asleep(self) -> bool:
+        return self.sleep and int(self.data.ntree_awake) == 0
