@@ -1,0 +1,440 @@
+"""The paper's planner end to end: assignment -> symbolic plan -> KOMO -> Plan.
+
+`plan(initial, target)` runs the three stages of "Modeling physical effort":
+`assign_blocks` (Hungarian, colours), `symbolic_plan` (grasp/place order from the
+support graphs) and KOMO (lgp.komo) on the arm of models/arm.sdf. The logic layer
+meets the geometry only through the skeleton: action k at phase k.
+
+Geometry of one action (Grasp or Place at phase k), with APPROACH = 0.05 m:
+
+- k - 0.2: the gripper straight above the grasp/place pose by APPROACH (same
+  orientation): pre-grasp / pre-place;
+- k: the gripper at the grasp pose (G at the block centre, hand vertical, G's x
+  axis at the block's yaw modulo 90 deg) or the held block at its target X_WB;
+  the arm at rest (zero velocity); the mode switch happens here;
+- k + 0.2: straight above again: post-grasp / post-place.
+
+So every block leaves its support and arrives on its target moving (nearly)
+vertically for the last 5 cm (two block heights), and is carried 5 cm above both
+its start and its target; between those waypoints KOMO is free. Plans start and end
+at rest at the arm's home posture (phase 0 and phase n_actions + 1).
+
+Which of the four quarter-turn grasps, which elbow swivel and which IK branch are
+discrete choices KOMO cannot make by gradient; they are chosen first, globally, by
+dynamic programming over closed-form IK solutions of every waypoint (minimising
+sum |dq|^2 / dt^3, the cost of rest-to-rest cubics), and the solutions seed KOMO.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+
+from lgp.arm import Arm, X_WG_from_above
+from lgp.assignment import assign_blocks
+from lgp.komo import Komo, KomoResult, kinetic_energy
+from lgp.scene import Scene
+from lgp.symbolic import Grasp, Place, SymbolicPlan, symbolic_plan
+
+#: Duration of one phase (one action) in seconds: a reach-and-place of a block in
+#: about a second is human-like, and every phase has the same length, as in KOMO.
+PHASE_DURATION = 1.0
+#: Slices per phase: 20, i.e. 50 ms; fine enough that effort changes by < 0.5 %
+#: when doubled (docs/effort.md).
+SLICES_PER_PHASE = 20
+#: Vertical approach/retreat distance (m) above every grasp and place pose.
+APPROACH = 0.05
+#: Phases between the approach waypoint and the action (and the action and the
+#: retreat waypoint): 0.2 s of each 1 s phase.
+APPROACH_TIME = 0.2
+#: Mass of a unit block in the effort model [paper: "a unit mass to a unit block"], kg.
+BLOCK_MASS = 1.0
+#: Elbow swivel angles tried per waypoint when seeding (and 8 IK branches each).
+SWIVELS = 16
+#: Seeding DP runs on swivel grids shifted by 1/SEED_RESTARTS of a step; each
+#: distinct outcome is solved by KOMO and the cheapest kept.
+SEED_RESTARTS = 2
+#: At most this many KOMO re-solves with re-chosen quarter turns per seed.
+TURN_RESOLVES = 2
+#: A turn change that costs less than this fraction of the total with joints 1-6
+#: held is still tried (re-optimising them may make it cheaper).
+TURN_TIE = 0.05
+#: Joint-limit margin (rad) asked of seeds, so KOMO starts strictly inside.
+SEED_MARGIN = 0.02
+
+_ARM: Arm | None = None
+
+
+def default_arm() -> Arm:
+    """The arm of models/arm.sdf + models/arm.yaml, loaded once per process."""
+    global _ARM
+    if _ARM is None:
+        _ARM = Arm()
+    return _ARM
+
+
+class PlanningError(RuntimeError):
+    """The geometric planner failed; the message names the scene, the action and why."""
+
+    def __init__(self, message: str, action=None):
+        super().__init__(message)
+        self.action = action
+
+
+@dataclass
+class Plan:
+    """A solved plan: actions, arm trajectory and every block's world trajectory.
+
+    `t` (n,) s and `q` (n, 7) rad per slice, time 0 first; `p_WB[name]` (n, 3) and
+    `R_WB[name]` (n, 3, 3) for every block of the initial scene (by its A name).
+    """
+
+    initial: Scene
+    target: Scene
+    symbolic: SymbolicPlan
+    t: np.ndarray
+    q: np.ndarray
+    p_WB: dict[str, np.ndarray]
+    R_WB: dict[str, np.ndarray]
+    komo: KomoResult | None = None
+    arm: Arm | None = field(default=None, repr=False)
+    planning_time: float = 0.0  # wall-clock s: assignment, symbolic plan, seeding, KOMO
+
+    @property
+    def actions(self):
+        return self.symbolic.actions
+
+    @property
+    def tau(self) -> float:
+        return float(self.t[1] - self.t[0]) if len(self.t) > 1 else 1.0
+
+    def kinetic_energy(self, mass: float = BLOCK_MASS) -> float:
+        """Physical effort: time integral of the carried blocks' kinetic energy, J s.
+
+        Sum over blocks of integral 1/2 m |v_WB|^2 dt, v the velocity of the block
+        centre. The integral (not a per-slice sum) keeps the number independent of
+        the slice count.
+        """
+        return float(sum(self.kinetic_energy_by_block(mass).values()))
+
+    def kinetic_energy_by_block(self, mass: float = BLOCK_MASS) -> dict[str, float]:
+        return {name: kinetic_energy(p, self.tau, mass) for name, p in self.p_WB.items()}
+
+    def kinetic_energy_by_action(self, mass: float = BLOCK_MASS) -> list[float]:
+        """Energy integral of each phase ending at each action (action k: phases k-1 to k)."""
+        S = int(round(PHASE_DURATION / self.tau))
+        out = []
+        for k in range(1, len(self.actions) + 1):
+            lo, hi = (k - 1) * S, k * S
+            out.append(sum(kinetic_energy(p[lo:hi + 1], self.tau, mass) for p in self.p_WB.values()))
+        return out
+
+    def speed(self, name: str) -> np.ndarray:
+        """Speed |v_WB| (m/s) of a block's centre at each slice (0 at time 0)."""
+        v = np.diff(self.p_WB[name], axis=0) / self.tau
+        return np.concatenate([[0.0], np.linalg.norm(v, axis=1)])
+
+    def describe(self) -> str:
+        """The action list with times and per-action energies, one line each."""
+        energies = self.kinetic_energy_by_action() if self.actions else []
+        lines = [f"{k + 1:3d}  t = {k + 1:5.1f} s  {a}   E = {e:.4f} J s" for k, (a, e) in enumerate(zip(self.actions, energies))]
+        lines.append(f"physical effort: {self.kinetic_energy():.4f} J s over {len(self.actions)} actions")
+        return "\n".join(lines)
+
+    def write_html(self, path) -> str:
+        """Self-contained 3-D replay (Meshcat recording, works offline); returns the path."""
+        from lgp.komo.view import write_html
+
+        return write_html(self, path)
+
+    def write_png(self, path) -> str:
+        """Figure of block paths (top and side views) and speed profiles; returns the path."""
+        from lgp.komo.view import write_png
+
+        return write_png(self, path)
+
+
+# ----------------------------------------------------------------------------- planning
+
+
+def plan(initial: Scene, target: Scene, rng_or_seed=0, *, formulation: str = "reduced", solver: str = "snopt",
+         slices_per_phase: int = SLICES_PER_PHASE, arm: Arm | None = None) -> Plan:
+    """Plan the construction of `target` from `initial`: assignment, symbolic plan, KOMO.
+
+    `rng_or_seed` (a numpy Generator or seed) jitters the swivel grid of the IK
+    seeding only; the optimum does not depend on it (tests/test_planner.py).
+    Raises PlanningError (naming the action) when a waypoint is out of reach or
+    KOMO fails to satisfy a constraint.
+    """
+    start = time.perf_counter()
+    arm = arm or default_arm()
+    rng = rng_or_seed if isinstance(rng_or_seed, np.random.Generator) else np.random.default_rng(rng_or_seed)
+    assignment = assign_blocks(initial, target)
+    symbolic = symbolic_plan(initial, target, assignment)
+    result = plan_symbolic(symbolic, rng, formulation=formulation, solver=solver, slices_per_phase=slices_per_phase, arm=arm)
+    result.planning_time = time.perf_counter() - start
+    return result
+
+
+def plan_symbolic(symbolic: SymbolicPlan, rng=0, *, formulation: str = "reduced", solver: str = "snopt",
+                  slices_per_phase: int = SLICES_PER_PHASE, arm: Arm | None = None) -> Plan:
+    """KOMO for a given symbolic plan (see `plan`)."""
+    start = time.perf_counter()
+    arm = arm or default_arm()
+    rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+    initial = symbolic.initial
+    names = initial.names
+    if not symbolic.actions:
+        n = len(names)
+        return Plan(initial, symbolic.target, symbolic, np.zeros(1), arm.q_home[None].copy(),
+                    {b.name: b.p_WB[None].copy() for b in initial}, {b.name: b.X_WB.rotation().matrix()[None] for b in initial} if n else {},
+                    None, arm)
+    results = [_solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase)
+               for komo, seeds, turns in declare(symbolic, arm, rng, slices_per_phase)]
+    solved = [r for r in results if r.success and r.max_violation <= 1e-6]
+    result = min(solved, key=lambda r: r.cost) if solved else results[0]
+    result.solve_time = sum(r.solve_time for r in results)
+    if not result.success or result.max_violation > 1e-6:
+        o = result.worst_objective
+        k = int(round(o.time[0])) if o is not None and o.time else None
+        action = symbolic.actions[k - 1] if k and 1 <= k <= len(symbolic.actions) else None
+        where = f"action {k} {action}" if action else "joint limits"
+        raise PlanningError(
+            f"{initial.label} -> {symbolic.target.label}: KOMO ({formulation}, {solver}) failed at {where}: "
+            f"{result.status}, constraint violation {result.max_violation:.2e}", action)
+    return Plan(initial, symbolic.target, symbolic, result.t, result.q,
+                {n: result.X_WB[n][:, :3, 3].copy() for n in names},
+                {n: result.X_WB[n][:, :3, :3].copy() for n in names}, result, arm, time.perf_counter() - start)
+
+
+@dataclass(frozen=True)
+class _Waypoint:
+    time: float  # phase
+    action: int  # index into actions
+    p_WG: np.ndarray  # gripper position
+    yaw: float  # block yaw (the gripper yaw is this plus a quarter turn multiple)
+
+
+def _waypoints(symbolic: SymbolicPlan) -> list[_Waypoint]:
+    out = []
+    state = symbolic.initial
+    for k, (phase, action) in enumerate(symbolic.skeleton()):
+        if isinstance(action, Grasp):
+            block = state.block(action.block)
+            p, yaw = block.p_WB, block.yaw
+        else:
+            p, yaw = np.asarray(action.p_WB, float), float(action.yaw)
+            state = state.with_blocks(b.moved_to(p, yaw) if b.name == action.block else b for b in state.blocks)
+        up = np.array([0.0, 0.0, APPROACH])
+        for dt, offset in ((-APPROACH_TIME, up), (0.0, 0.0 * up), (APPROACH_TIME, up)):
+            out.append(_Waypoint(phase + dt, k, p + offset, yaw))
+    return out
+
+
+def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float):
+    """Quarter-turn choice per action and an IK solution per waypoint, by dynamic programming.
+
+    Candidates: closed-form IK over a swivel grid (shifted by `offset` rad) x 8
+    branches x 4 gripper yaws, within the joint limits. Path cost: sum over
+    consecutive waypoints of |q_b - q_a|^2 / dt^3; the three waypoints of one action
+    share the gripper yaw. Returns ({phase: q}, {action: quarter turns}).
+    """
+    swivels = np.linspace(-np.pi, np.pi, SWIVELS, endpoint=False) + offset
+    layers = []  # per waypoint: (candidates (n, 7), quarter-turn label (n,))
+    for w in waypoints:
+        q, labels = arm.ik_from_above(w.p_WG, w.yaw, swivels, margin=SEED_MARGIN)
+        if len(q) == 0:
+            raise PlanningError(f"waypoint at phase {w.time:g} (gripper at {np.round(w.p_WG, 4).tolist()}) is out of the arm's reach",
+                                w.action)
+        layers.append((q, labels))
+    # Viterbi over the layers, home at both ends.
+    times = [0.0] + [w.time for w in waypoints] + [float(phases)]
+    cost = np.zeros(1)
+    prev_q, prev_label, prev_action = arm.q_home[None], np.array([-1]), -1
+    back = []
+    for i, (q, label) in enumerate(layers):
+        dt = times[i + 1] - times[i]
+        if waypoints[i].action == prev_action:  # same action: same quarter turn
+            d = np.full((len(prev_q), len(q)), np.inf)
+            for m in range(4):
+                a, b = np.flatnonzero(prev_label == m), np.flatnonzero(label == m)
+                d[np.ix_(a, b)] = _squared_distances(prev_q[a], q[b])
+        else:
+            d = _squared_distances(prev_q, q)
+        d = d / dt**3 + cost[:, None]
+        j = np.argmin(d, axis=0)
+        back.append(j)
+        cost = d[j, np.arange(len(q))]
+        prev_q, prev_label, prev_action = q, label, waypoints[i].action
+    dt = times[-1] - times[-2]
+    total = cost + np.sum((prev_q - arm.q_home) ** 2, axis=1) / dt**3
+    i = int(np.argmin(total))
+    picks = []
+    for layer in range(len(layers) - 1, -1, -1):
+        picks.append(i)
+        i = back[layer][i]
+    picks.reverse()
+    seeds = {w.time: layers[n][0][i] for n, (w, i) in enumerate(zip(waypoints, picks))}
+    turns = {w.action: int(layers[n][1][i]) for n, (w, i) in enumerate(zip(waypoints, picks))}
+    signature = tuple(turns[k] for k in sorted(turns)) + tuple(
+        tuple(np.sign(layers[n][0][i][[1, 3, 5]]).astype(int)) for n, i in enumerate(picks))
+    return seeds, turns, signature
+
+
+def _squared_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """|a_i - b_j|^2 for all pairs; einsum, not BLAS, whose threads stall on a busy machine."""
+    sq = np.einsum("ik,ik->i", a, a)[:, None] + np.einsum("jk,jk->j", b, b)[None, :] - 2 * np.einsum("ik,jk->ij", a, b)
+    return np.maximum(sq, 0.0)
+
+
+def declare(symbolic: SymbolicPlan, arm: Arm, rng: np.random.Generator, slices_per_phase: int = SLICES_PER_PHASE):
+    """KOMO declarations of a symbolic plan with IK seeds, one per distinct discrete choice.
+
+    The seeding DP runs SEED_RESTARTS times on swivel grids shifted by a fraction of
+    the grid step (plus one random shift from `rng`); each distinct outcome (quarter
+    turns and IK branches) gives one (Komo, seeds {phase: q}, turns) triple.
+    """
+    waypoints = _waypoints(symbolic)
+    phases = len(symbolic.actions) + 1
+    step = 2 * np.pi / SWIVELS
+    shift = rng.uniform(0, step)
+    out, seen = [], set()
+    for r in range(SEED_RESTARTS):
+        seeds, turns, signature = _seed(arm, waypoints, phases, shift + r * step / SEED_RESTARTS)
+        if signature not in seen:
+            seen.add(signature)
+            out.append((_declare(symbolic, arm, waypoints, turns, phases, slices_per_phase), seeds, turns))
+    return out
+
+
+def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase):
+    """Solve, then re-choose the quarter turns with the exact cost while that helps.
+
+    A quarter turn of the hand at an action changes only joint 7 at that action's
+    waypoints (its axis is vertical there), and the control cost is a sum of
+    independent quadratics per joint. With joints 1-6 fixed, the cost of shifting
+    joint 7 by d_k at action k is an exact quadratic in d; the rest at every action
+    splits it into a chain (action k only meets k - 1 and k + 1), so dynamic
+    programming over d_k in {0, +-90, 180 deg} ranks every choice of turns exactly.
+    KOMO re-solves from the shifted (still feasible) trajectory for the best shift,
+    or, when none improves with joints 1-6 held, for the cheapest nonzero one if it
+    costs less than TURN_TIE of the total (re-optimising joints 1-6 can then win):
+    near-ties between turn families were what made different seeds end in
+    different optima.
+    """
+    result = komo.solve(formulation=formulation, solver=solver, seeds=seeds)
+    elapsed = result.solve_time
+    waypoints = _waypoints(symbolic)
+    phases = len(symbolic.actions) + 1
+    tried = {tuple(sorted(turns.items()))}
+    for _ in range(TURN_RESOLVES):
+        if not result.success:
+            break
+        K = list(result.keyframes)
+        G, g = komo.reduced_cost(K)
+        x7 = result.q[1:, 6][K]
+        B = np.zeros((len(K), len(symbolic.actions)))  # which keyframes each action's turn moves
+        for w in waypoints:
+            s = komo.slice_of(w.time)
+            for r in (s, s - 1):  # the waypoint, and the rest slice before an action
+                if r in K and (r == s or w.time == round(w.time)):
+                    B[K.index(r), w.action] = 1.0
+        GB = G @ B
+        found = _best_shifts(GB.T @ GB, GB.T @ (G @ x7 + g[:, 6]), [x7[B[:, k] > 0] for k in range(B.shape[1])], arm)
+        if found is None or found[1] > TURN_TIE * result.cost:
+            break
+        shifts = found[0]
+        # Joint 7 turns about G's z axis, which points down: +d on joint 7 is -d of hand yaw.
+        new_turns = {k: (t - int(round(shifts[k] / (np.pi / 2)))) % 4 for k, t in turns.items()}
+        if tuple(sorted(new_turns.items())) in tried:
+            break
+        tried.add(tuple(sorted(new_turns.items())))
+        new_komo = _declare(symbolic, arm, waypoints, new_turns, phases, slices_per_phase)
+        X = result.q[1:].copy()
+        X[K, 6] = x7 + B @ shifts
+        candidate = new_komo.solve(formulation=formulation, solver=solver, initial_guess=new_komo.interpolate(dict(zip(K, X[K]))))
+        elapsed += candidate.solve_time
+        if not (candidate.success and candidate.max_violation <= 1e-6 and candidate.cost < result.cost * (1 - 1e-9)):
+            break
+        komo, result, turns = new_komo, candidate, new_turns
+    result.solve_time = elapsed
+    return result
+
+
+def _best_shifts(Q, b, x7_by_action, arm):
+    """Best joint-7 shifts d_k in {0, +-pi/2, +-pi} for the cost change d'Q d + 2 b'd.
+
+    Chain DP (Q must be tridiagonal: the rest at each action decouples the others),
+    forward and backward, so that the best vector with some d_k != 0 is also known.
+    Returns (d, change) for the best vector if it lowers the cost, else for the best
+    nonzero one; None when Q is not a chain or no shift is allowed. Shifts that take
+    joint 7 within SEED_MARGIN of a limit are not allowed.
+    """
+    n = len(b)
+    if n > 2 and np.abs(np.triu(Q, 2)).max() > 1e-9 * max(1.0, np.abs(Q).max()):
+        return None
+    options = np.array([0.0, np.pi / 2, -np.pi / 2, np.pi, -np.pi])
+    allowed = [options[[bool(np.all(x + d >= arm.q_lower[6] + SEED_MARGIN) and np.all(x + d <= arm.q_upper[6] - SEED_MARGIN))
+                        for d in options]] for x in x7_by_action]
+    unary = [Q[k, k] * a**2 + 2 * b[k] * a for k, a in enumerate(allowed)]
+    pair = [2 * Q[k, k + 1] * allowed[k][:, None] * allowed[k + 1][None, :] for k in range(n - 1)]
+    fwd, fback = [unary[0]], []
+    for k in range(1, n):
+        total = fwd[-1][:, None] + pair[k - 1]
+        fback.append(np.argmin(total, axis=0))
+        fwd.append(total[fback[-1], np.arange(len(allowed[k]))] + unary[k])
+    bwd, bback = [None] * n, [None] * n
+    bwd[n - 1] = unary[n - 1]
+    for k in range(n - 2, -1, -1):
+        total = pair[k] + bwd[k + 1][None, :]
+        bback[k] = np.argmin(total, axis=1)
+        bwd[k] = total[np.arange(len(allowed[k])), bback[k]] + unary[k]
+    through = [fwd[k] + bwd[k] - unary[k] for k in range(n)]  # best total with d_k fixed
+    best_k, best_i, best = None, None, np.inf
+    for k in range(n):
+        for i, d in enumerate(allowed[k]):
+            if d != 0.0 and through[k][i] < best:
+                best_k, best_i, best = k, i, float(through[k][i])
+    i0 = int(np.argmin(fwd[-1]))
+    if fwd[-1][i0] < min(best, 0.0) - 1e-12:  # the global optimum (it may be zero-free) improves
+        best_k, best_i, best = n - 1, i0, float(fwd[-1][i0])
+    if best_k is None:
+        return None
+    picks = [0] * n
+    picks[best_k] = best_i
+    for k in range(best_k, 0, -1):
+        picks[k - 1] = fback[k - 1][picks[k]]
+    for k in range(best_k, n - 1):
+        picks[k + 1] = bback[k][picks[k]]
+    return np.array([allowed[k][i] for k, i in enumerate(picks)]), best
+
+
+def _declare(symbolic, arm, waypoints, turns, phases, slices_per_phase) -> Komo:
+    komo = Komo(arm, phases, slices_per_phase, k_order=2, phase_duration=PHASE_DURATION, q_home=arm.q_home,
+                objects={b.name: b.X_WB for b in symbolic.initial})
+    up = np.array([0.0, 0.0, APPROACH])
+    X_GB = {}
+    for (phase, action), (pre, at, post) in zip(symbolic.skeleton(), _triples(waypoints)):
+        k = at.action
+        X_WG = X_WG_from_above(at.p_WG, at.yaw + turns[k] * np.pi / 2)
+        X_WG_up = RigidTransform(X_WG.rotation(), X_WG.translation() + up)
+        komo.add_objective([pre.time], "pose", ("G",), "eq", target=X_WG_up)
+        if isinstance(action, Grasp):
+            X_WB = RigidTransform(RotationMatrix.MakeZRotation(at.yaw), at.p_WG)
+            X_GB[action.block] = X_WG.inverse().multiply(X_WB)
+            komo.add_mode_switch(phase, "grasp", "G", action.block, X_GB=X_GB[action.block])
+        else:
+            # The block's target pose up to the cube's quarter-turn symmetry: the one
+            # that the chosen hand yaw and the grasp give (same p_WB exactly).
+            komo.add_mode_switch(phase, "place", "G", action.block, X_WB=X_WG.multiply(X_GB[action.block]))
+        komo.add_objective([phase], "qItself", order=1, type="eq")  # at rest when grasping/placing
+        komo.add_objective([post.time], "pose", ("G",), "eq", target=X_WG_up)
+    komo.add_objective([float(phases)], "qItself", type="eq", target=arm.q_home)
+    komo.add_objective([float(phases)], "qItself", order=1, type="eq")
+    return komo
+
+
+def _triples(waypoints):
+    return [waypoints[i:i + 3] for i in range(0, len(waypoints), 3)]
