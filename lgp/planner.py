@@ -191,8 +191,11 @@ def plan_symbolic(symbolic: SymbolicPlan, rng=0, *, formulation: str = "reduced"
         return Plan(initial, symbolic.target, symbolic, np.zeros(1), arm.q_home[None].copy(),
                     {b.name: b.p_WB[None].copy() for b in initial}, {b.name: b.X_WB.rotation().matrix()[None] for b in initial} if n else {},
                     None, arm)
-    results = [_solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase)
-               for komo, seeds, turns in declare(symbolic, arm, rng, slices_per_phase)]
+    try:
+        declared = declare(symbolic, arm, rng, slices_per_phase)
+    except PlanningError as e:
+        raise PlanningError(f"{initial.label} -> {symbolic.target.label}: {e}", e.action) from None
+    results = [_solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase) for komo, seeds, turns in declared]
     solved = [r for r in results if r.success and r.max_violation <= 1e-6]
     result = min(solved, key=lambda r: r.cost) if solved else results[0]
     result.solve_time = sum(r.solve_time for r in results)
@@ -215,6 +218,7 @@ class _Waypoint:
     action: int  # index into actions
     p_WG: np.ndarray  # gripper position
     yaw: float  # block yaw (the gripper yaw is this plus a quarter turn multiple)
+    what: str  # e.g. "approach to Place(b1, table)"
 
 
 def _waypoints(symbolic: SymbolicPlan) -> list[_Waypoint]:
@@ -228,12 +232,12 @@ def _waypoints(symbolic: SymbolicPlan) -> list[_Waypoint]:
             p, yaw = np.asarray(action.p_WB, float), float(action.yaw)
             state = state.with_blocks(b.moved_to(p, yaw) if b.name == action.block else b for b in state.blocks)
         up = np.array([0.0, 0.0, APPROACH])
-        for dt, offset in ((-APPROACH_TIME, up), (0.0, 0.0 * up), (APPROACH_TIME, up)):
-            out.append(_Waypoint(phase + dt, k, p + offset, yaw))
+        for dt, offset, what in ((-APPROACH_TIME, up, "approach to"), (0.0, 0.0 * up, "pose of"), (APPROACH_TIME, up, "retreat from")):
+            out.append(_Waypoint(phase + dt, k, p + offset, yaw, f"{what} action {k + 1} {action}"))
     return out
 
 
-def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float):
+def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, actions=()):
     """Quarter-turn choice per action and an IK solution per waypoint, by dynamic programming.
 
     Candidates: closed-form IK over a swivel grid (shifted by `offset` rad) x 8
@@ -246,8 +250,8 @@ def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float):
     for w in waypoints:
         q, labels = arm.ik_from_above(w.p_WG, w.yaw, swivels, margin=SEED_MARGIN)
         if len(q) == 0:
-            raise PlanningError(f"waypoint at phase {w.time:g} (gripper at {np.round(w.p_WG, 4).tolist()}) is out of the arm's reach",
-                                w.action)
+            raise PlanningError(f"{w.what} at phase {w.time:g}: gripper at {np.round(w.p_WG, 4).tolist()} is out of the arm's reach "
+                                "from above", actions[w.action] if actions else None)
         layers.append((q, labels))
     # Viterbi over the layers, home at both ends.
     times = [0.0] + [w.time for w in waypoints] + [float(phases)]
@@ -302,7 +306,7 @@ def declare(symbolic: SymbolicPlan, arm: Arm, rng: np.random.Generator, slices_p
     shift = rng.uniform(0, step)
     out, seen = [], set()
     for r in range(SEED_RESTARTS):
-        seeds, turns, signature = _seed(arm, waypoints, phases, shift + r * step / SEED_RESTARTS)
+        seeds, turns, signature = _seed(arm, waypoints, phases, shift + r * step / SEED_RESTARTS, symbolic.actions)
         if signature not in seen:
             seen.add(signature)
             out.append((_declare(symbolic, arm, waypoints, turns, phases, slices_per_phase), seeds, turns))

@@ -1,0 +1,139 @@
+"""Physical effort of a trial (paper: "Measuring physical effort").
+
+"Physical effort is measured by the kinetic energy needed to execute the resulting
+full plan" with "a unit mass to a unit block", averaged over M = 30 random initial
+layouts. Here, per layout:
+
+    effort = sum over carried blocks of integral 1/2 m |v_WB(t)|^2 dt      [J s]
+
+with m = 1 kg, v_WB the velocity of the block centre along the KOMO trajectory
+(lgp.planner.plan), and the integral taken over the whole plan. The time integral,
+not a sum over slices, so the number does not change with the slice count (a
+per-slice sum would double when the slices do); units are therefore joule-seconds.
+Each action takes one phase of 1 s (lgp.planner.PHASE_DURATION).
+
+Command line, the table of docs/effort.md::
+
+    python -m models.effort --samples 30 --jobs 2 --out effort_samples.csv
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from lgp.planner import PlanningError, plan
+
+#: Number of random initial layouts per trial [paper: M = 30].
+SAMPLES = 30
+COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "status"]
+
+
+def sample_rng(seed: int, sample: int) -> np.random.Generator:
+    """The Generator of one sample: the same (seed, sample) gives the same layout anywhere."""
+    return np.random.default_rng([seed, sample])
+
+
+def effort_of_sample(trial, seed: int, sample: int) -> dict:
+    """One row of the effort table: plan the sample's layout, integrate kinetic energy.
+
+    Raises PlanningError naming the trial, the sample and the failing action.
+    """
+    rng = sample_rng(seed, sample)
+    initial = trial.sample_initial(rng)
+    try:
+        result = plan(initial, trial.target, rng)
+    except PlanningError as e:
+        raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): {e}", e.action) from e
+    effort = result.kinetic_energy()
+    if not np.isfinite(effort):
+        raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): effort is {effort}")
+    komo = result.komo
+    return {
+        "trial": trial.id,
+        "sample": sample,
+        "effort": effort,
+        "n_actions": len(result.actions),
+        "solve_time": result.planning_time,  # wall-clock s, assignment to KOMO
+        "solver": komo.solver if komo else "none",
+        "status": komo.status if komo else "nothing to move",
+    }
+
+
+def _row(args):
+    trial, seed, sample = args
+    return effort_of_sample(trial, seed, sample)
+
+
+def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
+                    progress: Callable[[int, int], None] | None = None) -> tuple[float, pd.DataFrame]:
+    """Mean physical effort (J s) of `trial` over `samples` random layouts, and the tidy table.
+
+    `trial` is a stimuli.Trial or its id ("7H"). Sample i draws its layout with
+    numpy.random.default_rng([seed, i]); `jobs` > 1 spreads samples over that many
+    processes with identical numbers. `progress(done, total)` is called after each
+    sample. A trial whose layout is not random (a fixed structure in A) is planned
+    once and its row repeated: every sample would draw the same layout.
+    """
+    if isinstance(trial, str):
+        import stimuli
+
+        trial = stimuli.load_trial(trial)
+    if samples < 1:
+        raise ValueError(f"physical_effort needs samples >= 1, got {samples}")
+    todo = list(range(samples)) if trial.initial.is_random else [0]
+    rows: list[dict] = []
+    done = 0
+
+    def record(row):
+        nonlocal done
+        rows.append(row)
+        done += 1 if trial.initial.is_random else samples
+        if progress is not None:
+            progress(done, samples)
+
+    if jobs > 1 and len(todo) > 1:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
+            futures = [pool.submit(_row, (trial, seed, i)) for i in todo]
+            for future in as_completed(futures):
+                record(future.result())
+    else:
+        for i in todo:
+            record(effort_of_sample(trial, seed, i))
+    if not trial.initial.is_random:
+        rows = [{**rows[0], "sample": i} for i in range(samples)]
+    table = pd.DataFrame(rows, columns=COLUMNS).sort_values("sample").reset_index(drop=True)
+    return float(table["effort"].mean()), table
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m models.effort", description="Physical effort of every trial.")
+    parser.add_argument("trials", nargs="*", help="trial ids (default: all 24)")
+    parser.add_argument("--samples", type=int, default=SAMPLES)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--out", help="write the per-sample table (CSV) here")
+    args = parser.parse_args(argv)
+
+    import stimuli
+
+    trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
+    tables = []
+    for trial in trials:
+        mean, table = physical_effort(trial, samples=args.samples, seed=args.seed, jobs=args.jobs)
+        tables.append(table)
+        print(f"{trial.id:>4}  effort {mean:8.4f} J s  sd {table['effort'].std(ddof=1) if len(table) > 1 else 0.0:7.4f}  "
+              f"actions {table['n_actions'].iloc[0]:3d}  {table['solve_time'].mean():6.3f} s/plan", flush=True)
+    table = pd.concat(tables, ignore_index=True)
+    if args.out:
+        table.to_csv(args.out, index=False)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

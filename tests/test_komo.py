@@ -1,0 +1,220 @@
+"""KOMO on Drake: the closed-form cubic, the reduced program = the full program, and
+the kinematic rules of grasping, carrying and placing."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import MultibodyPlant
+
+from lgp.assignment import assign_blocks
+from lgp.komo import Komo, KomoError, kinetic_energy
+from lgp.planner import APPROACH, default_arm, plan
+from lgp.scene import BLOCK_SIZE, Block, Scene
+from lgp.symbolic import Grasp, Place
+
+SLIDER = """<robot name="point"><link name="base"/>
+<link name="point"><inertial><mass value="1"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3" ixy="0" ixz="0" iyz="0"/></inertial></link>
+<joint name="x" type="prismatic"><parent link="base"/><child link="point"/><axis xyz="1 0 0"/>
+<limit lower="{lower}" upper="{upper}" effort="1" velocity="1"/></joint></robot>"""
+
+
+def free_point(lower=-10.0, upper=10.0) -> MultibodyPlant:
+    """A point mass on a frictionless x slider: KOMO's q is its position."""
+    plant = MultibodyPlant(0.0)
+    Parser(plant).AddModelsFromString(SLIDER.format(lower=lower, upper=upper), "urdf")
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("base"))
+    plant.Finalize()
+    return plant
+
+
+def tower_task(n: int, label: str = "tower") -> tuple[Scene, Scene]:
+    """n blocks on an arc around the build site S = (0.35, 0), stacked into a tower at S."""
+    angles = np.linspace(-2.2, 2.2, n) if n > 1 else np.array([1.0])
+    blocks = [Block(f"a{i}", [0.35 + 0.17 * np.cos(a), 0.2 * np.sin(a), BLOCK_SIZE / 2], yaw=0.3 * i)
+              for i, a in enumerate(angles)]
+    tower = [Block(f"b{i}", [0.35, 0.0, BLOCK_SIZE * (i + 0.5)]) for i in range(n)]
+    return Scene(blocks, label=f"{label}{n}-A").validate(), Scene(tower, label=f"{label}{n}-B").validate()
+
+
+# ----------------------------------------------------------------------------- closed form
+
+
+def cubic_komo(slices: int) -> Komo:
+    komo = Komo(free_point(), phases=1, slices_per_phase=slices, k_order=2, q_home=[0.0])
+    komo.add_objective([1.0], "position", ("point",), "eq", target=[1.0, 0.0, 0.0])
+    komo.add_objective([1.0], "qItself", order=1, type="eq")  # at rest at the end
+    return komo
+
+
+def test_free_point_converges_to_the_cubic_with_kinetic_energy_integral_0_6_m_L2_over_T():
+    # Moving L = 1 m in T = 1 s between rest states, minimum squared acceleration gives
+    # the cubic x = L (3 s^2 - 2 s^3), whose integral of 1/2 m v^2 is 0.6 m L^2 / T.
+    errors = []
+    for slices in (25, 50, 100, 200):
+        komo = cubic_komo(slices)
+        result = komo.solve()
+        assert result.success, result.status
+        p = komo.frame_poses(result.q, "point")[:, :3, 3]
+        errors.append(abs(kinetic_energy(p, komo.tau, mass=1.0) - 0.6))
+        s = result.t / 1.0
+        assert np.max(np.abs(p[:, 0] - (3 * s**2 - 2 * s**3))) < 3.0 / slices
+    assert all(b < a for a, b in zip(errors, errors[1:])), errors
+    assert errors[-1] < 1e-3 * 0.6
+
+
+def test_free_point_full_and_reduced_programs_agree():
+    komo = cubic_komo(20)
+    reduced, full = komo.solve("reduced"), komo.solve("full")
+    assert reduced.success and full.success
+    assert reduced.cost == pytest.approx(full.cost, rel=1e-6)
+    np.testing.assert_allclose(reduced.q, full.q, atol=1e-6)
+
+
+def test_free_slice_over_a_joint_limit_is_promoted_and_the_limit_holds():
+    # Reaching 0.9 at a quarter of the phase and 1.0 at rest at the end overshoots 1.0
+    # in between when unconstrained; with the limit at 1.0 every slice must obey it.
+    def declare(upper):
+        komo = Komo(free_point(upper=upper), phases=1, slices_per_phase=40, q_home=[0.0])
+        komo.add_objective([0.25], "position", ("point",), "eq", target=[0.9, 0, 0])
+        komo.add_objective([1.0], "position", ("point",), "eq", target=[1.0, 0, 0])
+        komo.add_objective([1.0], "qItself", order=1, type="eq")
+        return komo
+
+    free = declare(10.0).solve()
+    assert free.q.max() > 1.01  # the unconstrained optimum overshoots
+    komo = declare(1.0)
+    reduced, full = komo.solve("reduced"), komo.solve("full")
+    assert reduced.success and full.success
+    assert len(reduced.keyframes) > 2  # promoted slices
+    assert reduced.q.max() <= 1.0 + 1e-9
+    assert reduced.cost == pytest.approx(full.cost, rel=1e-5)
+
+
+# ----------------------------------------------------------------------------- reduced = full
+
+
+@pytest.fixture(scope="module")
+def tower5_plans():
+    A, B = tower_task(5)
+    return plan(A, B, 0, formulation="reduced"), plan(A, B, 0, formulation="full")
+
+
+@pytest.mark.parametrize("n", [2, 5])
+def test_reduced_program_reaches_the_full_programs_optimum(n, request):
+    if n == 5:
+        reduced, full = request.getfixturevalue("tower5_plans")
+    else:
+        A, B = tower_task(n)
+        reduced, full = plan(A, B, 0, formulation="reduced"), plan(A, B, 0, formulation="full")
+    assert reduced.komo.n_variables < full.komo.n_variables / 3
+    assert reduced.komo.cost == pytest.approx(full.komo.cost, rel=5e-3)
+    assert reduced.kinetic_energy() == pytest.approx(full.kinetic_energy(), rel=5e-3)
+
+
+# ----------------------------------------------------------------------------- kinematic modes
+
+
+@pytest.fixture(scope="module")
+def tower3():
+    A, B = tower_task(3)
+    return plan(A, B, 0)
+
+
+def _slices_of(p, phase: float) -> int:
+    """Index into Plan.t / q / p_WB of a phase time."""
+    return int(round(phase / p.tau))
+
+
+def _held_intervals(p):
+    grasp = {a.block: _slices_of(p, t) for t, a in p.symbolic.skeleton() if isinstance(a, Grasp)}
+    place = {a.block: _slices_of(p, t) for t, a in p.symbolic.skeleton() if isinstance(a, Place)}
+    return {b: (grasp[b], place[b]) for b in grasp}
+
+
+def test_grasped_block_moves_with_hand(tower3):
+    arm = default_arm()
+    for block, (g, s) in _held_intervals(tower3).items():
+        X_GB = []
+        for i in range(g, s + 1):
+            X_WG = arm.X_WG(tower3.q[i]).GetAsMatrix4()
+            X_WB = np.eye(4)
+            X_WB[:3, :3], X_WB[:3, 3] = tower3.R_WB[block][i], tower3.p_WB[block][i]
+            X_GB.append(np.linalg.inv(X_WG) @ X_WB)
+        np.testing.assert_allclose(X_GB, np.broadcast_to(X_GB[0], np.shape(X_GB)), atol=1e-9)
+        assert np.linalg.norm(tower3.p_WB[block][s] - tower3.p_WB[block][g]) > 0.1  # it was carried
+
+
+def test_resting_block_never_moves(tower3):
+    for block, (g, s) in _held_intervals(tower3).items():
+        p = tower3.p_WB[block]
+        np.testing.assert_array_equal(p[:g], np.broadcast_to(p[0], p[:g].shape))  # before the grasp
+        np.testing.assert_allclose(p[g], p[0], atol=1e-9)  # grasped where it lay
+        np.testing.assert_array_equal(p[s:], np.broadcast_to(p[s], p[s:].shape))  # after the place
+
+
+def test_block_not_in_the_plan_never_moves():
+    A, B = tower_task(2)
+    bystander = Block("c", [0.5, -0.3, BLOCK_SIZE / 2])
+    A = A.with_blocks([*A.blocks, bystander])
+    p = plan(A, B, 0)
+    assert "c" not in p.symbolic.moved
+    np.testing.assert_array_equal(p.p_WB["c"], np.broadcast_to(bystander.p_WB, p.p_WB["c"].shape))
+
+
+def test_placed_block_ends_at_target_within_1e_6_m(tower3):
+    assignment = tower3.symbolic.assignment
+    for a, b in assignment.items():
+        target = tower3.target.block(b)
+        assert np.linalg.norm(tower3.p_WB[a][-1] - target.p_WB) < 1e-6
+        # Orientation: the target's, up to the cube's quarter-turn symmetry about z.
+        R = tower3.R_WB[a][-1]
+        assert R[2, 2] == pytest.approx(1.0, abs=1e-9)
+        yaw = np.arctan2(R[1, 0], R[0, 0])
+        assert abs((yaw - target.yaw + np.pi / 4) % (np.pi / 2) - np.pi / 4) < 1e-6
+
+
+def test_gripper_vertical_at_grasp_and_place_and_straight_above_at_approach(tower3):
+    arm = default_arm()
+    for phase, action in tower3.symbolic.skeleton():
+        block = action.block
+        i = _slices_of(tower3, phase)
+        X_WG = arm.X_WG(tower3.q[i])
+        assert X_WG.rotation().matrix()[:, 2] @ np.array([0, 0, -1.0]) > 1 - 1e-9
+        np.testing.assert_allclose(X_WG.translation(), tower3.p_WB[block][i], atol=1e-6)  # G at the block centre
+        for dt in (-0.2, 0.2):  # approach and retreat waypoints straight above
+            X = arm.X_WG(tower3.q[_slices_of(tower3, phase + dt)])
+            np.testing.assert_allclose(X.translation(), X_WG.translation() + [0, 0, APPROACH], atol=1e-6)
+            assert X.rotation().matrix()[:, 2] @ np.array([0, 0, -1.0]) > 1 - 1e-9
+        assert np.allclose(tower3.q[i], tower3.q[i - 1], atol=1e-9)  # at rest when grasping/placing
+
+
+def test_joint_limits_hold_at_every_slice(tower3, tower5_plans):
+    arm = default_arm()
+    for p in (tower3, *tower5_plans):
+        assert np.all(p.q >= arm.q_lower - 1e-9) and np.all(p.q <= arm.q_upper + 1e-9)
+
+
+def test_plan_starts_and_ends_at_rest_at_home(tower3):
+    home = default_arm().q_home
+    np.testing.assert_allclose(tower3.q[0], home)
+    np.testing.assert_allclose(tower3.q[-1], home, atol=1e-9)
+    np.testing.assert_allclose(tower3.q[-2], home, atol=1e-9)  # zero final velocity
+    assert tower3.t[0] == 0.0 and tower3.t[-1] == pytest.approx(len(tower3.actions) + 1)
+
+
+# ----------------------------------------------------------------------------- declarations
+
+
+def test_bad_declarations_are_refused_with_the_reason():
+    komo = Komo(free_point(), phases=2, slices_per_phase=10, q_home=[0.0], objects={})
+    with pytest.raises(KomoError, match="not a slice"):
+        komo.add_objective([0.33], "position", ("point",), "eq", target=[0, 0, 0])
+    with pytest.raises(KomoError, match="unknown feature"):
+        komo.add_objective([1.0], "velocity", ("point",), "eq")
+    with pytest.raises(KomoError, match="no frame or object"):
+        komo.add_objective([1.0], "position", ("hand",), "eq", target=[0, 0, 0])
+    with pytest.raises(KomoError, match="unknown object"):
+        komo.add_mode_switch(1.0, "grasp", "point", "b1")
+    with pytest.raises(KomoError, match="unknown solver"):
+        komo.solve(solver="cplex")

@@ -1,0 +1,91 @@
+"""The planner end to end: seeding does not change the optimum, failures name the
+action, effort is a time integral, and plans can be looked at."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import lgp
+import stimuli
+from lgp.planner import Plan, PlanningError, plan
+from lgp.scene import BLOCK_SIZE, Block, Scene
+
+
+def test_plan_is_exported_from_lgp():
+    assert lgp.plan is plan and lgp.Plan is Plan
+
+
+@pytest.mark.parametrize("trial_id, sample", [("2H", 0), ("5E", 1), ("10H", 0), ("4H", 1)])
+def test_different_ik_seeds_give_the_same_optimum(trial_id, sample):
+    # The IK seeds are closed-form solutions on a swivel grid shifted at random;
+    # once a bad seed gave twice the cost. These layouts had near-tied optima.
+    trial = stimuli.load_trial(trial_id)
+    A = trial.sample_initial(np.random.default_rng([0, sample]))
+    plans = [plan(A, trial.target, seed) for seed in range(4)]
+    costs = np.array([p.komo.cost for p in plans])
+    efforts = np.array([p.kinetic_energy() for p in plans])
+    assert costs.max() / costs.min() - 1 < 5e-3, costs
+    assert efforts.max() / efforts.min() - 1 < 5e-3, efforts
+
+
+def test_plan_has_a_trajectory_for_every_block():
+    trial = stimuli.load_trial("9E")  # 2 of 6 blocks move
+    A = trial.sample_initial(np.random.default_rng(0))
+    p = plan(A, trial.target)
+    n = len(p.t)
+    assert p.q.shape == (n, 7) and set(p.p_WB) == set(A.names)
+    assert all(v.shape == (n, 3) for v in p.p_WB.values())
+    assert len(p.actions) == 4 and len(p.symbolic.moved) == 2
+    assert p.t[1] - p.t[0] == pytest.approx(0.05)
+    assert sum(p.kinetic_energy_by_action()) == pytest.approx(p.kinetic_energy())
+    assert "physical effort" in p.describe()
+
+
+def test_effort_does_not_depend_on_the_slice_count():
+    trial = stimuli.load_trial("2H")
+    A = trial.sample_initial(np.random.default_rng(0))
+    coarse, fine = plan(A, trial.target, slices_per_phase=20), plan(A, trial.target, slices_per_phase=40)
+    assert fine.kinetic_energy() == pytest.approx(coarse.kinetic_energy(), rel=5e-3)
+
+
+def test_nothing_to_move_is_zero_effort():
+    scene = Scene([Block("a", [0.35, 0.0, BLOCK_SIZE / 2])], label="one-A")
+    p = plan(scene, Scene([Block("b", [0.35, 0.0, BLOCK_SIZE / 2])], label="one-B"))
+    assert p.actions == () and p.kinetic_energy() == 0.0
+
+
+def test_unreachable_target_raises_planning_error_naming_the_action():
+    A = Scene([Block("a", [0.35, 0.0, BLOCK_SIZE / 2])], label="far-A")
+    B = Scene([Block("b", [1.6, 0.0, BLOCK_SIZE / 2])], label="far-B")
+    with pytest.raises(PlanningError, match=r"far-A -> far-B: .*Place\(a, table\).*out of the arm's reach") as info:
+        plan(A, B)
+    assert str(info.value.action) == "Place(a, table)"
+
+
+def test_ipopt_reaches_the_snopt_optimum():
+    trial = stimuli.load_trial("10E")
+    A = trial.sample_initial(np.random.default_rng(0))
+    snopt, ipopt = plan(A, trial.target, solver="snopt"), plan(A, trial.target, solver="ipopt")
+    assert ipopt.komo.cost == pytest.approx(snopt.komo.cost, rel=5e-3)
+
+
+def test_replay_html_is_self_contained_and_figure_is_written(tmp_path):
+    trial = stimuli.load_trial("1E")
+    p = plan(trial.sample_initial(np.random.default_rng(0)), trial.target)
+    html = (tmp_path / "replay.html")
+    p.write_html(html)
+    text = html.read_text()
+    assert "<script src=" not in text.replace(" ", "")  # the viewer is inlined: opens offline
+    assert "animation" in text.lower() and len(text) > 100_000
+    png = tmp_path / "plan.png"
+    p.write_png(png)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_command_line_prints_the_actions(capsys, tmp_path):
+    from lgp.plan import main
+
+    assert main(["9E", "--seed", "0", "--png", str(tmp_path / "9E.png")]) == 0
+    out = capsys.readouterr().out
+    assert "Grasp(" in out and "Place(" in out and "physical effort" in out
+    assert (tmp_path / "9E.png").exists()
