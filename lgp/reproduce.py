@@ -1,0 +1,224 @@
+"""The paper's pipeline end to end: stimuli -> physical effort -> physical risk ->
+(analysis, when human data are given) -> tidy CSVs, figures and report.md.
+
+    python -m lgp.reproduce --quick                 # a small version, about a minute
+    python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
+    python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
+
+Every expensive result (effort of one trial, risk curve of one trial) is cached
+under ``<out>/cache`` by a hash of the trial file, the parameters and the code that
+computes it, and written atomically: a second run is near instant, and a run killed
+half way resumes with nothing lost.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+import stimuli
+from lgp.cache import Cache, code_version, input_key, write_csv_atomic
+
+#: The paper's sigma grid: 0.05 d to 0.10 d in steps of 0.005 d.
+SIGMA_GRID = tuple(np.round(np.arange(0.05, 0.10 + 1e-9, 0.005), 3))
+PAPER_SIGMA = 0.065
+QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def effort_tables(trials, samples: int, seed: int, jobs: int, cache: Cache) -> pd.DataFrame:
+    """Per (trial, sample) effort, one cached file per trial."""
+    from models.effort import physical_effort
+
+    version = code_version("lgp/*.py", "models/effort.py", "models/*.urdf", "models/*.sdf", "models/*.yaml")
+    out = []
+    for k, trial in enumerate(trials, 1):
+        key = input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, code=version)
+        t0 = time.perf_counter()
+        hit = cache.path("effort", key).exists() and cache.enabled
+        df = cache.get_or_compute("effort", key, lambda: physical_effort(trial, samples=samples, seed=seed, jobs=jobs)[1])
+        _log(f"[effort {k:2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
+             f"  ({'cached' if hit else f'{time.perf_counter() - t0:.1f} s'})")
+        out.append(df)
+    return pd.concat(out, ignore_index=True)
+
+
+def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, jobs: int, cache: Cache, chunk: int = 6) -> pd.DataFrame:
+    """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
+
+    Uncached trials are simulated a few at a time in one process pool, so the
+    grid keeps both cores busy and an interruption loses at most one chunk.
+    """
+    from models.risk import risk_table
+
+    version = code_version("lgp/scene.py", "models/risk/*.py")
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n=n_sims, seed=seed, engine=engine, code=version) for t in trials}
+    todo = [t for t in trials if not (cache.enabled and cache.path("risk", keys[t.id]).exists())]
+    for k in range(0, len(todo), chunk):
+        group = todo[k:k + chunk]
+        t0 = time.perf_counter()
+        table = risk_table(group, sigmas=list(sigmas), n=n_sims, seed=seed, engine=engine, jobs=jobs)
+        for t in group:
+            write_csv_atomic(table[table["trial"] == t.id].reset_index(drop=True), cache.path("risk", keys[t.id]))
+        _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
+    out = []
+    for k, trial in enumerate(trials, 1):
+        df = cache.get_or_compute("risk", keys[trial.id], lambda: risk_table([trial], sigmas=list(sigmas), n=n_sims, seed=seed, engine=engine, jobs=jobs))
+        curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
+        _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
+        out.append(df)
+    return pd.concat(out, ignore_index=True)
+
+
+def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
+    order = {t.id: i for i, t in enumerate(trials)}
+    g = samples.groupby("trial")["effort"]
+    df = pd.DataFrame({"effort": g.mean(), "effort_sd": g.std(ddof=1), "samples": g.size()}).reset_index()
+    df["pair"] = df["trial"].str[:-1].astype(int)
+    df["level"] = df["trial"].str[-1]
+    return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]
+
+
+def pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trials) -> pd.DataFrame:
+    """Per pair: effort and risk (at `sigma`) of E and H, and whether E < H in each."""
+    from analysis import pair_table, risk_at_sigma
+
+    dims = {t.pair: t.dimension for t in trials}
+    e = pair_table(effort.set_index("trial")["effort"]).rename(columns={"cost_E": "effort_E", "cost_H": "effort_H", "E_lt_H": "effort_E_lt_H"})
+    r = pair_table(risk_at_sigma(risk, sigma)).rename(columns={"cost_E": "risk_E", "cost_H": "risk_H", "E_lt_H": "risk_E_lt_H"})
+    table = e.merge(r, on="pair")
+    table.insert(1, "dimension", table["pair"].map(dims))
+    table.insert(5, "sigma", sigma)
+    return table
+
+
+def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
+    cols = list(df.columns)
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for _, row in df.iterrows():
+        cells = [format(v, floatfmt) if isinstance(v, (float, np.floating)) else str(v) for v in row]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None, elapsed: float) -> Path:
+    wide = risk.pivot_table(index="trial", columns="sigma", values="risk").reindex(effort["trial"])
+    wide.columns = [f"{s:g}" for s in wide.columns]
+    lines = [
+        "# Reproduction report",
+        "",
+        f"Settings: trials {len(effort)}, M = {args.samples} layouts, N = {args.n_sims} runs per sigma, "
+        f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), engine {args.engine or 'default'}, seed {args.seed}"
+        + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
+        f"Wall time {elapsed:.0f} s.",
+        "",
+        "## Physical effort (J*s: integral of the carried blocks' kinetic energy over time, 1 kg blocks)",
+        "",
+        _markdown(effort),
+        "",
+        "## Physical risk (fraction of noisy runs that fall)",
+        "",
+        _markdown(wide.reset_index(), ".2f"),
+        "",
+    ]
+    if pairs is not None:
+        lines += [
+            f"## Easy/hard pairs (risk at sigma = {pairs['sigma'].iloc[0]:g} d)",
+            "",
+            _markdown(pairs.drop(columns=["sigma"])),
+            "",
+            f"Effort orders {int(pairs['effort_E_lt_H'].sum())} of {len(pairs)} pairs E < H; "
+            f"risk orders {int(pairs['risk_E_lt_H'].sum())} of {len(pairs)} (ties count as not ordered). "
+            "The paper's fitted full model ordered 11 of 12 (pair 11 the exception); without human data "
+            "there are no fitted betas, so the full-model cost is reported only with --human-data.",
+            "",
+        ]
+    if analysis is None:
+        lines += ["No human data given (`--human-data FILE`, format in docs/human-data.md): the fits of Eq. 1, "
+                  "the sigma profile and the bootstrap need the responses, which are not public.", ""]
+    else:
+        for key in ("sigma_choice", "fits", "bootstrap_summary", "bootstrap_tests"):
+            if key in analysis and isinstance(analysis[key], pd.DataFrame) and len(analysis[key]):
+                lines += [f"## {key.replace('_', ' ')}", "", _markdown(analysis[key]), ""]
+        if "pairs" in analysis:
+            model_pairs = analysis["pairs"]
+            lines += ["## Pair orderings by source", "", _markdown(model_pairs), ""]
+    path = out / "report.md"
+    tmp = path.with_suffix(".md.tmp")
+    tmp.write_text("\n".join(lines))
+    os.replace(tmp, path)
+    return path
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m lgp.reproduce", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="results", help="output directory (default: results/)")
+    p.add_argument("--trials", nargs="+", help="trial ids (default: all 24)")
+    p.add_argument("--samples", type=int, help="M, random layouts of A per trial (default 30; --quick 3)")
+    p.add_argument("--n-sims", type=int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
+    p.add_argument("--sigmas", type=float, nargs="+", help="noise levels in units of d (default: 0.05..0.10 step 0.005)")
+    p.add_argument("--engine", choices=["mujoco", "drake"], help="physics engine for risk (default: the models.risk default)")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-boot", type=int, help="bootstrap resamples (default 1000; --quick 200)")
+    p.add_argument("--human-data", help="CSV of human responses (docs/human-data.md)")
+    p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
+    p.add_argument("--no-cache", action="store_true", help="recompute everything")
+    p.add_argument("--risk-chunk", type=int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
+    args = p.parse_args(argv)
+    q = QUICK if args.quick else {}
+    args.samples = args.samples or q.get("samples", 30)
+    args.n_sims = args.n_sims or q.get("n_sims", 100)
+    args.sigmas = tuple(args.sigmas or q.get("sigmas", SIGMA_GRID))
+    args.n_boot = args.n_boot or q.get("n_boot", 1000)
+
+    t0 = time.perf_counter()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cache = Cache(out / "cache", enabled=not args.no_cache)
+    trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
+    human = None
+    if args.human_data:
+        from analysis import load_human_data
+
+        human = load_human_data(args.human_data)  # validate before the long work
+    _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}; cache {cache.root}")
+
+    effort_samples = effort_tables(trials, args.samples, args.seed, args.jobs, cache)
+    effort = summarise_effort(effort_samples, trials)
+    risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, args.jobs, cache, args.risk_chunk)
+    sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
+    written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
+               write_csv_atomic(risk, out / "risk.csv")]
+    complete = {t.id for t in trials} >= {f"{p}{lv}" for p in range(1, 13) for lv in "EH"}
+    pairs, analysis = None, None
+    if complete:  # pair orderings, figures and fits are defined on the 24 trials
+        from analysis import run_analysis
+
+        pairs = pair_orderings(effort, risk, sigma, trials)
+        written.append(write_csv_atomic(pairs, out / "pairs.csv"))
+        analysis = run_analysis(human, effort_samples, risk, out / ("analysis" if human is not None else "figures"),
+                                seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma)
+    else:
+        _log("a subset of trials: no pair table, figures or fits (they need all 24)")
+    report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0)
+    written.append(report)
+    print(f"Outputs in {out.resolve()}:")
+    for path in written:
+        print(f"  {path}")
+    for sub in ("analysis", "figures"):
+        if (out / sub).exists():
+            print(f"  {out / sub}/ ({len(list((out / sub).iterdir()))} files: CSVs and figures)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
