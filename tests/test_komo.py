@@ -186,7 +186,24 @@ def test_gripper_vertical_at_grasp_and_place_and_straight_above_at_approach(towe
             X = arm.X_WG(tower3.q[_slices_of(tower3, phase + dt)])
             np.testing.assert_allclose(X.translation(), X_WG.translation() + [0, 0, APPROACH], atol=1e-6)
             assert X.rotation().matrix()[:, 2] @ np.array([0, 0, -1.0]) > 1 - 1e-9
-        assert np.allclose(tower3.q[i], tower3.q[i - 1], atol=1e-9)  # at rest when grasping/placing
+        # At rest when grasping/placing: zero velocity to second order, from both sides.
+        q = tower3.q
+        np.testing.assert_allclose(3 * q[i] - 4 * q[i - 1] + q[i - 2], 0.0, atol=1e-8)
+        np.testing.assert_allclose(3 * q[i] - 4 * q[i + 1] + q[i + 2], 0.0, atol=1e-8)
+
+
+def test_block_leaves_and_reaches_its_support_vertically_within_1_5_mm(tower3):
+    # The last and first APPROACH metres of every carry stay on the vertical line
+    # through the grasp/place pose, so a block never sweeps into its neighbours.
+    S = int(round(1 / tower3.tau))
+    for phase, action in tower3.symbolic.skeleton():
+        i = _slices_of(tower3, phase)
+        p = tower3.p_WB[action.block]
+        xy = p[i, :2]
+        for j in range(i - S // 5, i + S // 5 + 1):
+            if isinstance(action, Place) and j > i or isinstance(action, Grasp) and j < i:
+                continue  # the block is not held there
+            assert np.linalg.norm(p[j, :2] - xy) < 1.5e-3
 
 
 def test_joint_limits_hold_at_every_slice(tower3, tower5_plans):
@@ -198,12 +215,31 @@ def test_joint_limits_hold_at_every_slice(tower3, tower5_plans):
 def test_plan_starts_and_ends_at_rest_at_home(tower3):
     home = default_arm().q_home
     np.testing.assert_allclose(tower3.q[0], home)
-    np.testing.assert_allclose(tower3.q[-1], home, atol=1e-9)
-    np.testing.assert_allclose(tower3.q[-2], home, atol=1e-9)  # zero final velocity
+    q = tower3.q
+    np.testing.assert_allclose(q[-1], home, atol=1e-9)
+    np.testing.assert_allclose(3 * q[-1] - 4 * q[-2] + q[-3], 0.0, atol=1e-8)  # zero final velocity
+    # Starts from rest (k_order prefix slices at home): it speeds up from zero.
+    steps = np.abs(np.diff(q, axis=0)).max(axis=1)
+    assert steps[0] < steps[1] < steps[2]
     assert tower3.t[0] == 0.0 and tower3.t[-1] == pytest.approx(len(tower3.actions) + 1)
 
 
 # ----------------------------------------------------------------------------- declarations
+
+
+def test_lazy_constraint_is_imposed_only_where_violated_and_matches_full():
+    # A ceiling at 0.8 over the whole phase, lazy: the reduced program imposes it at
+    # the slices the free cubic crosses, the full program everywhere; same optimum.
+    komo = cubic_komo(40)
+    komo.add_objective([], "position", ("point",), "ineq", scale=(1, 0, 0), target=[0.8, 0, 0], lazy=True)
+    komo.objectives.pop(0)  # the end target 1.0 would contradict the ceiling
+    komo.add_objective([1.0], "position", ("point",), "eq", target=[0.8, 0, 0])
+    komo.add_objective([0.5], "position", ("point",), "ineq", scale=(-1, 0, 0), target=[0.75, 0, 0])  # x >= 0.75 at t = 0.5
+    reduced, full = komo.solve("reduced"), komo.solve("full")
+    assert reduced.success and full.success
+    assert 2 < len(reduced.keyframes) < komo.N
+    assert reduced.q.max() <= 0.8 + 1e-9
+    assert reduced.cost == pytest.approx(full.cost, rel=1e-5)
 
 
 def test_bad_declarations_are_refused_with_the_reason():

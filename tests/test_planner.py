@@ -28,6 +28,26 @@ def test_different_ik_seeds_give_the_same_optimum(trial_id, sample):
     assert efforts.max() / efforts.min() - 1 < 5e-3, efforts
 
 
+@pytest.mark.parametrize("trial_id", ["2E", "12H"])
+def test_carried_block_never_sweeps_through_another_block_or_the_bucket(trial_id):
+    # 2E: a 2x2 square of touching blocks; 12H: blocks lifted out of a packed bucket.
+    from lgp.scene import penetration
+
+    trial = stimuli.load_trial(trial_id)
+    A = trial.sample_initial(np.random.default_rng(0))
+    p = plan(A, trial.target)
+
+    def block(name, i):
+        R = p.R_WB[name][i]
+        return Block(name, p.p_WB[name][i], np.arctan2(R[1, 0], R[0, 0]))
+
+    for i in range(len(p.t)):
+        moving = [n for n in p.p_WB if np.any(p.p_WB[n][i] != p.p_WB[n][max(i - 1, 0)])]
+        for n in moving:
+            others = [block(m, i) for m in p.p_WB if m != n]
+            assert max(penetration(block(n, i), o) for o in [*others, *A.fixed]) < 1e-3, (n, i)
+
+
 def test_plan_has_a_trajectory_for_every_block():
     trial = stimuli.load_trial("9E")  # 2 of 6 blocks move
     A = trial.sample_initial(np.random.default_rng(0))
@@ -45,7 +65,7 @@ def test_effort_does_not_depend_on_the_slice_count():
     trial = stimuli.load_trial("2H")
     A = trial.sample_initial(np.random.default_rng(0))
     coarse, fine = plan(A, trial.target, slices_per_phase=20), plan(A, trial.target, slices_per_phase=40)
-    assert fine.kinetic_energy() == pytest.approx(coarse.kinetic_energy(), rel=5e-3)
+    assert fine.kinetic_energy() == pytest.approx(coarse.kinetic_energy(), rel=1e-2)
 
 
 def test_nothing_to_move_is_zero_effort():
