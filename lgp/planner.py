@@ -43,8 +43,8 @@ from lgp.symbolic import Grasp, Place, SymbolicPlan, symbolic_plan
 #: Duration of one phase (one action) in seconds: a reach-and-place of a block in
 #: about a second is human-like, and every phase has the same length, as in KOMO.
 PHASE_DURATION = 1.0
-#: Slices per phase: 20, i.e. 50 ms; fine enough that effort changes by < 0.5 %
-#: when doubled (docs/effort.md).
+#: Slices per phase: 20, i.e. 50 ms; effort changes by < 1 % when they double
+#: (docs/effort.md).
 SLICES_PER_PHASE = 20
 #: Vertical approach/retreat distance (m) above every grasp and place pose.
 APPROACH = 0.05
@@ -55,9 +55,6 @@ APPROACH_TIME = 0.2
 BLOCK_MASS = 1.0
 #: Elbow swivel angles tried per waypoint when seeding (and 8 IK branches each).
 SWIVELS = 16
-#: Seeding DP runs on swivel grids shifted by 1/SEED_RESTARTS of a step; each
-#: distinct outcome is solved by KOMO and the cheapest kept.
-SEED_RESTARTS = 1
 #: At most this many KOMO re-solves with re-chosen quarter turns per seed.
 TURN_RESOLVES = 3
 #: Joint-limit margin (rad) asked of seeds, so KOMO starts strictly inside.
@@ -191,13 +188,10 @@ def plan_symbolic(symbolic: SymbolicPlan, rng=0, *, formulation: str = "reduced"
                     {b.name: b.p_WB[None].copy() for b in initial}, {b.name: b.X_WB.rotation().matrix()[None] for b in initial} if n else {},
                     None, arm)
     try:
-        declared = declare(symbolic, arm, rng, slices_per_phase)
+        komo, seeds, turns = declare(symbolic, arm, rng, slices_per_phase)
     except PlanningError as e:
         raise PlanningError(f"{initial.label} -> {symbolic.target.label}: {e}", e.action) from None
-    results = [_solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase) for komo, seeds, turns in declared]
-    solved = [r for r in results if r.success and r.max_violation <= 1e-6]
-    result = min(solved, key=lambda r: r.cost) if solved else results[0]
-    result.solve_time = sum(r.solve_time for r in results)
+    result = _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase)
     if not result.success or result.max_violation > 1e-6:
         o = result.worst_objective
         k = int(round(o.time[0])) if o is not None and o.time else None
@@ -281,9 +275,7 @@ def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, acti
     picks.reverse()
     seeds = {w.time: layers[n][0][i] for n, (w, i) in enumerate(zip(waypoints, picks))}
     turns = {w.action: int(layers[n][1][i]) for n, (w, i) in enumerate(zip(waypoints, picks))}
-    signature = tuple(turns[k] for k in sorted(turns)) + tuple(
-        tuple(np.sign(layers[n][0][i][[1, 3, 5]]).astype(int)) for n, i in enumerate(picks))
-    return seeds, turns, signature
+    return seeds, turns
 
 
 def _squared_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -293,23 +285,14 @@ def _squared_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def declare(symbolic: SymbolicPlan, arm: Arm, rng: np.random.Generator, slices_per_phase: int = SLICES_PER_PHASE):
-    """KOMO declarations of a symbolic plan with IK seeds, one per distinct discrete choice.
+    """The KOMO declaration of a symbolic plan, IK seeds {phase: q}, and the quarter turns.
 
-    The seeding DP runs SEED_RESTARTS times on swivel grids shifted by a fraction of
-    the grid step (plus one random shift from `rng`); each distinct outcome (quarter
-    turns and IK branches) gives one (Komo, seeds {phase: q}, turns) triple.
+    The seeding swivel grid is shifted by a random fraction of its step drawn from `rng`.
     """
     waypoints = _waypoints(symbolic)
     phases = len(symbolic.actions) + 1
-    step = 2 * np.pi / SWIVELS
-    shift = rng.uniform(0, step)
-    out, seen = [], set()
-    for r in range(SEED_RESTARTS):
-        seeds, turns, signature = _seed(arm, waypoints, phases, shift + r * step / SEED_RESTARTS, symbolic.actions)
-        if signature not in seen:
-            seen.add(signature)
-            out.append((_declare(symbolic, arm, waypoints, turns, phases, slices_per_phase), seeds, turns))
-    return out
+    seeds, turns = _seed(arm, waypoints, phases, rng.uniform(0, 2 * np.pi / SWIVELS), symbolic.actions)
+    return _declare(symbolic, arm, waypoints, turns, phases, slices_per_phase), seeds, turns
 
 
 def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase):
