@@ -122,12 +122,22 @@ class Arm:
 
         Returns (q (n, 7), m (n,)): every solution within the limits and its quarter turn.
         """
+        q, ok = self.ik_grid_from_above(p_WG, yaw, swivels, margin)
+        labels = np.broadcast_to(np.arange(4)[:, None], ok.shape)
+        return q[ok], labels[ok]
+
+    def ik_grid_from_above(self, p_WG, yaw: float, swivels, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """All IK solutions (4, 8 * len(swivels), 7) of `ik_from_above`, and which are within the limits.
+
+        Row m is the quarter turn m; column i the same (branch, swivel) for every
+        pose, so nearby poses give nearby solutions at the same index.
+        """
         X_BW = self.X_WBase.inverse()
         R_BG = np.array([X_BW.rotation().multiply(X_WG_from_above(p_WG, yaw + m * np.pi / 2).rotation()).matrix() for m in range(4)])
         q = srs_ik(R_BG, X_BW.multiply(np.asarray(p_WG, float)), np.asarray(swivels, float))
-        labels = np.broadcast_to(np.arange(4)[:, None], q.shape[:2])
-        ok = self.within_limits(q, margin)
-        return q[ok], labels[ok]
+        if q.shape[1] == 0:
+            return np.zeros((4, 8 * len(swivels), 7)), np.zeros((4, 8 * len(swivels)), bool)
+        return q, self.within_limits(q, margin)
 
 
 # ----------------------------------------------------------------------------- closed-form IK

@@ -38,7 +38,7 @@ from lgp.arm import Arm, X_WG_from_above
 from lgp.assignment import assign_blocks
 from lgp.komo import Komo, KomoResult, kinetic_energy
 from lgp.scene import Scene
-from lgp.symbolic import Grasp, Place, SymbolicPlan, symbolic_plan
+from lgp.symbolic import Grasp, SymbolicPlan, symbolic_plan
 
 #: Duration of one phase (one action) in seconds: a reach-and-place of a block in
 #: about a second is human-like, and every phase has the same length, as in KOMO.
@@ -231,50 +231,45 @@ def _waypoints(symbolic: SymbolicPlan) -> list[_Waypoint]:
 
 
 def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, actions=()):
-    """Quarter-turn choice per action and an IK solution per waypoint, by dynamic programming.
+    """Quarter turn per action and an IK solution per waypoint, by dynamic programming.
 
-    Candidates: closed-form IK over a swivel grid (shifted by `offset` rad) x 8
-    branches x 4 gripper yaws, within the joint limits. Path cost: sum over
-    consecutive waypoints of |q_b - q_a|^2 / dt^3; the three waypoints of one action
-    share the gripper yaw. Returns ({phase: q}, {action: quarter turns}).
+    Candidates per action: closed-form IK solutions of its three waypoints (approach,
+    action, retreat) at the same branch, swivel angle (a grid shifted by `offset`
+    rad) and quarter turn, all within the joint limits. Path cost, as for
+    rest-to-rest cubics: sum over consecutive waypoints of |q_b - q_a|^2 / dt^3, home
+    at both ends; Viterbi over the actions. Returns ({phase: q}, {action: turn}).
     """
     swivels = np.linspace(-np.pi, np.pi, SWIVELS, endpoint=False) + offset
-    layers = []  # per waypoint: (candidates (n, 7), quarter-turn label (n,))
-    for w in waypoints:
-        q, labels = arm.ik_from_above(w.p_WG, w.yaw, swivels, margin=SEED_MARGIN)
-        if len(q) == 0:
-            raise PlanningError(f"{w.what} at phase {w.time:g}: gripper at {np.round(w.p_WG, 4).tolist()} is out of the arm's reach "
-                                "from above", actions[w.action] if actions else None)
-        layers.append((q, labels))
-    # Viterbi over the layers, home at both ends.
-    times = [0.0] + [w.time for w in waypoints] + [float(phases)]
-    cost = np.zeros(1)
-    prev_q, prev_label, prev_action = arm.q_home[None], np.array([-1]), -1
-    back = []
-    for i, (q, label) in enumerate(layers):
-        dt = times[i + 1] - times[i]
-        if waypoints[i].action == prev_action:  # same action: same quarter turn
-            d = np.full((len(prev_q), len(q)), np.inf)
-            for m in range(4):
-                a, b = np.flatnonzero(prev_label == m), np.flatnonzero(label == m)
-                d[np.ix_(a, b)] = _squared_distances(prev_q[a], q[b])
-        else:
-            d = _squared_distances(prev_q, q)
-        d = d / dt**3 + cost[:, None]
-        j = np.argmin(d, axis=0)
-        back.append(j)
-        cost = d[j, np.arange(len(q))]
-        prev_q, prev_label, prev_action = q, label, waypoints[i].action
-    dt = times[-1] - times[-2]
-    total = cost + np.sum((prev_q - arm.q_home) ** 2, axis=1) / dt**3
-    i = int(np.argmin(total))
-    picks = []
-    for layer in range(len(layers) - 1, -1, -1):
-        picks.append(i)
-        i = back[layer][i]
+    triples = _triples(waypoints)
+    nodes = []  # per action: (pre, at, post) solutions (m, 7) each, quarter turn (m,), internal cost (m,)
+    for pre, at, post in triples:
+        grids = [arm.ik_grid_from_above(w.p_WG, w.yaw, swivels, margin=SEED_MARGIN) for w in (pre, at, post)]
+        for w, (_, ok) in zip((pre, at, post), grids):
+            if not ok.any():
+                raise PlanningError(f"{w.what} at phase {w.time:g}: gripper at {np.round(w.p_WG, 4).tolist()} is out of the arm's "
+                                    "reach from above", actions[w.action] if actions else None)
+        ok = grids[0][1] & grids[1][1] & grids[2][1]
+        if not ok.any():
+            raise PlanningError(f"{at.what}: no arm posture reaches it and the point {APPROACH} m above it alike",
+                                actions[at.action] if actions else None)
+        q_pre, q_at, q_post = (grid[ok] for grid, _ in grids)
+        internal = (np.sum((q_at - q_pre) ** 2, axis=1) + np.sum((q_post - q_at) ** 2, axis=1)) / APPROACH_TIME**3
+        nodes.append((q_pre, q_at, q_post, np.broadcast_to(np.arange(4)[:, None], ok.shape)[ok], internal))
+    cost, prev_q, prev_time, back = np.zeros(1), arm.q_home[None], 0.0, []
+    for (pre, _, post), (q_pre, _, q_post, _, internal) in zip(triples, nodes):
+        d = _squared_distances(prev_q, q_pre) / (pre.time - prev_time) ** 3 + cost[:, None]
+        back.append(np.argmin(d, axis=0))
+        cost = d[back[-1], np.arange(len(q_pre))] + internal
+        prev_q, prev_time = q_post, post.time
+    cost = cost + np.sum((prev_q - arm.q_home) ** 2, axis=1) / (phases - prev_time) ** 3
+    picks = [int(np.argmin(cost))]
+    for k in range(len(nodes) - 1, 0, -1):
+        picks.append(back[k][picks[-1]])
     picks.reverse()
-    seeds = {w.time: layers[n][0][i] for n, (w, i) in enumerate(zip(waypoints, picks))}
-    turns = {w.action: int(layers[n][1][i]) for n, (w, i) in enumerate(zip(waypoints, picks))}
+    seeds, turns = {}, {}
+    for (pre, at, post), (q_pre, q_at, q_post, turn, _), i in zip(triples, nodes, picks):
+        seeds.update({pre.time: q_pre[i], at.time: q_at[i], post.time: q_post[i]})
+        turns[at.action] = int(turn[i])
     return seeds, turns
 
 

@@ -8,7 +8,6 @@ import pytest
 
 import stimuli
 from lgp.planner import PlanningError
-from lgp.scene import Block
 from models.effort import COLUMNS, physical_effort
 
 SAMPLES = 3  # the paper's M = 30 is the script's job (docs/effort.md); a few suffice here

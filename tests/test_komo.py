@@ -7,7 +7,6 @@ import pytest
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
-from lgp.assignment import assign_blocks
 from lgp.komo import Komo, KomoError, kinetic_energy
 from lgp.planner import APPROACH, default_arm, plan
 from lgp.scene import BLOCK_SIZE, Block, Scene

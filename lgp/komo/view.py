@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 
 #: Display colours (r, g, b) of block colours in stimuli files.
 COLOURS = {
