@@ -9,7 +9,7 @@ from models.risk import ENGINES, UnstableSceneError, check_stable, get_engine
 from models.risk.core import fall_threshold
 from models.risk.noise import draw_normals, perturb_from_normals
 from models.risk.static import static_margins, static_stable
-from models.risk.structures import bridge, harmonic, line, pyramid, staircase, tower, two_block
+from models.risk.structures import bridge, grid, harmonic, line, pyramid, staircase, tower, two_block
 
 D = BLOCK_SIZE
 ENGINE_NAMES = sorted(ENGINES)
@@ -111,9 +111,11 @@ def test_engine_agrees_with_static_criterion_on_random_stacks(engine, count):
 
 
 def noisy_scenes():
-    """Perturbed copies of structures with a middling risk, so that both verdicts occur."""
+    """Perturbed copies of structures with a middling risk, so that both verdicts
+    occur, and of a wall of touching blocks (Drake's weak spot: docs/risk.md)."""
     out = []
-    for scene, sigma, n in ((staircase(4), 0.1, 16), (staircase(3, 0.3), 0.08, 12), (tower(6), 0.1, 12)):
+    cases = ((staircase(4), 0.1, 14), (staircase(3, 0.3), 0.08, 10), (tower(6), 0.1, 8), (grid(1, 3, 3), 0.1, 8))
+    for scene, sigma, n in cases:
         for z in draw_normals(n, len(scene), seed=4):
             out.append(perturb_from_normals(scene, sigma, z))
     return out
@@ -128,7 +130,7 @@ def test_engines_agree_on_the_same_noisy_scenes():
     assert agreement >= 0.95, f"engines agree on {agreement:.0%} of {len(a)} noisy scenes (mujoco {a.sum()} falls, drake {b.sum()})"
 
 
-@pytest.mark.parametrize("engine,count", [("mujoco", 40), ("drake", 4)])
+@pytest.mark.parametrize("engine,count", [("mujoco", 40), ("drake", 3)])
 def test_early_termination_gives_the_verdict_of_the_full_four_seconds(engine, count):
     scenes = noisy_scenes()[::max(1, len(noisy_scenes()) // count)][:count]
     early = [falls(s, engine) for s in scenes]

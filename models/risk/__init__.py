@@ -2,9 +2,9 @@
 to fall when every block is nudged by Gaussian noise and the scene is simulated
 for 4 s. See docs/risk.md for the noise rule, the fall rule and the engines.
 
-    >>> from models.risk import physical_risk, risk_table
-    >>> physical_risk(scene, sigma=0.065, n=100, seed=0)      # fraction of falls
-    >>> risk_table(stimuli.load_all(), SIGMA_GRID, n=100)     # tidy (trial, sigma) table
+    from models.risk import SIGMA_GRID, physical_risk, risk_table
+    physical_risk(scene, sigma=0.065, n=100, seed=0)      # fraction of falls
+    risk_table(stimuli.load_all(), SIGMA_GRID, n=100)     # tidy (trial, sigma) table
 """
 from models.risk.core import (  # noqa: F401
     DEFAULT_ENGINE,

@@ -146,7 +146,8 @@ def run_grid(
     progress: Callable[[int, int], None] | None = None,
     trial_ids: Sequence[str] | None = None,
 ) -> pd.DataFrame:
-    """Every (scene, sigma, run): a tidy table with columns RUN_COLUMNS.
+    """Every (scene, sigma, run): a tidy table with columns RUN_COLUMNS, in the
+    order of `scenes`, then `sigmas`, then runs.
 
     Each scene is checked for stability first (UnstableSceneError). The grid is
     spread over `jobs` processes (None: all cores; 1: in this process), with
@@ -195,8 +196,7 @@ def run_grid(
     for t, res in zip(tasks, results):
         for row in res:
             rows.append({"trial": ids[t.scene_index], **row})
-    table = pd.DataFrame(rows, columns=RUN_COLUMNS)
-    return table.sort_values(["trial", "sigma", "run"], kind="stable").reset_index(drop=True) if len(table) else table
+    return pd.DataFrame(rows, columns=RUN_COLUMNS)  # tasks are in (scene, sigma, run) order
 
 
 def summarise(runs: pd.DataFrame) -> pd.DataFrame:

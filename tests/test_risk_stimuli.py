@@ -1,0 +1,49 @@
+"""Physical risk on the 24 stimuli: every Finish state B stands unperturbed, and
+the paper's easy/hard contrasts in risk at its fitted sigma = 0.065 d."""
+import pytest
+
+stimuli = pytest.importorskip("stimuli")
+
+from models.risk import ENGINES, check_stable, risk_table  # noqa: E402
+
+TRIALS = stimuli.load_all()
+SIGMA = 0.065  # the paper's fitted noise level (Results)
+
+
+@pytest.mark.parametrize("engine", sorted(ENGINES))
+@pytest.mark.parametrize("trial", TRIALS, ids=lambda t: t.id)
+def test_unperturbed_finish_state_stands(trial, engine):
+    check_stable(trial.target, engine)  # raises UnstableSceneError naming the block
+
+
+@pytest.fixture(scope="module")
+def risk_at_paper_sigma():
+    pairs = [t for t in TRIALS if t.pair in (4, 5, 7, 8)]
+    table = risk_table(pairs, [SIGMA], n=100, seed=0)
+    return dict(zip(table["trial"], table["risk"]))
+
+
+def assert_harder_is_riskier(risk, pair):
+    e, h = risk[f"{pair}E"], risk[f"{pair}H"]
+    assert h > e, f"risk at sigma = {SIGMA} d: {pair}H {h:.2f} vs {pair}E {e:.2f}"
+
+
+def test_tower_is_riskier_than_line(risk_at_paper_sigma):
+    assert_harder_is_riskier(risk_at_paper_sigma, 7)
+
+
+def test_staircase_is_riskier_than_aligned_tower(risk_at_paper_sigma):
+    assert_harder_is_riskier(risk_at_paper_sigma, 4)
+
+
+def test_bridge_is_riskier_than_pyramid(risk_at_paper_sigma):
+    assert_harder_is_riskier(risk_at_paper_sigma, 5)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured with mujoco, n = 100, seed 0: 8H 0.00 vs 8E 0.00 at sigma 0.065 d (8H 0.08 vs 8E 0.00 at "
+    "0.10 d); the castle is robust to the paper's fitted noise in a faithful engine (docs/risk.md)",
+)
+def test_castle_is_riskier_than_piles(risk_at_paper_sigma):
+    assert_harder_is_riskier(risk_at_paper_sigma, 8)
