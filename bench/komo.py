@@ -141,8 +141,9 @@ def render(rows, notes, load0, load1, full_max) -> str:
         return "-" if v is None else fmt.format(v)
 
     lines = [
-        "<!-- komo:begin (written by bench/komo.py; edit there) -->",
-        "## komo (geometric planner of the effort model)",
+        "## komo",
+        "",
+        "Geometric planner of the effort model (`lgp/komo`, `lgp/planner.py`); written by `python bench/komo.py`.",
         "",
         f"`python bench/komo.py`, drake {version('drake')}, {os.cpu_count()} cores shared with other jobs "
         f"(load average {load0:.1f} at the start, {load1:.1f} at the end): seconds are noisy, ratios within a row are "
@@ -168,16 +169,15 @@ def render(rows, notes, load0, load1, full_max) -> str:
         "(same seeds; the reduced optimum is a KKT point of the full program: every free slice is its exact minimiser).",
         "",
         *[f"- {note}" for note in notes],
-        "<!-- komo:end -->",
     ]
     return "\n".join(lines) + "\n"
 
 
 def write_section(path: Path, section: str) -> None:
-    """Replace the komo section of `path` (between its markers), or append it; keep the rest."""
-    text = path.read_text() if path.exists() else "# Benchmarks\n\n"
-    pattern = re.compile(r"<!-- komo:begin.*?<!-- komo:end -->\n?", re.S)
-    text = pattern.sub(lambda _: section, text) if pattern.search(text) else text.rstrip("\n") + "\n\n" + section
+    """Replace the "## komo" section of `path` (up to the next "## " header), or append it; keep the rest."""
+    text = path.read_text() if path.exists() else "# Benchmarks\n"
+    pattern = re.compile(r"(<!-- komo:begin[^\n]*\n)?## komo\b.*?(?=\n## |\Z)", re.S)
+    text = pattern.sub("", text).rstrip("\n") + "\n\n" + section
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
 
