@@ -1,4 +1,15 @@
 """Logic-geometric planning of block-building tasks: scene, support graph,
-assignment, symbolic plan (logic layer) and KOMO motion optimisation (geometry)."""
+assignment, symbolic plan (logic layer) and KOMO motion optimisation (geometry).
+
+``lgp.plan`` and ``lgp.Plan`` (lgp/planner.py) load Drake on first use, so that
+``import stimuli`` and the logic layer stay light.
+"""
 from lgp.scene import Block, FixedBox, Scene, StimulusError, support_graph  # noqa: F401
-from lgp.planner import Plan, plan  # noqa: F401,E402
+
+
+def __getattr__(name):
+    if name in ("plan", "Plan"):
+        from lgp import planner
+
+        return getattr(planner, name)
+    raise AttributeError(f"module 'lgp' has no attribute {name!r}")

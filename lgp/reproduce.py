@@ -38,7 +38,9 @@ def effort_tables(trials, samples: int, seed: int, jobs: int, cache: Cache) -> p
     """Per (trial, sample) effort, one cached file per trial."""
     from models.effort import physical_effort
 
-    version = code_version("lgp/*.py", "models/effort.py", "models/*.urdf", "models/*.sdf", "models/*.yaml")
+    # The code effort depends on (not the CLI or this cache), so editing them re-plans.
+    version = code_version("lgp/scene.py", "lgp/assignment.py", "lgp/symbolic.py", "lgp/planner.py", "lgp/arm.py",
+                           "lgp/komo/*.py", "models/effort.py", "models/*.sdf", "models/*.urdf", "models/*.yaml")
     out = []
     for k, trial in enumerate(trials, 1):
         key = input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, code=version)
