@@ -89,8 +89,26 @@ def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
     return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]
 
 
+def kappa_range(E_e: float, R_e: float, E_h: float, R_h: float) -> str:
+    """Ratios k = b2/b1 (b1 > 0, k >= 0) for which Eq. 1 costs E less than H.
+
+    Eq. 1 cost over b1 is E(1 - R) + k E R (+ const), so cost_H - cost_E is
+    a + k b with a = E_h(1 - R_h) - E_e(1 - R_e) and b = E_h R_h - E_e R_e:
+    linear in k, and the set where it is positive is a half-line.
+    """
+    a = E_h * (1 - R_h) - E_e * (1 - R_e)
+    b = E_h * R_h - E_e * R_e
+    if b == 0:
+        return "any" if a > 0 else "none"
+    k = -a / b
+    if b > 0:
+        return "any" if k < 0 else f"> {k:.3g}"
+    return "none" if k <= 0 else f"< {k:.3g}"
+
+
 def pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trials) -> pd.DataFrame:
-    """Per pair: effort and risk (at `sigma`) of E and H, and whether E < H in each."""
+    """Per pair: effort and risk (at `sigma`) of E and H, whether E < H in each, and
+    the ratios b2/b1 for which the full model (Eq. 1) would order the pair E < H."""
     from analysis import pair_table, risk_at_sigma
 
     dims = {t.pair: t.dimension for t in trials}
@@ -98,7 +116,9 @@ def pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trial
     r = pair_table(risk_at_sigma(risk, sigma)).rename(columns={"cost_E": "risk_E", "cost_H": "risk_H", "E_lt_H": "risk_E_lt_H"})
     table = e.merge(r, on="pair")
     table.insert(1, "dimension", table["pair"].map(dims))
-    table.insert(5, "sigma", sigma)
+    table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
+    table.insert(6, "sigma", sigma)
+    table["full_E_lt_H_for_b2_over_b1"] = [kappa_range(*row) for row in table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy()]
     return table
 
 
@@ -140,7 +160,8 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
             f"Effort orders {int(pairs['effort_E_lt_H'].sum())} of {len(pairs)} pairs E < H; "
             f"risk orders {int(pairs['risk_E_lt_H'].sum())} of {len(pairs)} (ties count as not ordered). "
             "The paper's fitted full model ordered 11 of 12 (pair 11 the exception); without human data "
-            "there are no fitted betas, so the full-model cost is reported only with --human-data.",
+            "there are no fitted betas, so the last column says for which ratios b2/b1 (b1 > 0) Eq. 1 would "
+            "order each pair E < H. effort_rel_diff = (H - E) / E: |values| below ~1e-4 are solver-level ties.",
             "",
         ]
     if analysis is None:

@@ -57,3 +57,24 @@ def test_interrupted_run_resumes_to_the_same_results(tmp_path, monkeypatch):
     reproduce.main([*ARGS, "--out", str(cut), "--risk-chunk", "2"])
     for name, df in _tables(cut).items():
         pd.testing.assert_frame_equal(df, _tables(whole)[name])
+
+
+def test_kappa_range_matches_brute_force_over_ratios():
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    kappas = np.linspace(0, 50, 50001)
+    for _ in range(200):
+        E_e, E_h = rng.uniform(0.05, 1, 2)
+        R_e, R_h = rng.choice([0.0, 0.01, 0.2, 0.5], 2)
+        text = reproduce.kappa_range(E_e, R_e, E_h, R_h)
+        ok = E_h * (1 - R_h) + kappas * E_h * R_h > E_e * (1 - R_e) + kappas * E_e * R_e
+        if text == "any":
+            assert ok.all()
+        elif text == "none":
+            assert not ok.any()
+        else:
+            bound = float(text[2:])
+            expect = kappas > bound if text[0] == ">" else kappas < bound
+            far = np.abs(kappas - bound) > 1e-2 * max(1, bound)  # away from the 3-digit rounding
+            assert (ok[far] == expect[far]).all()
