@@ -155,3 +155,15 @@ def test_run_analysis_refuses_a_csv_of_simulated_participants_as_human_data(tmp_
     simulate(0.075, 3, 1.0, seed=6).to_csv(path, index=False)
     with pytest.raises(HumanDataError, match="simulated participants are not human data"):
         run_analysis(path, E, RISK, tmp_path / "out", seed=0, n_boot=10, jobs=1)
+
+
+def test_demo_labels_every_output_as_simulated(tmp_path):
+    from analysis import demo
+    from lgp import reproduce
+
+    results = tmp_path / "results"
+    # a real (tiny) model run: every trial, one layout, few simulations
+    reproduce.main(["--out", str(results), "--samples", "1", "--n-sims", "4", "--sigmas", "0.065", "--jobs", "2", "--n-boot", "20"])
+    demo.main(["--results", str(results), "--out", str(tmp_path / "sim"), "--n-boot", "20"])
+    written = list((tmp_path / "sim").iterdir())
+    assert written and all(p.name.startswith("simulated_") for p in written)
