@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 from typing import Callable
 
 import numpy as np
 import pandas as pd
 
+from lgp.parallel import map_in_processes
 from lgp.planner import PlanningError, plan
 
 #: Number of random initial layouts per trial [paper: M = 30].
@@ -98,10 +98,7 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
             progress(done, samples)
 
     if jobs > 1 and len(todo) > 1:
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(_row, (trial, seed, i)) for i in todo]
-            for future in as_completed(futures):
-                record(future.result())
+        map_in_processes(_row, [(trial, seed, i) for i in todo], jobs, get_context("spawn"), lambda _, row: record(row))
     else:
         for i in todo:
             record(effort_of_sample(trial, seed, i))

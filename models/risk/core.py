@@ -182,16 +182,15 @@ def run_grid(
             if progress:
                 progress(done, total)
     else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from lgp.parallel import map_in_processes
 
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=_mp_context()) as pool:
-            futures = {pool.submit(_task_worker, a): k for k, a in enumerate(args)}
-            for fut in as_completed(futures):
-                k = futures[fut]
-                results[k] = fut.result()
-                done += len(results[k])
-                if progress:
-                    progress(done, total)
+        def arrived(k, res):
+            nonlocal done
+            done += len(res)
+            if progress:
+                progress(done, total)
+
+        results = map_in_processes(_task_worker, args, min(jobs, len(tasks)), _mp_context(), arrived)
     rows = []
     for t, res in zip(tasks, results):
         for row in res:
