@@ -40,7 +40,8 @@ def effort_tables(trials, samples: int, seed: int, jobs: int, cache: Cache) -> p
 
     # The code effort depends on (not the CLI or this cache), so editing them re-plans.
     version = code_version("lgp/scene.py", "lgp/assignment.py", "lgp/symbolic.py", "lgp/planner.py", "lgp/arm.py",
-                           "lgp/komo/*.py", "models/effort.py", "models/*.sdf", "models/*.urdf", "models/*.yaml")
+                           "lgp/komo/*.py", "models/effort.py", "models/*.sdf", "models/*.urdf", "models/*.yaml",
+                           "stimuli/__init__.py")  # draws the layouts of A
     out = []
     for k, trial in enumerate(trials, 1):
         key = input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, code=version)
@@ -61,19 +62,23 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, jobs
     """
     from models.risk import risk_table
 
-    version = code_version("lgp/scene.py", "models/risk/*.py")
+    version = code_version("lgp/scene.py", "models/risk/*.py", "stimuli/__init__.py")
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n=n_sims, seed=seed, engine=engine, code=version) for t in trials}
     todo = [t for t in trials if not (cache.enabled and cache.path("risk", keys[t.id]).exists())]
+    fresh: dict[str, pd.DataFrame] = {}
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
         table = risk_table(group, sigmas=list(sigmas), n=n_sims, seed=seed, engine=engine, jobs=jobs)
         for t in group:
-            write_csv_atomic(table[table["trial"] == t.id].reset_index(drop=True), cache.path("risk", keys[t.id]))
+            fresh[t.id] = table[table["trial"] == t.id].reset_index(drop=True)
+            write_csv_atomic(fresh[t.id], cache.path("risk", keys[t.id]))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     out = []
     for k, trial in enumerate(trials, 1):
-        df = cache.get_or_compute("risk", keys[trial.id], lambda: risk_table([trial], sigmas=list(sigmas), n=n_sims, seed=seed, engine=engine, jobs=jobs))
+        df = fresh.get(trial.id)
+        if df is None:
+            df = cache.get_or_compute("risk", keys[trial.id], lambda: risk_table([trial], sigmas=list(sigmas), n=n_sims, seed=seed, engine=engine, jobs=jobs))
         curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
         _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)

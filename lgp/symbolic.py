@@ -69,8 +69,11 @@ POSITION_TOLERANCE = 1e-4
 YAW_TOLERANCE = 1e-3
 
 
-def same_pose(p_a, yaw_a, p_b, yaw_b) -> bool:
-    d_yaw = (yaw_a - yaw_b + np.pi / 4) % (np.pi / 2) - np.pi / 4
+def same_pose(p_a, yaw_a, p_b, yaw_b, size=None) -> bool:
+    """Same centre and the same yaw up to the footprint's symmetry: a quarter turn
+    for a square footprint (the cubes), a half turn for a rectangle."""
+    period = np.pi / 2 if size is None or np.isclose(size[0], size[1]) else np.pi
+    d_yaw = (yaw_a - yaw_b + period / 2) % period - period / 2
     return bool(np.linalg.norm(np.asarray(p_a) - np.asarray(p_b)) <= POSITION_TOLERANCE and abs(d_yaw) <= YAW_TOLERANCE)
 
 
@@ -173,7 +176,7 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
             block, goal = initial.block(a), target_of.get(a)
             stays[a] = (
                 goal is not None
-                and same_pose(block.p_WB, block.yaw, goal.p_WB, goal.yaw)
+                and same_pose(block.p_WB, block.yaw, goal.p_WB, goal.yaw, block.size)
                 and all(s in fixed_names or stays_put(s) for s in support_A[a])
             )
         return stays[a]

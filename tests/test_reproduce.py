@@ -78,3 +78,15 @@ def test_kappa_range_matches_brute_force_over_ratios():
             expect = kappas > bound if text[0] == ">" else kappas < bound
             far = np.abs(kappas - bound) > 1e-2 * max(1, bound)  # away from the 3-digit rounding
             assert (ok[far] == expect[far]).all()
+
+
+def test_no_cache_simulates_each_trial_once(tmp_path, monkeypatch):
+    real, calls = models.risk.risk_table, []
+
+    def counted(trials, *a, **k):
+        calls.append([t.id for t in trials])
+        return real(trials, *a, **k)
+
+    monkeypatch.setattr(models.risk, "risk_table", counted)
+    reproduce.main([*ARGS, "--out", str(tmp_path / "r"), "--no-cache"])
+    assert sorted(sum(calls, [])) == ["10E", "6H", "9E"]

@@ -112,5 +112,6 @@ def test_unknown_engine_is_refused_naming_the_known_ones():
 def test_bad_sigma_or_n_is_refused():
     with pytest.raises(ValueError, match="sigma"):
         physical_risk(tower(2), -0.1, n=2)
-    with pytest.raises(ValueError, match="n >= 0"):
-        physical_risk(tower(2), 0.1, n=-1)
+    for n in (-1, 0):  # risk is falls / n: no runs, no risk (never a NaN)
+        with pytest.raises(ValueError, match="n >= 1"):
+            physical_risk(tower(2), 0.1, n=n)

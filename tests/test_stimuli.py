@@ -42,6 +42,7 @@ def test_scattered_blocks_respect_region_gap_and_clearance():
         P = A.positions
         assert np.all(P[:, 2] == pytest.approx(d / 2))
         assert np.all((P[:, 0] >= init.region.x[0]) & (P[:, 0] <= init.region.x[1]))
+        assert np.all((P[:, 1] >= init.region.y[0]) & (P[:, 1] <= init.region.y[1]))
         # centres of two blocks >= 1 cm apart are at least d + gap apart when aligned,
         # and never closer than the gap plus a side whatever the yaw
         dist = np.linalg.norm(P[:, None, :2] - P[None, :, :2], axis=-1) + np.eye(len(P))

@@ -24,6 +24,9 @@ def test_plan_is_legal_and_builds_the_target(tid, seed):
     trial, plan = _plan(tid, seed)
     states = plan.states()  # raises IllegalActionError on an illegal step
     final = states[-1].scene
+    # the executed assignment (possibly repaired) still gives every B block exactly one A block
+    assert sorted(plan.assignment.values()) == sorted(trial.target.names)
+    assert len(set(plan.assignment)) == len(plan.assignment)
     assert states[-1].held is None
     for a, b in plan.assignment.items():
         goal = trial.target.block(b)
@@ -104,6 +107,13 @@ def test_checker_rejects_placing_into_another_block():
 def test_checker_rejects_placing_in_mid_air():
     with pytest.raises(IllegalActionError, match=r"would rest on nothing, not \['y'\]"):
         apply(Place("z", ("y",), np.array([0, 0, 6 * h])), PlanState(TWO, held="z"))
+
+
+def test_rectangular_block_turned_a_quarter_is_not_in_place():
+    p = np.zeros(3)
+    assert same_pose(p, 0.0, p, np.pi / 2) and same_pose(p, 0.0, p, np.pi / 2, size=[d, d, d])
+    assert not same_pose(p, 0.0, p, np.pi / 2, size=[2 * d, d, d])
+    assert same_pose(p, 0.0, p, np.pi, size=[2 * d, d, d])
 
 
 def test_checker_accepts_a_legal_place():

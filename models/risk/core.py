@@ -156,8 +156,8 @@ def run_grid(
     """
     name = _engine_name(engine)
     sigmas = [float(s) for s in sigmas]
-    if n < 0:
-        raise ValueError(f"need n >= 0 runs, got {n}")
+    if n < 1:
+        raise ValueError(f"need n >= 1 runs (risk is falls / n), got {n}")
     for s in sigmas:
         if not s >= 0:
             raise ValueError(f"sigma must be >= 0 (a fraction of the block size), got {s}")
@@ -228,7 +228,7 @@ def physical_risk(
     unknown engine.
     """
     runs = run_grid([scene], [sigma], n, seed, engine, jobs)
-    risk = float(runs["fell"].mean()) if n else float("nan")
+    risk = float(runs["fell"].mean())
     if return_table:
         return risk, runs.drop(columns="trial")
     return risk
