@@ -7,6 +7,7 @@ in order 1E, 1H, ..., 12H plus any extra trial file a user drops in (sorted afte
 from __future__ import annotations
 
 import hashlib
+from collections import Counter
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -75,16 +76,12 @@ class StartState:
     def is_random(self) -> bool:
         return bool(self.scattered) or self.recolour is not None
 
-    def colour_counts(self) -> dict[str, int]:
+    def colour_counts(self) -> Counter:
         """Most blocks of each colour a sample can hold."""
-        counts: dict[str, int] = {}
-        for _, c in self.scattered:
-            counts[c] = counts.get(c, 0) + 1
-        for b in self.blocks:
-            counts[b.colour] = counts.get(b.colour, 0) + 1
+        counts = Counter(c for _, c in self.scattered) + Counter(b.colour for b in self.blocks)
         if self.recolour:
             n, c = self.recolour
-            counts[c] = counts.get(c, 0) + n
+            counts[c] += n
         return counts
 
     def sample(self, rng: np.random.Generator) -> Scene:
@@ -241,7 +238,7 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     start = StartState(f"{tid}-A", fixed_blocks, fixed, scattered, region, recolour=recolour, build_site=build_site, keep_clear=target.blocks, **kw)
 
     have = start.colour_counts()
-    for colour, need in _count_colours(target).items():
+    for colour, need in Counter(b.colour for b in target.blocks).items():
         if need > have.get(colour, 0):
             raise StimulusError(f"{tid}-B: needs {need} {colour} blocks but {tid}-A has {have.get(colour, 0)}")
     trial = Trial(tid, int(m.group(1)), m.group(2), str(data.get("dimension", "")), str(data.get("description", "")), start, target, data.get("provenance") or {}, path)
@@ -250,13 +247,6 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     if colour_shortfall(sample, target):
         raise StimulusError(f"{tid}: a sample of A lacks colours for B: {colour_shortfall(sample, target)}")
     return trial
-
-
-def _count_colours(scene: Scene) -> dict[str, int]:
-    counts: dict[str, int] = {}
-    for b in scene.blocks:
-        counts[b.colour] = counts.get(b.colour, 0) + 1
-    return counts
 
 
 def load_file(path: str | Path) -> Trial:
