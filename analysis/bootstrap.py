@@ -17,11 +17,12 @@ p-value for "the better model in the full sample is better".
 from __future__ import annotations
 
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 from typing import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+
+from lgp.executor import borrowed
 
 from analysis.data import ordered_datasets
 from analysis.models import (MODELS, batch_predictions, design_matrix, effort_per_trial,
@@ -33,7 +34,8 @@ COMPARISONS: tuple[tuple[str, str], ...] = (("full", "effort"), ("full", "risk")
 
 def bootstrap_model_correlations(boot_means: Mapping[str, np.ndarray], effort,
                                  risk: pd.Series | Mapping[str, pd.Series],
-                                 models: Sequence[str] = MODELS, jobs: int = 1) -> pd.DataFrame:
+                                 models: Sequence[str] = MODELS, jobs: int = 1,
+                                 executor=None) -> pd.DataFrame:
     """Correlation of each refit model with each resample's trial means.
 
     `boot_means` is {dataset: (n_boot, 24) array} from `resample_trial_means`;
@@ -54,11 +56,8 @@ def bootstrap_model_correlations(boot_means: Mapping[str, np.ndarray], effort,
         R = risk[dataset] if isinstance(risk, Mapping) else risk
         designs = [design_matrix(m, E, R) for m in models]
         tasks.append((dataset, designs, np.asarray(boot_means[dataset], dtype=float)))
-    if jobs > 1 and len(tasks) > 1:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
-            results = list(pool.map(_correlations_one_dataset, tasks))
-    else:
-        results = [_correlations_one_dataset(task) for task in tasks]
+    with borrowed(executor, min(jobs, max(len(tasks), 1))) as ex:
+        results = ex.map(_correlations_one_dataset, tasks)
     frames = []
     for (dataset, _, Y), r in zip(tasks, results):
         n_boot = Y.shape[0]

@@ -17,10 +17,10 @@ from typing import Iterable, Mapping
 import numpy as np
 import pandas as pd
 
+from lgp.paper import PAIRS, TRIAL_IDS  # noqa: F401  (re-exported)
+
 #: The 24 trial ids in the paper's order: pair 1 easy, pair 1 hard, ..., 12H.
-TRIAL_IDS: tuple[str, ...] = tuple(f"{pair}{level}" for pair in range(1, 13) for level in "EH")
 #: The 12 easy/hard pairs.
-PAIRS: tuple[int, ...] = tuple(range(1, 13))
 #: The paper's three datasets: Difficulty Estimation, Time Estimation, Build Task.
 DATASETS: tuple[str, ...] = ("difficulty", "time", "build")
 #: Dataset names of simulated participants carry this prefix (e.g. ``simulated-time``)

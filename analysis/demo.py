@@ -18,11 +18,12 @@ import numpy as np
 import pandas as pd
 
 from analysis.run import run_analysis
+from lgp.paper import PAPER_SIGMA
 from analysis.simulate import simulate_participants
 
 #: Stated, not fitted: risky effort costs 4x safe effort; n as in the paper's datasets.
 BETAS = (0.0, 1.0, 4.0)
-SIGMA = 0.065
+SIGMA = PAPER_SIGMA
 PARTICIPANTS = {"difficulty": 59, "time": 60, "build": 20}
 NOISE_SD = 0.1
 

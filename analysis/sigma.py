@@ -16,12 +16,11 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from lgp.paper import PAPER_SIGMA, SIGMA_GRID  # noqa: F401  (re-exported)
 from analysis.models import effort_per_trial, fit_model, risk_at_sigma, risk_sigmas
 
 #: The paper's sigma grid, in units of the block length d: 0.050, 0.055, ..., 0.100.
-SIGMA_GRID: tuple[float, ...] = tuple(round(0.05 + 0.005 * k, 3) for k in range(11))
 #: The sigma the paper reported using for all datasets.
-PAPER_SIGMA = 0.065
 
 
 def sigma_profile(means: pd.DataFrame, effort, risk_table: pd.DataFrame,

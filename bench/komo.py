@@ -30,12 +30,13 @@ from pydrake.solvers import MathematicalProgram  # noqa: E402
 
 import lgp.planner as planner  # noqa: E402
 from lgp.komo import Komo  # noqa: E402
+from lgp.paper import BUILD_SITE  # noqa: E402
 from lgp.scene import BLOCK_SIZE, Block, Scene  # noqa: E402
 
 SIZES = (1, 5, 10, 15)
 FULL_MAX = 10
 REPEATS = 3
-SITE = np.array([0.35, 0.0])
+SITE = np.array(BUILD_SITE)
 
 
 def tower_task(n: int, seed: int = 0) -> tuple[Scene, Scene]:

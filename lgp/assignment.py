@@ -7,23 +7,15 @@ Hungarian algorithm (here scipy's linear_sum_assignment).
 """
 from __future__ import annotations
 
-from collections import Counter
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from lgp.scene import Scene, StimulusError
+from lgp.scene import Scene, StimulusError, colour_shortfall  # noqa: F401  (re-exported)
 
 #: Cost of pairing blocks of different colours: large enough that no feasible
 #: assignment uses one, finite so the solver stays well-posed.
 _FORBIDDEN = 1e6
-
-
-def colour_shortfall(initial: Scene, target: Scene) -> dict[str, tuple[int, int]]:
-    """Colours the target needs more of than the start has: {colour: (needed, available)}."""
-    have = Counter(b.colour for b in initial.blocks)
-    need = Counter(b.colour for b in target.blocks)
-    return {c: (n, have[c]) for c, n in need.items() if n > have[c]}
 
 
 def assign_blocks(initial: Scene, target: Scene) -> dict[str, str]:

@@ -22,11 +22,9 @@ import numpy as np
 import pandas as pd
 
 import stimuli
+from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.cache import Cache, code_version, input_key, write_csv_atomic
 
-#: The paper's sigma grid: 0.05 d to 0.10 d in steps of 0.005 d.
-SIGMA_GRID = tuple(np.round(np.arange(0.05, 0.10 + 1e-9, 0.005), 3))
-PAPER_SIGMA = 0.065
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
 
 
@@ -63,13 +61,13 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, jobs
     from models.risk import risk_table
 
     version = code_version("lgp/scene.py", "models/risk/*.py", "stimuli/__init__.py")
-    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n=n_sims, seed=seed, engine=engine, code=version) for t in trials}
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, code=version) for t in trials}
     todo = [t for t in trials if not (cache.enabled and cache.path("risk", keys[t.id]).exists())]
     fresh: dict[str, pd.DataFrame] = {}
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
-        table = risk_table(group, sigmas=list(sigmas), n=n_sims, seed=seed, engine=engine, jobs=jobs)
+        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, jobs=jobs)
         for t in group:
             fresh[t.id] = table[table["trial"] == t.id].reset_index(drop=True)
             write_csv_atomic(fresh[t.id], cache.path("risk", keys[t.id]))
@@ -78,7 +76,7 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, jobs
     for k, trial in enumerate(trials, 1):
         df = fresh.get(trial.id)
         if df is None:
-            df = cache.get_or_compute("risk", keys[trial.id], lambda: risk_table([trial], sigmas=list(sigmas), n=n_sims, seed=seed, engine=engine, jobs=jobs))
+            df = cache.get_or_compute("risk", keys[trial.id], lambda: risk_table([trial], sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, jobs=jobs))
         curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
         _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)
@@ -203,10 +201,10 @@ def main(argv=None) -> int:
     p.add_argument("--risk-chunk", type=int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
     args = p.parse_args(argv)
     q = QUICK if args.quick else {}
-    args.samples = args.samples or q.get("samples", 30)
-    args.n_sims = args.n_sims or q.get("n_sims", 100)
+    args.samples = args.samples or q.get("samples", SAMPLES)
+    args.n_sims = args.n_sims or q.get("n_sims", N_SIMS)
     args.sigmas = tuple(args.sigmas or q.get("sigmas", SIGMA_GRID))
-    args.n_boot = args.n_boot or q.get("n_boot", 1000)
+    args.n_boot = args.n_boot or q.get("n_boot", N_BOOT)
 
     t0 = time.perf_counter()
     out = Path(args.out)
@@ -226,7 +224,7 @@ def main(argv=None) -> int:
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
-    complete = {t.id for t in trials} >= {f"{p}{lv}" for p in range(1, 13) for lv in "EH"}
+    complete = {t.id for t in trials} >= set(TRIAL_IDS)
     pairs, analysis = None, None
     if complete:  # pair orderings, figures and fits are defined on the 24 trials
         from analysis import run_analysis

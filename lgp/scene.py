@@ -8,15 +8,14 @@ about z, so X_WB = RigidTransform(RotationMatrix.MakeZRotation(yaw), p_WB).
 """
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Iterable
 
 import numpy as np
 
-#: Edge of a 1-inch wooden cube [paper], metres.
-BLOCK_SIZE = 0.0254
-#: Colours a block may have (stimuli-spec.md).
-COLOURS = ("natural", "green", "yellow", "blue", "red")
+from lgp.paper import BLOCK_SIZE, COLOURS
+
 #: Two solids may interpenetrate by at most this much (m) and still count as
 #: touching: trial files are written to 0.1 mm, and a touching pair computed in
 #: floating point overlaps by ~1e-17 m.
@@ -263,6 +262,13 @@ def validate_scene(scene: Scene) -> None:
             raise StimulusError(
                 f"{label} block {b.name}: floats (bottom at z = {b.bottom * 1000:.1f} mm rests on neither the table nor another solid)"
             )
+
+
+def colour_shortfall(initial: Scene, target: Scene) -> dict[str, tuple[int, int]]:
+    """Colours the target needs more of than the start has: {colour: (needed, available)}."""
+    have = Counter(b.colour for b in initial.blocks)
+    need = Counter(b.colour for b in target.blocks)
+    return {c: (n, have[c]) for c, n in need.items() if n > have[c]}
 
 
 # ----------------------------------------------------------------------------- support graph

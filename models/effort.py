@@ -20,17 +20,15 @@ from __future__ import annotations
 
 import argparse
 import sys
-from multiprocessing import get_context
 from typing import Callable
 
 import numpy as np
 import pandas as pd
 
-from lgp.parallel import map_in_processes
+from lgp.paper import SAMPLES
+from lgp.executor import borrowed
 from lgp.planner import PlanningError, plan
 
-#: Number of random initial layouts per trial [paper: M = 30].
-SAMPLES = 30
 COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "status"]
 
 
@@ -39,17 +37,28 @@ def sample_rng(seed: int, sample: int) -> np.random.Generator:
     return np.random.default_rng([seed, sample])
 
 
-def effort_of_sample(trial, seed: int, sample: int) -> dict:
-    """One row of the effort table: plan the sample's layout, integrate kinetic energy.
+def plan_of_sample(trial, seed: int, sample: int, **planner_options):
+    """The Plan behind row (trial, sample) of the effort table.
 
+    One Generator, sample_rng(seed, sample), draws the layout of A and then seeds
+    the planner, in that order: this is the only place that order is written, so
+    `python -m lgp.show` replays exactly what `physical_effort` computed.
     Raises PlanningError naming the trial, the sample and the failing action.
     """
     rng = sample_rng(seed, sample)
     initial = trial.sample_initial(rng)
     try:
-        result = plan(initial, trial.target, rng)
+        return plan(initial, trial.target, rng, **planner_options)
     except PlanningError as e:
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): {e}", e.action) from e
+
+
+def effort_of_sample(trial, seed: int, sample: int) -> dict:
+    """One row of the effort table: plan the sample's layout, integrate kinetic energy.
+
+    Raises PlanningError naming the trial, the sample and the failing action.
+    """
+    result = plan_of_sample(trial, seed, sample)
     effort = result.kinetic_energy()
     if not np.isfinite(effort):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): effort is {effort}")
@@ -71,12 +80,13 @@ def _row(args):
 
 
 def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
-                    progress: Callable[[int, int], None] | None = None) -> tuple[float, pd.DataFrame]:
+                    progress: Callable[[int, int], None] | None = None, executor=None) -> tuple[float, pd.DataFrame]:
     """Mean physical effort (J s) of `trial` over `samples` random layouts, and the tidy table.
 
     `trial` is a stimuli.Trial or its id ("7H"). Sample i draws its layout with
     numpy.random.default_rng([seed, i]); `jobs` > 1 spreads samples over that many
-    processes with identical numbers. `progress(done, total)` is called after each
+    processes with identical numbers (or pass an `executor`, lgp.executor, to reuse
+    warm workers across trials). `progress(done, total)` is called after each
     sample. A trial whose layout is not random (a fixed structure in A) is planned
     once and its row repeated: every sample would draw the same layout.
     """
@@ -97,11 +107,8 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
         if progress is not None:
             progress(done, samples)
 
-    if jobs > 1 and len(todo) > 1:
-        map_in_processes(_row, [(trial, seed, i) for i in todo], jobs, get_context("spawn"), lambda _, row: record(row))
-    else:
-        for i in todo:
-            record(effort_of_sample(trial, seed, i))
+    with borrowed(executor, jobs if len(todo) > 1 else 1) as ex:
+        ex.map(_row, [(trial, seed, i) for i in todo], lambda _, row: record(row))
     if not trial.initial.is_random:
         rows = [{**rows[0], "sample": i} for i in range(samples)]
     table = pd.DataFrame(rows, columns=COLUMNS).sort_values("sample").reset_index(drop=True)

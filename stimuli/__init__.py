@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from lgp.assignment import colour_shortfall
-from lgp.scene import BLOCK_SIZE, Block, FixedBox, Scene, StimulusError, horizontal_penetration
+from lgp.paper import BLOCK_SIZE, BUILD_SITE
+from lgp.scene import Block, FixedBox, Scene, StimulusError, colour_shortfall, horizontal_penetration
 
 TRIAL_DIR = Path(__file__).parent / "trials"
 TRIAL_ID = re.compile(r"^(\d+)([EH])$")
@@ -69,7 +69,7 @@ class StartState:
     min_gap: float = 0.01
     clearance: float = 0.02
     recolour: tuple[int, str] | None = None
-    build_site: tuple[float, float] = (0.35, 0.0)
+    build_site: tuple[float, float] = BUILD_SITE
     keep_clear: tuple = ()
 
     @property
@@ -198,7 +198,7 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     if int(data.get("pair", -1)) != int(m.group(1)) or data.get("level") != m.group(2):
         raise StimulusError(f"{tid}: pair/level fields disagree with the id")
     fixed = _fixed(f"{tid} fixed", data.get("fixed"))
-    build_site = tuple(_vector(f"{tid} build_site", data.get("build_site", [0.35, 0.0]), 2))
+    build_site = tuple(_vector(f"{tid} build_site", data.get("build_site", list(BUILD_SITE)), 2))
 
     target_data = data.get("target") or {}
     _check_keys(f"{tid}-B", target_data, {"blocks"})

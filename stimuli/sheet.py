@@ -12,9 +12,10 @@ import argparse
 import numpy as np
 
 import stimuli
+from lgp.paper import COLOURS, display_hex
 from lgp.scene import Scene
 
-FACE_COLOURS = {"natural": "#d9b27c", "green": "#3a9b48", "yellow": "#f0cf2c", "blue": "#3563c9", "red": "#cc3333"}
+FACE_COLOURS = {c: display_hex(c) for c in COLOURS}
 
 
 def _box_faces(p, size, yaw):

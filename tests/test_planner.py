@@ -15,6 +15,19 @@ def test_plan_is_exported_from_lgp():
     assert lgp.plan is plan and lgp.Plan is Plan
 
 
+def test_lgp_plan_stays_a_function_after_every_submodule_is_imported():
+    # In a fresh interpreter, so the order of other tests cannot hide a module
+    # named lgp.plan shadowing the function (the defect of issue 9).
+    import pkgutil
+    import subprocess
+    import sys
+
+    modules = [m.name for m in pkgutil.walk_packages(lgp.__path__, "lgp.")]
+    code = "import importlib, lgp\n" + "".join(f"importlib.import_module({m!r})\n" for m in modules)
+    code += "import lgp.planner\nassert callable(lgp.plan) and lgp.plan is lgp.planner.plan, type(lgp.plan)\n"
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
 @pytest.mark.parametrize("trial_id, sample", [("2H", 0), ("5E", 1), ("10H", 0), ("4H", 1)])
 def test_different_ik_seeds_give_the_same_optimum(trial_id, sample):
     # The IK seeds are closed-form solutions on a swivel grid shifted at random;
@@ -103,9 +116,24 @@ def test_replay_html_is_self_contained_and_figure_is_written(tmp_path):
 
 
 def test_command_line_prints_the_actions(capsys, tmp_path):
-    from lgp.plan import main
+    from lgp.show import main
 
     assert main(["9E", "--seed", "0", "--png", str(tmp_path / "9E.png")]) == 0
     out = capsys.readouterr().out
     assert "Grasp(" in out and "Place(" in out and "physical effort" in out
     assert (tmp_path / "9E.png").exists()
+
+
+@pytest.mark.parametrize("trial_id, seed, sample", [("5E", 0, 2), ("2H", 3, 1)])
+def test_viewer_replays_the_effort_table_row(capsys, trial_id, seed, sample):
+    # `python -m lgp.show T --seed S --sample K` plans exactly row (T, K) of
+    # effort_samples.csv of a run with --seed S: the same layout, the same effort.
+    import re
+
+    from lgp.show import main
+    from models.effort import physical_effort
+
+    table = physical_effort(trial_id, samples=sample + 1, seed=seed)[1]
+    assert main([trial_id, "--seed", str(seed), "--sample", str(sample)]) == 0
+    printed = float(re.search(r"^effort ([0-9.eE+-]+) J\*s$", capsys.readouterr().out, re.M).group(1))
+    assert printed == pytest.approx(table.loc[table["sample"] == sample, "effort"].item(), rel=1e-9)

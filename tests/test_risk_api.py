@@ -24,7 +24,7 @@ def test_sigma_grid_is_the_papers():
 
 
 def test_risk_is_the_fraction_of_runs_that_fell():
-    risk, runs = physical_risk(staircase(4), 0.1, n=40, seed=1, return_table=True)
+    risk, runs = physical_risk(staircase(4), 0.1, n_sims=40, seed=1, return_table=True)
     assert list(runs.columns) == ["sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine"]
     assert list(runs["run"]) == list(range(40))
     assert risk == runs["fell"].mean()
@@ -35,40 +35,40 @@ def test_risk_is_the_fraction_of_runs_that_fell():
 
 
 def test_zero_noise_never_falls_for_a_stable_scene():
-    assert physical_risk(tower(5), 0.0, n=5) == 0.0
+    assert physical_risk(tower(5), 0.0, n_sims=5) == 0.0
 
 
 def test_same_seed_gives_same_numbers_and_another_seed_other_numbers():
-    a = physical_risk(staircase(4), 0.1, n=30, seed=3, return_table=True)[1]
-    b = physical_risk(staircase(4), 0.1, n=30, seed=3, return_table=True)[1]
-    c = physical_risk(staircase(4), 0.1, n=30, seed=4, return_table=True)[1]
+    a = physical_risk(staircase(4), 0.1, n_sims=30, seed=3, return_table=True)[1]
+    b = physical_risk(staircase(4), 0.1, n_sims=30, seed=3, return_table=True)[1]
+    c = physical_risk(staircase(4), 0.1, n_sims=30, seed=4, return_table=True)[1]
     pd.testing.assert_frame_equal(a, b)
     assert not a["max_displacement"].equals(c["max_displacement"])
 
 
 def test_risk_curve_uses_the_same_random_numbers_for_every_sigma():
-    curve, runs = risk_curve(staircase(4), [0.06, 0.08, 0.1], n=30, seed=5, jobs=1, return_table=True)
+    curve, runs = risk_curve(staircase(4), [0.06, 0.08, 0.1], n_sims=30, seed=5, jobs=1, return_table=True)
     assert list(curve.columns) == ["sigma", "risk", "falls", "n", "engine"]
     assert list(curve["sigma"]) == [0.06, 0.08, 0.1] and (curve["n"] == 30).all()
     for sigma in (0.06, 0.1):
-        alone = physical_risk(staircase(4), sigma, n=30, seed=5, return_table=True)[1]
+        alone = physical_risk(staircase(4), sigma, n_sims=30, seed=5, return_table=True)[1]
         pd.testing.assert_frame_equal(runs[runs["sigma"] == sigma].reset_index(drop=True), alone)
 
 
 def test_risk_grows_with_noise_on_a_marginal_stack():
-    curve = risk_curve(staircase(4), [0.02, 0.1, 0.3], n=30, seed=0, jobs=1)
+    curve = risk_curve(staircase(4), [0.02, 0.1, 0.3], n_sims=30, seed=0, jobs=1)
     assert list(curve["risk"]) == sorted(curve["risk"]) and curve["risk"].iloc[-1] > curve["risk"].iloc[0]
 
 
 def test_risk_table_is_tidy_in_input_order_and_matches_physical_risk():
     scenes = {"stair": staircase(4), "tower": tower(4), "line": line(3)}
-    table = risk_table(scenes, [0.07, 0.1], n=20, seed=2, jobs=1)
+    table = risk_table(scenes, [0.07, 0.1], n_sims=20, seed=2, jobs=1)
     assert list(table.columns) == ["trial", "sigma", "risk", "falls", "n", "engine"]
     assert list(table["trial"]) == ["stair", "stair", "tower", "tower", "line", "line"]
     assert table.loc[(table.trial == "stair") & (table.sigma == 0.1), "risk"].item() == physical_risk(
-        staircase(4), 0.1, n=20, seed=2
+        staircase(4), 0.1, n_sims=20, seed=2
     )
-    runs = risk_table([staircase(4)], [0.1], n=20, seed=2, jobs=1, runs=True)
+    runs = risk_table([staircase(4)], [0.1], n_sims=20, seed=2, jobs=1, runs=True)
     assert list(runs.columns) == ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine"]
     assert set(runs["trial"]) == {"staircase4 0.2d"}
 
@@ -77,9 +77,9 @@ def test_risk_table_is_tidy_in_input_order_and_matches_physical_risk():
 def test_parallel_grid_gives_identical_numbers_to_serial(engine, scenes, n):
     scenes = [staircase(4), harmonic(4, 0.8)][:scenes]
     progress = []
-    serial = risk_table(scenes, [0.06, 0.1], n=n, seed=9, engine=engine, jobs=1, runs=True)
+    serial = risk_table(scenes, [0.06, 0.1], n_sims=n, seed=9, engine=engine, jobs=1, runs=True)
     parallel = risk_table(
-        scenes, [0.06, 0.1], n=n, seed=9, engine=engine, jobs=2, runs=True, progress=lambda d, t: progress.append((d, t))
+        scenes, [0.06, 0.1], n_sims=n, seed=9, engine=engine, jobs=2, runs=True, progress=lambda d, t: progress.append((d, t))
     )
     pd.testing.assert_frame_equal(serial, parallel)
     total = len(scenes) * 2 * n
@@ -89,7 +89,7 @@ def test_parallel_grid_gives_identical_numbers_to_serial(engine, scenes, n):
 def test_unstable_scene_is_refused_naming_scene_and_block():
     scene = two_block(0.7, label="7X-B")
     with pytest.raises(UnstableSceneError, match=r"7X-B: unstable before any noise.*block b1 moved"):
-        physical_risk(scene, 0.065, n=3)
+        physical_risk(scene, 0.065, n_sims=3)
     with pytest.raises(UnstableSceneError, match="7X-B"):
         check_stable(scene)
 
@@ -99,19 +99,19 @@ def test_floating_scene_is_refused_before_simulating():
 
     floating = Scene([Block("b0", [0.3, 0.0, 0.05])], label="floaty")
     with pytest.raises(StimulusError, match="floaty"):
-        physical_risk(floating, 0.065, n=3)
+        physical_risk(floating, 0.065, n_sims=3)
 
 
 def test_unknown_engine_is_refused_naming_the_known_ones():
     with pytest.raises(ValueError, match=r"unknown physics engine 'physx'; known engines: drake, mujoco"):
-        physical_risk(tower(2), 0.065, n=2, engine="physx")
+        physical_risk(tower(2), 0.065, n_sims=2, engine="physx")
     with pytest.raises(ValueError, match="known engines"):
-        risk_table([tower(2)], [0.1], n=2, engine="bullet")
+        risk_table([tower(2)], [0.1], n_sims=2, engine="bullet")
 
 
 def test_bad_sigma_or_n_is_refused():
     with pytest.raises(ValueError, match="sigma"):
-        physical_risk(tower(2), -0.1, n=2)
+        physical_risk(tower(2), -0.1, n_sims=2)
     for n in (-1, 0):  # risk is falls / n: no runs, no risk (never a NaN)
-        with pytest.raises(ValueError, match="n >= 1"):
-            physical_risk(tower(2), 0.1, n=n)
+        with pytest.raises(ValueError, match="n_sims >= 1"):
+            physical_risk(tower(2), 0.1, n_sims=n)

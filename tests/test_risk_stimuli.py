@@ -19,7 +19,7 @@ def test_unperturbed_finish_state_stands(trial, engine):
 @pytest.fixture(scope="module")
 def risk_at_paper_sigma():
     pairs = [t for t in TRIALS if t.pair in (4, 5, 7, 8)]
-    table = risk_table(pairs, [SIGMA], n=100, seed=0)
+    table = risk_table(pairs, [SIGMA], n_sims=100, seed=0)
     return dict(zip(table["trial"], table["risk"]))
 
 

@@ -11,14 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 
-#: Display colours (r, g, b) of block colours in stimuli files.
-COLOURS = {
-    "natural": (0.87, 0.72, 0.53),
-    "green": (0.2, 0.65, 0.3),
-    "yellow": (0.95, 0.85, 0.2),
-    "blue": (0.2, 0.4, 0.85),
-    "red": (0.85, 0.2, 0.2),
-}
+from lgp.paper import DISPLAY_RGB as COLOURS
 
 
 def write_html(plan, path) -> str:

@@ -3,13 +3,11 @@ to fall when every block is nudged by Gaussian noise and the scene is simulated
 for 4 s. See docs/risk.md for the noise rule, the fall rule and the engines.
 
     from models.risk import SIGMA_GRID, physical_risk, risk_table
-    physical_risk(scene, sigma=0.065, n=100, seed=0)      # fraction of falls
-    risk_table(stimuli.load_all(), SIGMA_GRID, n=100)     # tidy (trial, sigma) table
+    physical_risk(scene, sigma=0.065, n_sims=100, seed=0) # fraction of falls
+    risk_table(stimuli.load_all(), SIGMA_GRID, n_sims=100)# tidy (trial, sigma) table
 """
 from models.risk.core import (  # noqa: F401
     DEFAULT_ENGINE,
-    N_RUNS,
-    SIGMA_GRID,
     UnstableSceneError,
     check_stable,
     fall_threshold,
@@ -19,6 +17,7 @@ from models.risk.core import (  # noqa: F401
     run_grid,
     summarise,
 )
+from lgp.paper import N_SIMS, SIGMA_GRID  # noqa: F401  (re-exported for convenience)
 from models.risk.engine import DURATION, ENGINES, FALL_THRESHOLD, Rollout, get_engine  # noqa: F401
 from models.risk.noise import draw_normals, perturb, perturb_from_normals  # noqa: F401
 from models.risk.static import static_stable  # noqa: F401

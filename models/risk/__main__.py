@@ -1,7 +1,7 @@
 """Risk table of the 24 trials over the paper's sigma grid.
 
     python -m models.risk --table docs/risk_table.csv [--runs runs.csv]
-        [--n 100] [--seed 0] [--engine mujoco] [--jobs N] [--sigmas 0.05 0.065 ...]
+        [--n-sims 100] [--seed 0] [--engine mujoco] [--jobs N] [--sigmas 0.05 0.065 ...]
 
 Writes the tidy (trial, sigma, risk, falls, n, engine) table as CSV, optionally
 the per-run table, and prints risk per trial and sigma.
@@ -12,7 +12,8 @@ import argparse
 import sys
 import time
 
-from models.risk.core import DEFAULT_ENGINE, N_RUNS, SIGMA_GRID, risk_table, summarise
+from lgp.paper import N_SIMS, SIGMA_GRID
+from models.risk.core import DEFAULT_ENGINE, risk_table, summarise
 from models.risk.engine import ENGINES
 
 
@@ -20,7 +21,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m models.risk", description=__doc__.splitlines()[0])
     p.add_argument("--table", required=True, help="CSV to write: trial, sigma, risk, falls, n, engine")
     p.add_argument("--runs", help="also write the per-run CSV here")
-    p.add_argument("--n", type=int, default=N_RUNS, help="simulations per trial and sigma (default %(default)s)")
+    p.add_argument("--n-sims", type=int, default=N_SIMS, help="simulations per trial and sigma (default %(default)s)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--engine", choices=sorted(ENGINES), default=DEFAULT_ENGINE)
     p.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
@@ -40,7 +41,7 @@ def main(argv=None) -> int:
             last[0] = now
             print(f"  {done}/{total} runs, {now - t0:.0f} s", file=sys.stderr, flush=True)
 
-    runs = risk_table(trials, args.sigmas, args.n, args.seed, args.engine, args.jobs, progress, runs=True)
+    runs = risk_table(trials, args.sigmas, args.n_sims, args.seed, args.engine, args.jobs, progress, runs=True)
     table = summarise(runs)
     order = {t.id: k for k, t in enumerate(trials)}
     table = table.sort_values(["trial", "sigma"], key=lambda c: c.map(order) if c.name == "trial" else c).reset_index(drop=True)

@@ -4,19 +4,20 @@ of N noisy copies of B that fall when simulated for 4 s.
 Run r of a scene perturbs B with the standard normals z[r] (drawn once from the
 seed, shape (n_blocks, 3)) scaled by sigma, so every sigma value sees the same
 random numbers (common random numbers) and a risk curve over sigma is smooth. A
-scene's numbers depend only on (scene, sigma, n, seed, engine), never on the other
+scene's numbers depend only on (scene, sigma, n_sims, seed, engine), never on the other
 scenes of a table, on the order of runs, or on the number of worker processes.
 """
 from __future__ import annotations
 
 import hashlib
-import os
 from dataclasses import dataclass
 from typing import Callable, Iterable, Sequence
 
 import numpy as np
 import pandas as pd
 
+from lgp.executor import borrowed, default_jobs
+from lgp.paper import N_SIMS, SIGMA_GRID
 from lgp.scene import Scene
 from models.risk.engine import ENGINES, FALL_THRESHOLD, Rollout, _smallest_width, get_engine
 from models.risk.noise import draw_normals, perturb_from_normals
@@ -24,10 +25,6 @@ from models.risk.noise import draw_normals, perturb_from_normals
 #: The engine used when none is named: the one that passes the faithfulness suite
 #: with the better throughput (docs/risk.md).
 DEFAULT_ENGINE = "mujoco"
-#: The paper's grid of noise levels: 0.05 d to 0.10 d in steps of 0.005 d.
-SIGMA_GRID = tuple(round(0.05 + 0.005 * k, 3) for k in range(11))
-#: The paper's number of simulations per trial and sigma.
-N_RUNS = 100
 
 RUN_COLUMNS = ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine"]
 RISK_COLUMNS = ["trial", "sigma", "risk", "falls", "n", "engine"]
@@ -121,30 +118,16 @@ def _task_worker(args):
     return _simulate_runs(scene, sigma, z, range(start, start + len(z)), engine)
 
 
-def _mp_context():
-    """fork where it is safe (POSIX, no other threads): workers start at once and
-    callers need no `if __name__ == "__main__"` guard; spawn otherwise."""
-    import multiprocessing as mp
-    import threading
-
-    if "fork" in mp.get_all_start_methods() and threading.active_count() == 1:
-        return mp.get_context("fork")
-    return mp.get_context("spawn")
-
-
-def _default_jobs() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
 def run_grid(
     scenes: Sequence[Scene],
     sigmas: Iterable[float],
-    n: int = N_RUNS,
+    n_sims: int = N_SIMS,
     seed: int = 0,
     engine: str | None = None,
     jobs: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     trial_ids: Sequence[str] | None = None,
+    executor=None,
 ) -> pd.DataFrame:
     """Every (scene, sigma, run): a tidy table with columns RUN_COLUMNS, in the
     order of `scenes`, then `sigmas`, then runs.
@@ -156,41 +139,33 @@ def run_grid(
     """
     name = _engine_name(engine)
     sigmas = [float(s) for s in sigmas]
-    if n < 1:
-        raise ValueError(f"need n >= 1 runs (risk is falls / n), got {n}")
+    if n_sims < 1:
+        raise ValueError(f"need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
     for s in sigmas:
         if not s >= 0:
             raise ValueError(f"sigma must be >= 0 (a fraction of the block size), got {s}")
     ids = list(trial_ids) if trial_ids is not None else [s.label for s in scenes]
     for scene in scenes:
         check_stable(scene, name)
-    normals = [draw_normals(n, len(scene), seed) for scene in scenes]
-    jobs = _default_jobs() if jobs is None else max(1, int(jobs))
-    total = len(scenes) * len(sigmas) * n
+    normals = [draw_normals(n_sims, len(scene), seed) for scene in scenes]
+    jobs = (executor.jobs if executor is not None else default_jobs()) if jobs is None else max(1, int(jobs))
+    total = len(scenes) * len(sigmas) * n_sims
     # chunks small enough to balance the load, large enough to amortise the model build
-    chunk = max(1, min(n, -(-total // (8 * jobs)))) if total else 1
+    chunk = max(1, min(n_sims, -(-total // (8 * jobs)))) if total else 1
     tasks = [
-        _Task(i, s, a, min(a + chunk, n)) for i in range(len(scenes)) for s in sigmas for a in range(0, n, chunk)
+        _Task(i, s, a, min(a + chunk, n_sims)) for i in range(len(scenes)) for s in sigmas for a in range(0, n_sims, chunk)
     ]
     args = [(scenes[t.scene_index], t.sigma, normals[t.scene_index][t.start : t.stop], t.start, name) for t in tasks]
-    results: list[list[dict] | None] = [None] * len(tasks)
     done = 0
-    if jobs == 1 or len(tasks) <= 1:
-        for k, a in enumerate(args):
-            results[k] = _task_worker(a)
-            done += len(results[k])
-            if progress:
-                progress(done, total)
-    else:
-        from lgp.parallel import map_in_processes
 
-        def arrived(k, res):
-            nonlocal done
-            done += len(res)
-            if progress:
-                progress(done, total)
+    def arrived(k, res):
+        nonlocal done
+        done += len(res)
+        if progress:
+            progress(done, total)
 
-        results = map_in_processes(_task_worker, args, min(jobs, len(tasks)), _mp_context(), arrived)
+    with borrowed(executor, 1 if len(tasks) <= 1 else min(jobs, len(tasks))) as ex:
+        results = ex.map(_task_worker, args, arrived)
     rows = []
     for t, res in zip(tasks, results):
         for row in res:
@@ -213,13 +188,13 @@ def summarise(runs: pd.DataFrame) -> pd.DataFrame:
 def physical_risk(
     scene: Scene,
     sigma: float,
-    n: int = N_RUNS,
+    n_sims: int = N_SIMS,
     seed: int = 0,
     engine: str | None = None,
     return_table: bool = False,
     jobs: int | None = 1,
 ):
-    """Physical risk of `scene` (a Finish state B): the fraction of `n` perturbed
+    """Physical risk of `scene` (a Finish state B): the fraction of `n_sims` perturbed
     copies (noise SD `sigma` * d per axis) that fall within 4 s of simulation.
 
     With `return_table`, also the per-run table (columns run, sigma, fell,
@@ -227,7 +202,7 @@ def physical_risk(
     Raises UnstableSceneError when the unperturbed scene falls, ValueError for an
     unknown engine.
     """
-    runs = run_grid([scene], [sigma], n, seed, engine, jobs)
+    runs = run_grid([scene], [sigma], n_sims, seed, engine, jobs)
     risk = float(runs["fell"].mean())
     if return_table:
         return risk, runs.drop(columns="trial")
@@ -237,7 +212,7 @@ def physical_risk(
 def risk_curve(
     scene: Scene,
     sigmas: Iterable[float] = SIGMA_GRID,
-    n: int = N_RUNS,
+    n_sims: int = N_SIMS,
     seed: int = 0,
     engine: str | None = None,
     jobs: int | None = None,
@@ -245,7 +220,7 @@ def risk_curve(
 ) -> pd.DataFrame:
     """Risk of one scene at each sigma (same random numbers for every sigma):
     columns sigma, risk, falls, n, engine (and the per-run table with `return_table`)."""
-    runs = run_grid([scene], sigmas, n, seed, engine, jobs)
+    runs = run_grid([scene], sigmas, n_sims, seed, engine, jobs)
     curve = summarise(runs).drop(columns="trial")
     return (curve, runs.drop(columns="trial")) if return_table else curve
 
@@ -253,12 +228,13 @@ def risk_curve(
 def risk_table(
     trials_or_scenes,
     sigmas: Iterable[float] = SIGMA_GRID,
-    n: int = N_RUNS,
+    n_sims: int = N_SIMS,
     seed: int = 0,
     engine: str | None = None,
     jobs: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     runs: bool = False,
+    executor=None,
 ) -> pd.DataFrame:
     """Risk of many scenes over a grid of sigma values, as a tidy table.
 
@@ -267,11 +243,11 @@ def risk_table(
     mapping. Returns columns trial, sigma, risk, falls, n, engine, one row per
     (trial, sigma) in input order; with `runs=True` the per-run table instead
     (trial, sigma, run, fell, max_displacement, max_displacement_3d, sim_time,
-    engine). Each trial's numbers equal `physical_risk(scene, sigma, n, seed)`.
+    engine). Each trial's numbers equal `physical_risk(scene, sigma, n_sims, seed)`.
     """
     ids, scenes = _as_scenes(trials_or_scenes)
     sigmas = list(sigmas)
-    table = run_grid(scenes, sigmas, n, seed, engine, jobs, progress, trial_ids=ids)
+    table = run_grid(scenes, sigmas, n_sims, seed, engine, jobs, progress, trial_ids=ids, executor=executor)
     if runs:
         return _in_order(table, ids, ["sigma", "run"])
     return _in_order(summarise(table), ids, ["sigma"])

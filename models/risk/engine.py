@@ -13,13 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lgp.scene import BLOCK_SIZE, Scene
+from lgp.paper import BLOCK_SIZE, DURATION
+from lgp.scene import Scene
 
 #: Wood (kg/m^3) and wood-on-wood friction, for blocks, table and fixed boxes.
 DENSITY = 600.0
 FRICTION = 0.6
-#: Simulated time of a run (paper, footnote 1), s.
-DURATION = 4.0
 #: A run falls when some block's centre ends farther than this (fraction of the
 #: block size d) from where it started, measured in the horizontal plane.
 FALL_THRESHOLD = 0.25

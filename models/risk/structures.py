@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from lgp.scene import BLOCK_SIZE, Block, Scene
+from lgp.paper import BLOCK_SIZE, BUILD_SITE
+from lgp.scene import Block, Scene
 
 D = BLOCK_SIZE
 
@@ -16,7 +17,7 @@ def _block(i: int, x: float, y: float, z_bottom: float, yaw: float = 0.0) -> Blo
     return Block(f"b{i}", np.array([x, y, z_bottom + D / 2]), yaw=yaw)
 
 
-def tower(n: int, p_WS=(0.35, 0.0), offsets=None, label: str | None = None) -> Scene:
+def tower(n: int, p_WS=BUILD_SITE, offsets=None, label: str | None = None) -> Scene:
     """n blocks stacked at the site S; `offsets` (n-1, 2) shifts each block (m)
     relative to the one below it (default: perfectly aligned)."""
     offsets = np.zeros((max(n - 1, 0), 2)) if offsets is None else np.asarray(offsets, float).reshape(-1, 2)
@@ -28,7 +29,7 @@ def tower(n: int, p_WS=(0.35, 0.0), offsets=None, label: str | None = None) -> S
     return Scene(blocks, label=label or f"tower{n}").validate()
 
 
-def line(n: int, p_WS=(0.35, 0.0), gap: float = 0.0, label: str | None = None) -> Scene:
+def line(n: int, p_WS=BUILD_SITE, gap: float = 0.0, label: str | None = None) -> Scene:
     """n blocks side by side along y on the table, `gap` (m) apart (0 = touching)."""
     ys = p_WS[1] + (np.arange(n) - (n - 1) / 2) * (D + gap)
     return Scene([_block(i, p_WS[0], y, 0.0) for i, y in enumerate(ys)], label=label or f"line{n}").validate()
@@ -58,7 +59,7 @@ def staircase(n: int, step: float = 0.2, label: str | None = None) -> Scene:
 def bridge(gap: float = 0.5, height: int = 2, top: bool = True, label: str | None = None) -> Scene:
     """Two pillars of `height` blocks `gap` * d apart along x, a lintel spanning them
     and (optionally) a block on the lintel."""
-    x0 = 0.35
+    x0 = BUILD_SITE[0]
     xl, xr = x0 - (D + gap * D) / 2, x0 + (D + gap * D) / 2
     blocks, i = [], 0
     for level in range(height):
@@ -73,7 +74,7 @@ def bridge(gap: float = 0.5, height: int = 2, top: bool = True, label: str | Non
 
 def pyramid(label: str = "pyramid 3-2-1") -> Scene:
     """A row of 3 blocks, 2 on the seams, 1 on top."""
-    x0 = 0.35
+    x0 = BUILD_SITE[0]
     blocks = [_block(i, x0 + (i - 1) * D, 0.0, 0.0) for i in range(3)]
     blocks += [_block(3 + i, x0 + (i - 0.5) * D, 0.0, D) for i in range(2)]
     blocks.append(_block(5, x0, 0.0, 2 * D))
@@ -82,7 +83,7 @@ def pyramid(label: str = "pyramid 3-2-1") -> Scene:
 
 def grid(nx: int, ny: int, layers: int = 1, label: str | None = None) -> Scene:
     """A wall/floor of touching blocks: nx along x, ny along y, `layers` high."""
-    x0, y0 = 0.35 - (nx - 1) * D / 2, -(ny - 1) * D / 2
+    x0, y0 = BUILD_SITE[0] - (nx - 1) * D / 2, BUILD_SITE[1] - (ny - 1) * D / 2
     blocks = []
     for k in range(layers):
         for i in range(nx):

@@ -1,0 +1,184 @@
+"""Executors: how the expensive maps of the pipeline (effort per (trial, layout),
+risk per (trial, chunk of runs)) are spread over processes.
+
+One interface, ``Executor.map(fn, items, on_result=None) -> list`` (results in
+input order; ``on_result(index, result)`` as each arrives, for progress), with
+
+- ``SerialExecutor``: in this process;
+- ``ProcessExecutor(jobs)``: a pool of warm worker processes kept for the
+  executor's whole life, so a run imports Drake and compiles models once per
+  worker, not once per trial. An exception in the caller (Ctrl-C included)
+  cancels what is queued and terminates the workers at once; workers die with
+  their parent (Linux: PR_SET_PDEATHSIG).
+
+A later backend (Dask) implements the same ``map``. This module knows nothing of
+the paper: it sits on the ground floor with the scene, so models may take an
+``executor=`` argument without importing the application.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+from typing import Any, Callable, Protocol, Sequence
+
+
+class Executor(Protocol):
+    jobs: int
+
+    def map(self, fn: Callable, items: Sequence, on_result: Callable[[int, Any], None] | None = None) -> list: ...
+
+    def close(self) -> None: ...
+
+
+class SerialExecutor:
+    """Runs every item in this process, in order."""
+
+    jobs = 1
+
+    def map(self, fn, items, on_result=None) -> list:
+        results = []
+        for k, item in enumerate(items):
+            results.append(fn(item))
+            if on_result is not None:
+                on_result(k, results[-1])
+        return results
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def default_jobs() -> int:
+    """Cores this process may use."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _start_method() -> str:
+    """fork where it is safe (POSIX, no other threads in this process): workers
+    start at once and callers need no ``if __name__ == "__main__"`` guard; spawn
+    otherwise."""
+    import multiprocessing as mp
+
+    if "fork" in mp.get_all_start_methods() and threading.active_count() == 1:
+        return "fork"
+    return "spawn"
+
+
+def _die_with_parent() -> None:
+    """Worker initialiser: the kernel sends SIGTERM to this worker when its parent
+    dies (Linux), so a killed run leaves no orphans; Ctrl-C is the parent's to handle."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        try:
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+        except OSError:  # pragma: no cover - no libc by that name
+            pass
+        if os.getppid() == 1:  # the parent died before prctl took effect
+            os._exit(1)
+
+
+class ProcessExecutor:
+    """A pool of `jobs` warm worker processes (multiprocessing.Pool), created on
+    first use and kept until `close()`."""
+
+    def __init__(self, jobs: int | None = None, start_method: str | None = None):
+        self.jobs = default_jobs() if jobs is None else int(jobs)
+        if self.jobs < 1:
+            raise ValueError(f"jobs must be >= 1, got {jobs}")
+        self.start_method = start_method
+        self._pool = None
+
+    def _get_pool(self):
+        if self._pool is None:
+            import multiprocessing as mp
+
+            ctx = mp.get_context(self.start_method or _start_method())
+            self._pool = ctx.Pool(self.jobs, initializer=_die_with_parent)
+        return self._pool
+
+    def map(self, fn, items, on_result=None) -> list:
+        items = list(items)
+        results: list = [None] * len(items)
+        if not items:
+            return results
+        pool = self._get_pool()
+        try:
+            for k, result, error in pool.imap_unordered(_indexed, [(fn, k, it) for k, it in enumerate(items)]):
+                if error is not None:
+                    raise error
+                results[k] = result
+                if on_result is not None:
+                    on_result(k, result)
+        except BaseException:
+            self.terminate()
+            raise
+        return results
+
+    def terminate(self) -> None:
+        """Stop at once: queued work is dropped and the workers are killed."""
+        if self._pool is not None:
+            self._pool.terminate()
+            self._pool.join()
+            self._pool = None
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.close()
+            self._pool.join()
+            self._pool = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if exc[0] is None:
+            self.close()
+        else:
+            self.terminate()
+
+
+def _indexed(args):
+    fn, k, item = args
+    try:
+        return k, fn(item), None
+    except Exception:
+        raise  # the pool carries it to the caller
+    except BaseException as e:  # a Pool worker would die on it and the map would hang
+        return k, None, e
+
+
+def executor_for(jobs: int | None) -> SerialExecutor | ProcessExecutor:
+    """SerialExecutor for one job, a ProcessExecutor otherwise (None: all cores)."""
+    jobs = default_jobs() if jobs is None else int(jobs)
+    if jobs < 1:
+        raise ValueError(f"jobs must be >= 1, got {jobs}")
+    return SerialExecutor() if jobs == 1 else ProcessExecutor(jobs)
+
+
+class borrowed:
+    """Context manager: the caller's executor (left open) or a fresh one for `jobs`
+    (closed on exit)."""
+
+    def __init__(self, executor: Executor | None, jobs: int | None):
+        self.own = executor is None
+        self.executor = executor_for(jobs) if executor is None else executor
+
+    def __enter__(self):
+        return self.executor
+
+    def __exit__(self, *exc):
+        if self.own:
+            if exc[0] is None or not hasattr(self.executor, "terminate"):
+                self.executor.close()
+            else:
+                self.executor.terminate()

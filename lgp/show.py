@@ -1,0 +1,48 @@
+"""Inspect the plan of one trial: ``python -m lgp.show 7H --seed 0 --sample 0 --html out.html --png out.png``.
+
+Replays row (trial, sample) of `effort_samples.csv` exactly: the layout of A and
+the planner are seeded as `models.effort.physical_effort` seeds them
+(`models.effort.plan_of_sample`), so the effort printed here equals that row's.
+Prints the action list with per-action kinetic energy, and optionally writes the
+3-D replay (HTML, works offline) and a figure of block paths and speeds (PNG).
+From a script, use ``lgp.plan(...)`` (lgp/planner.py) and ``Plan.write_html`` /
+``Plan.write_png``; this module is the command line only.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m lgp.show", description=__doc__.splitlines()[0])
+    parser.add_argument("trial", help="trial id, e.g. 7H")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the run, as `lgp.reproduce --seed` (default 0)")
+    parser.add_argument("--sample", type=int, default=0, help="layout index K: replays row (trial, K) of effort_samples.csv (default 0)")
+    parser.add_argument("--html", help="write a self-contained 3-D replay here")
+    parser.add_argument("--png", help="write a figure of block paths and speeds here")
+    parser.add_argument("--formulation", default="reduced", choices=("reduced", "full"))
+    parser.add_argument("--solver", default="snopt", choices=("snopt", "ipopt"))
+    args = parser.parse_args(argv)
+
+    import stimuli
+    from models.effort import plan_of_sample
+
+    trial = stimuli.load_trial(args.trial)
+    result = plan_of_sample(trial, args.seed, args.sample, formulation=args.formulation, solver=args.solver)
+    komo = result.komo
+    print(f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})")
+    print(result.describe())
+    if komo is not None:
+        print(f"KOMO {komo.formulation} / {komo.solver}: {komo.status}, cost {komo.cost:.4f}, {komo.n_variables} variables, "
+              f"{komo.solve_time:.3f} s solving, planned in {result.planning_time:.3f} s")
+    print(f"effort {result.kinetic_energy():.12g} J*s")
+    if args.html:
+        print("replay:", result.write_html(args.html))
+    if args.png:
+        print("figure:", result.write_png(args.png))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
