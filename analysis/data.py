@@ -17,7 +17,7 @@ from typing import Iterable, Mapping
 import numpy as np
 import pandas as pd
 
-from lgp.paper import PAIRS, TRIAL_IDS  # noqa: F401  (re-exported)
+from lgp.paper import PAIRS, TRIAL_IDS, canonical_trial_id  # noqa: F401  (re-exported)
 
 #: The 24 trial ids in the paper's order: pair 1 easy, pair 1 hard, ..., 12H.
 #: The 12 easy/hard pairs.
@@ -133,7 +133,7 @@ def validate_human_data(
         table["line"] = np.arange(len(table)) + 2
     for column in ("dataset", "participant", "trial"):
         table[column] = table[column].map(lambda v: "" if _is_missing(v) else str(v).strip())
-    table["trial"] = table["trial"].str.upper()
+    table["trial"] = table["trial"].map(canonical_trial_id)  # "1e" is 1E, as on every command line
 
     allowed = set(DATASETS) | ({SIMULATED_PREFIX + d for d in DATASETS} if allow_simulated else set())
     problems: list[tuple[int, str]] = []

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from lgp.paper import BLOCK_SIZE, BUILD_SITE
+from lgp.paper import BLOCK_SIZE, BUILD_SITE, canonical_trial_id
 from lgp.scene import Block, FixedBox, Scene, StimulusError, colour_shortfall, horizontal_penetration
 
 TRIAL_DIR = Path(__file__).parent / "trials"
@@ -271,7 +271,9 @@ _cache: dict[tuple[str, str], Trial] = {}
 
 
 def load_trial(trial_id: str, directory: str | Path = TRIAL_DIR) -> Trial:
-    """The trial ``trial_id`` (e.g. ``"7H"``) from ``directory``, validated."""
+    """The trial ``trial_id`` (e.g. ``"7H"``; case-insensitive, ``"7h"`` too) from
+    ``directory``, validated."""
+    trial_id = canonical_trial_id(trial_id)
     path = Path(directory) / f"{trial_id}.yaml"
     if not path.exists():
         raise StimulusError(f"no trial {trial_id!r}: {path} does not exist (known: {', '.join(trial_ids(Path(directory)))})")

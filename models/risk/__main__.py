@@ -8,25 +8,28 @@ the per-run table, and prints risk per trial and sigma.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
+from lgp import cli
 from lgp.paper import N_SIMS, SIGMA_GRID
 from models.risk.core import DEFAULT_ENGINE, risk_table, summarise
 from models.risk.engine import ENGINES
 
 
+PROG = "python -m models.risk"
+
+
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m models.risk", description=__doc__.splitlines()[0])
-    p.add_argument("--table", required=True, help="CSV to write: trial, sigma, risk, falls, n, engine")
-    p.add_argument("--runs", help="also write the per-run CSV here")
-    p.add_argument("--n-sims", type=int, default=N_SIMS, help="simulations per trial and sigma (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0)
+    p = cli.parser(PROG, description=__doc__.splitlines()[0])
+    p.add_argument("--table", required=True, type=cli.output_file, help="CSV to write: trial, sigma, risk, falls, n, engine")
+    p.add_argument("--runs", type=cli.output_file, help="also write the per-run CSV here")
+    p.add_argument("--n-sims", type=cli.positive_int, default=N_SIMS, help="simulations per trial and sigma (default %(default)s)")
+    p.add_argument("--seed", type=cli.seed, default=0)
     p.add_argument("--engine", choices=sorted(ENGINES), default=DEFAULT_ENGINE)
-    p.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
-    p.add_argument("--sigmas", type=float, nargs="+", default=list(SIGMA_GRID), help="noise SDs, fractions of d")
-    p.add_argument("--trials", nargs="+", help="trial ids (default: all 24)")
+    p.add_argument("--jobs", type=cli.positive_int, default=None, help="worker processes (default: all cores)")
+    p.add_argument("--sigmas", type=cli.sigma, nargs="+", default=list(SIGMA_GRID), help="noise SDs in (0, 1], fractions of d")
+    p.add_argument("--trials", type=cli.trial_id, nargs="+", help="trial ids (default: all 24; case-insensitive)")
     args = p.parse_args(argv)
 
     import stimuli
@@ -55,4 +58,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(cli.run_cli(main, prog=PROG))
