@@ -68,7 +68,8 @@ def clear_previous(out: Path) -> list[str]:
         else:
             continue
         removed.append(name)
-    return sorted(set(removed))
+    dirs = {name for name in removed if name in OUTPUT_NAMES and not name.endswith((".csv", ".md"))}
+    return sorted({name for name in removed if Path(name).parts[0] not in dirs or name in dirs})
 
 
 def write_json_atomic(data, path: Path) -> Path:
