@@ -145,9 +145,16 @@ def input_dir(text: str) -> str:
 # ----------------------------------------------------------------------------- parser and runner
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line on stderr (exit 2); --help shows the usage."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (--help shows the usage)\n")
+
+
 def parser(prog: str, description: str | None = None, **kwargs) -> argparse.ArgumentParser:
-    """An ArgumentParser with the shared ``--debug`` flag."""
-    p = argparse.ArgumentParser(prog=prog, description=description, **kwargs)
+    """An ArgumentParser with the shared ``--debug`` flag whose usage errors are one line."""
+    p = _Parser(prog=prog, description=description, **kwargs)
     p.add_argument("--debug", action="store_true",
                    help=f"show the traceback of an error (or set {DEBUG_ENV}=1)")
     return p
@@ -209,14 +216,64 @@ def run_cli(main: Callable[[Sequence[str] | None], int | None], argv: Sequence[s
     try:
         return int(main(argv) or 0)
     except KeyboardInterrupt:
-        if debug:
-            traceback.print_exc()
-        print(f"{prog}: {interrupted}", file=sys.stderr, flush=True)
-        return EXIT_INTERRUPTED
+        return _interrupted(prog, interrupted, debug)
     except Exception as exc:
+        if _caused_by_interrupt(exc):  # e.g. pydrake turns Ctrl-C during its import into ImportError
+            return _interrupted(prog, interrupted, debug)
         if not is_known_error(exc):
             raise
         if debug:
             traceback.print_exc()
         print(f"{prog}: error: {one_line(exc)}", file=sys.stderr, flush=True)
         return EXIT_DATA
+
+
+class deferred_interrupt:
+    """Context manager: a Ctrl-C inside the block takes effect when the block ends.
+
+    For imports of compiled libraries: pydrake turns a KeyboardInterrupt during its
+    import into ImportError, logs a critical message, and leaves CPython marked to
+    kill itself with SIGINT at exit. Main thread only (elsewhere it does nothing).
+    """
+
+    def __enter__(self):
+        import signal
+
+        self.hit, self.old = False, None
+        try:
+            self.old = signal.signal(signal.SIGINT, self._note)
+        except ValueError:  # not the main thread
+            pass
+        return self
+
+    def _note(self, signum, frame):
+        self.hit = True
+
+    def __exit__(self, *exc):
+        import signal
+
+        if self.old is not None:
+            signal.signal(signal.SIGINT, self.old)
+        if self.hit and exc[0] is None:
+            raise KeyboardInterrupt
+        return False
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def _interrupted(prog: str, message: str, debug: bool) -> int:
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not interrupt the goodbye
+    if debug:
+        traceback.print_exc()
+    print(f"{prog}: {message}", file=sys.stderr, flush=True)
+    return EXIT_INTERRUPTED

@@ -295,14 +295,15 @@ def parse_args(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     args = parse_args(argv)
     t0 = time.perf_counter()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    # Validate every input before anything is written or computed.
     trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
     human = None
     if args.human_data:
         from analysis import load_human_data
 
-        human = load_human_data(args.human_data)  # validate before the long work
+        human = load_human_data(args.human_data)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     removed = clear_previous(out)  # this folder describes this run only (lgp/manifest.py)
     if removed:
         _log(f"removed the outputs of an earlier run from {out}: {', '.join(removed)} (the cache is kept)")
@@ -314,6 +315,9 @@ def main(argv=None) -> int:
     with executor_for(args.jobs) as executor:
         if hasattr(executor, "start"):
             executor.start()
+        with cli.deferred_interrupt():  # Drake loads here; a Ctrl-C meanwhile waits until it has
+            import models.effort  # noqa: F401
+            import models.risk  # noqa: F401
         with cache.stage():
             effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
         effort = summarise_effort(effort_samples, trials)
