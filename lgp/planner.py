@@ -132,6 +132,16 @@ class Plan:
         v = np.diff(self.p_WB[name], axis=0) / self.tau
         return np.concatenate([[0.0], np.linalg.norm(v, axis=1)])
 
+    def __repr__(self) -> str:
+        """One line: scene, actions, effort, time; the arrays stay behind the attributes
+        (t, q, p_WB, R_WB) and `describe()` lists the actions."""
+        actions = self.actions
+        shown = " -> ".join(map(str, actions[:2])) + (" -> ..." if len(actions) > 2 else "")
+        status = f", {self.komo.solver} {self.komo.status}" if self.komo is not None else ""
+        return (f"Plan({self.initial.label or 'scene'}: {len(actions)} actions [{shown}], "
+                f"effort {self.kinetic_energy():.4g} J*s, {len(self.t)} slices, "
+                f"planned in {self.planning_time:.2f} s{status})")
+
     def describe(self) -> str:
         """The action list with times and per-action energies, one line each."""
         energies = self.kinetic_energy_by_action() if self.actions else []
