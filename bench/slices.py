@@ -38,10 +38,14 @@ def main(argv=None) -> int:
     for trial in trials:
         for slices in args.slices:
             t0 = time.perf_counter()
-            plan = plan_of_sample(trial, args.seed, args.sample, slices_per_phase=slices)
-            rows.append({"trial": trial.id, "slices_per_phase": slices, "effort": plan.kinetic_energy(),
-                         "plan_time": time.perf_counter() - t0, "n_actions": len(plan.actions)})
-            print(f"{trial.id:>4} {slices:3d} slices: effort {rows[-1]['effort']:.6f} J*s in {rows[-1]['plan_time']:.2f} s", flush=True)
+            try:
+                plan = plan_of_sample(trial, args.seed, args.sample, slices_per_phase=slices)
+                effort, n_actions, status = plan.kinetic_energy(), len(plan.actions), "ok"
+            except Exception as e:  # a discretisation too coarse for the skeleton: recorded, not hidden
+                effort, n_actions, status = float("nan"), 0, f"{type(e).__name__}: {e}"
+            rows.append({"trial": trial.id, "slices_per_phase": slices, "effort": effort,
+                         "plan_time": time.perf_counter() - t0, "n_actions": n_actions, "status": status})
+            print(f"{trial.id:>4} {slices:3d} slices: effort {effort:.6f} J*s in {rows[-1]['plan_time']:.2f} s  {status}", flush=True)
         pd.DataFrame(rows).to_csv(args.out, index=False)
     print(f"# {machine()}", flush=True)
     df = pd.DataFrame(rows)
@@ -52,7 +56,7 @@ def main(argv=None) -> int:
     print("| trial | " + " | ".join(f"{s} slices" for s in args.slices) + " |")
     print("|---|" + "---|" * len(args.slices))
     for tid, row in wide.iterrows():
-        print(f"| {tid} | " + " | ".join(f"{v * 100:+.2f}%" for v in row) + " |")
+        print(f"| {tid} | " + " | ".join("fails" if v != v else f"{v * 100:+.2f}%" for v in row) + " |")
     print("| mean plan time (s) | " + " | ".join(f"{times[s]:.2f}" for s in args.slices) + " |")
     df.to_csv(args.out, index=False)
     return 0
