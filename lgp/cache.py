@@ -284,7 +284,7 @@ class Cache:
     def path(self, kind: str, key: str) -> Path:
         return self.root / f"{kind}-{key}.csv"
 
-    def load(self, kind: str, key: str) -> pd.DataFrame | None:
+    def get(self, kind: str, key: str) -> pd.DataFrame | None:
         """The cached table, or None when it must be computed (absent, disabled or damaged)."""
         path = self.path(kind, key)
         if not self.enabled or not path.exists():
@@ -300,13 +300,11 @@ class Cache:
         self.counts[kind, "hit"] += 1
         return df
 
-    def store(self, kind: str, key: str, df: pd.DataFrame) -> Path:
-        """Write `df` as the entry (kind, key), atomically, with its checksum."""
-        return write_bytes_atomic(entry_bytes(df), self.path(kind, key))
+    def put(self, kind: str, key: str, df: pd.DataFrame) -> pd.DataFrame:
+        """Write `df` as the entry (kind, key), atomically, with its checksum; return `df`."""
+        write_bytes_atomic(entry_bytes(df), self.path(kind, key))
+        return df
 
     def get_or_compute(self, kind: str, key: str, compute: Callable[[], pd.DataFrame]) -> pd.DataFrame:
-        df = self.load(kind, key)
-        if df is None:
-            df = compute()
-            self.store(kind, key, df)
-        return df
+        df = self.get(kind, key)
+        return df if df is not None else self.put(kind, key, compute())

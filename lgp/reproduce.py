@@ -24,6 +24,7 @@ import pandas as pd
 
 import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
+from lgp.executor import executor_for
 from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
@@ -53,45 +54,67 @@ def risk_key_inputs(engine: str | None) -> dict:
             "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
 
 
-def effort_tables(trials, samples: int, seed: int, jobs: int, cache: Cache) -> pd.DataFrame:
-    """Per (trial, sample) effort, one cached file per trial."""
-    from models.effort import physical_effort
+def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd.DataFrame:
+    """Per (trial, sample) effort, one cached file per trial.
+
+    The layouts of every uncached trial are one stream of work units on the run's
+    one executor (warm workers plan across trial boundaries); a trial's file is
+    written as soon as its last layout arrives, so an interruption loses at most
+    the trials still in flight.
+    """
+    from models.effort import effort_of_unit, effort_table, effort_units
 
     depends = effort_key_inputs()
-    out = []
-    for k, trial in enumerate(trials, 1):
-        key = input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, **depends)
-        t0 = time.perf_counter()
-        df = cache.load("effort", key)
-        hit = df is not None
-        if df is None:
-            df = physical_effort(trial, samples=samples, seed=seed, jobs=jobs)[1]
-            cache.store("effort", key, df)
-        _log(f"[effort {k:2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
-             f"  ({'cached' if hit else f'{time.perf_counter() - t0:.1f} s'})")
-        out.append(df)
-    return pd.concat(out, ignore_index=True)
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, samples=samples, seed=seed, **depends) for t in trials}
+    tables: dict[str, pd.DataFrame] = {}
+    for t in trials:
+        cached = cache.get("effort", keys[t.id])
+        if cached is not None:
+            tables[t.id] = cached
+    todo = [t for t in trials if t.id not in tables]
+    units = [u for t in todo for u in effort_units(t, samples, seed)]
+    owner = [u[0] for u in units]
+    pending = {t.id: len(effort_units(t, samples, seed)) for t in todo}
+    rows: dict[str, list[dict]] = {t.id: [] for t in todo}
+    started = {t.id: None for t in todo}
+    t0 = time.perf_counter()
+
+    def arrived(k, row):
+        trial = owner[k]
+        rows[trial.id].append(row)
+        pending[trial.id] -= 1
+        if pending[trial.id] == 0:
+            tables[trial.id] = cache.put("effort", keys[trial.id], effort_table(trial, samples, rows[trial.id]))
+            df = tables[trial.id]
+            _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
+                 f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
+
+    for t in trials:
+        if t.id in tables and t.id not in rows:
+            _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
+                 f" over {len(tables[t.id])} layouts  (cached)")
+    executor.map(effort_of_unit, units, arrived)
+    return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
-def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, jobs: int, cache: Cache, chunk: int = 6) -> pd.DataFrame:
+def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6) -> pd.DataFrame:
     """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
 
-    Uncached trials are simulated a few at a time in one process pool, so the
-    grid keeps both cores busy and an interruption loses at most one chunk.
+    Uncached trials are simulated a few at a time on the run's one executor, so
+    the grid keeps every worker busy and an interruption loses at most one chunk.
     """
     from models.risk import risk_table
 
     depends = risk_key_inputs(engine)
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
-    tables = {t.id: cache.load("risk", keys[t.id]) for t in trials}
+    tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
-        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, jobs=jobs)
+        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor)
         for t in group:
-            tables[t.id] = table[table["trial"] == t.id].reset_index(drop=True)
-            cache.store("risk", keys[t.id], tables[t.id])
+            tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     out = []
     for k, trial in enumerate(trials, 1):
@@ -241,9 +264,14 @@ def main(argv=None) -> int:
         human = load_human_data(args.human_data)  # validate before the long work
     _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}; cache {cache.root}")
 
-    effort_samples = effort_tables(trials, args.samples, args.seed, args.jobs, cache)
-    effort = summarise_effort(effort_samples, trials)
-    risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, args.jobs, cache, args.risk_chunk)
+    # One executor for the whole run: its workers start now, before this process
+    # imports Drake or MuJoCo, and stay warm across trials and stages.
+    with executor_for(args.jobs) as executor:
+        if hasattr(executor, "start"):
+            executor.start()
+        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
+        effort = summarise_effort(effort_samples, trials)
+        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk)
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]

@@ -52,7 +52,7 @@ def test_results_get_the_mode_the_umask_gives(tmp_path, umask):
     old = os.umask(umask)
     try:
         write_csv_atomic(_table(), tmp_path / "r.csv")
-        Cache(tmp_path / "c").store("effort", "k", _table())
+        Cache(tmp_path / "c").put("effort", "k", _table())
         (tmp_path / "plain.csv").write_text("x\n")  # what open() gives under this umask
     finally:
         os.umask(old)
@@ -113,11 +113,11 @@ def test_damaged_entry_is_reported_and_recomputed_never_used(tmp_path, capsys, d
 
 
 def test_disabled_cache_counts_misses_and_rewrites(tmp_path):
-    Cache(tmp_path).store("risk", "k", _table().assign(effort=0.0))
+    Cache(tmp_path).put("risk", "k", _table().assign(effort=0.0))
     cache = Cache(tmp_path, enabled=False)
     pd.testing.assert_frame_equal(cache.get_or_compute("risk", "k", _table), _table())
     assert (cache.count("miss", "risk"), cache.hits) == (1, 0)
-    assert Cache(tmp_path).load("risk", "k").equals(_table())
+    assert Cache(tmp_path).get("risk", "k").equals(_table())
 
 
 # ----------------------------------------------------------------------------- the key
@@ -170,23 +170,23 @@ def _copy_project(dst):
 
 def test_editing_a_module_the_computation_imports_changes_the_key(tmp_path):
     root = _copy_project(tmp_path)
-    before = modules_digest("models.effort", "stimuli", root=root)
-    assert before == modules_digest("models.effort", "stimuli")  # same bytes, same key
+    before = modules_digest("models.effort", root=root)
+    assert before == modules_digest("models.effort")  # same bytes, same key
 
-    # lgp/symbolic.py is reached only through lgp.planner; the import in a function
-    # of planner.py (lgp.komo.view) counts too.
-    for module in ("lgp/symbolic.py", "lgp/komo/view.py", "lgp/executor.py", "stimuli/__init__.py"):
+    # symbolic is reached through lgp.planner, komo.linear through the lgp.komo
+    # package, stimuli through an import inside physical_effort.
+    for module in ("lgp/symbolic.py", "lgp/komo/linear.py", "lgp/executor.py", "stimuli/__init__.py", "models/effort.py"):
         path = root / module
         text = path.read_text()
         path.write_text(text + "\n# edited\n")
-        assert modules_digest("models.effort", "stimuli", root=root) != before, module
+        assert modules_digest("models.effort", root=root) != before, module
         path.write_text(text)
-    assert modules_digest("models.effort", "stimuli", root=root) == before
+    assert modules_digest("models.effort", root=root) == before
 
     # files the effort computation never imports do not invalidate it
-    for module in ("lgp/reproduce.py", "analysis/models.py", "models/risk/core.py"):
+    for module in ("lgp/reproduce.py", "lgp/view.py", "analysis/models.py", "models/risk/core.py"):
         (root / module).write_text((root / module).read_text() + "\n# edited\n")
-    assert modules_digest("models.effort", "stimuli", root=root) == before
+    assert modules_digest("models.effort", root=root) == before
 
 
 def test_a_new_import_is_followed(tmp_path):
