@@ -123,12 +123,12 @@ def test_bad_input_names_the_trial():
 @pytest.mark.slow
 def test_work_share_proxy_tracks_komo_per_block_energy():
     # The care weight's proxy (share of sum L^2) against KOMO's per-block kinetic energy.
-    from models.effort import plan_of_sample
+    from models.effort import kinetic_energy_by_block, plan_of_sample
 
     for tid in ("1H", "6E", "7E"):
         trial = stimuli.load_trial(tid)
         plan = plan_of_sample(trial, 0, 0)
-        ke = plan.kinetic_energy_by_block()
+        ke = kinetic_energy_by_block(plan)
         total = sum(ke.values())
         komo = np.cumsum([ke[a] for a in plan.symbolic.moved]) / total
         proxy = [st.work_share for st in plan_stages(trial, 0, 0)]
