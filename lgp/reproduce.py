@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -25,6 +26,7 @@ import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import executor_for
 from lgp.cache import Cache, code_version, input_key, write_csv_atomic
+from lgp.executor import sigterm_as_interrupt
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
 
@@ -231,7 +233,18 @@ def main(argv=None) -> int:
     args.n_sims = args.n_sims or q.get("n_sims", N_SIMS)
     args.sigmas = tuple(args.sigmas or q.get("sigmas", SIGMA_GRID))
     args.n_boot = args.n_boot or q.get("n_boot", N_BOOT)
+    with sigterm_as_interrupt():  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
+        try:
+            return run(args)
+        except KeyboardInterrupt as e:
+            how = "terminated (SIGTERM)" if getattr(e, "signal", None) == signal.SIGTERM else "interrupted"
+            resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
+            print(f"{p.prog}: {how}; {resume}", file=sys.stderr)
+            return 128 + int(getattr(e, "signal", signal.SIGINT))
 
+
+def run(args) -> int:
+    """The pipeline for parsed command-line `args` (see `main`)."""
     t0 = time.perf_counter()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
