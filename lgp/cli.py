@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import traceback
 from pathlib import Path
@@ -78,12 +79,18 @@ def sigma(text: str) -> float:
 
 
 def trial_id(text: str) -> str:
-    """One of the paper's 24 trial ids, case-insensitive; returned in its canonical spelling."""
+    """A trial id, case-insensitive, returned in its canonical spelling: the paper's
+    1E ... 12H, or another <pair><E|H> (a trial file the loader then looks for)."""
     tid = canonical_trial_id(text)
-    if tid not in TRIAL_IDS:
-        raise argparse.ArgumentTypeError(f"unknown trial id {text!r}; expected one of 1E, 1H, ..., 12H "
+    if tid not in TRIAL_IDS and not re.fullmatch(r"\d+[EH]", tid):
+        raise argparse.ArgumentTypeError(f"unknown trial id {text!r}; expected <pair><E|H> such as 1E, 1H, ..., 12H "
                                          "(case-insensitive)")
     return tid
+
+
+def trial_id_or_all(text: str) -> str:
+    """A trial id (see `trial_id`) or the word ``all``."""
+    return "all" if str(text).strip().lower() == "all" else trial_id(text)
 
 
 def _nearest_existing(path: Path) -> Path:

@@ -13,7 +13,9 @@ half way resumes with nothing lost.
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -24,18 +26,37 @@ import pandas as pd
 import stimuli
 from lgp import cli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import default_jobs, executor_for
-from lgp.cache import Cache, code_version, input_key, write_csv_atomic
+from lgp.executor import default_jobs, executor_for, sigterm_as_interrupt
+from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 
 PROG = "python -m lgp.reproduce"
-INTERRUPTED = "interrupted; finished trials are cached, rerun to resume"
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
 
 
 def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
+
+
+def effort_key_inputs() -> dict:
+    """What an effort table depends on besides the trial and the parameters: the
+    source of every project module physical_effort can run (stimuli draws the
+    layouts of A), the arm's model files, and the numerical libraries (SNOPT is Drake's)."""
+    return {"code": modules_digest("models.effort", "stimuli"),
+            "data": files_digest("models/*.sdf", "models/*.urdf", "models/*.yaml"),
+            "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
+
+
+def risk_key_inputs(engine: str | None) -> dict:
+    """What a risk table depends on besides the trial and the parameters: the source
+    of every project module risk_table can run (the engine module is loaded by name,
+    so it is named here), the engine's settings, and the libraries."""
+    from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
+
+    name = DEFAULT_ENGINE if engine is None else engine
+    return {"code": modules_digest("models.risk", ENGINES[name].split(":")[0], "stimuli"),
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd.DataFrame:
@@ -48,11 +69,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
     """
     from models.effort import effort_of_unit, effort_table, effort_units
 
-    # The code effort depends on (not the CLI or this cache), so editing them re-plans.
-    version = code_version("lgp/scene.py", "lgp/assignment.py", "lgp/symbolic.py", "lgp/planner.py", "lgp/arm.py",
-                           "lgp/komo/*.py", "models/effort.py", "models/*.sdf", "models/*.urdf", "models/*.yaml",
-                           "stimuli/__init__.py")  # draws the layouts of A
-    keys = {t.id: input_key(trial=t.id, digest=t.digest, samples=samples, seed=seed, code=version) for t in trials}
+    depends = effort_key_inputs()
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, samples=samples, seed=seed, **depends) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
         cached = cache.get("effort", keys[t.id])
@@ -92,22 +110,20 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     """
     from models.risk import risk_table
 
-    version = code_version("lgp/scene.py", "models/risk/*.py", "stimuli/__init__.py")
-    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, code=version) for t in trials}
-    todo = [t for t in trials if not (cache.enabled and cache.path("risk", keys[t.id]).exists())]
-    fresh: dict[str, pd.DataFrame] = {}
+    depends = risk_key_inputs(engine)
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
+    tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
+    todo = [t for t in trials if tables[t.id] is None]
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
         table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor)
         for t in group:
-            fresh[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
+            tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     out = []
     for k, trial in enumerate(trials, 1):
-        df = fresh.get(trial.id)
-        if df is None:
-            df = cache.get_or_compute("risk", keys[trial.id], lambda: risk_table([trial], sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor))
+        df = tables[trial.id]
         curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
         _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)
@@ -173,13 +189,13 @@ def _orders(pairs: pd.DataFrame, source: str) -> str:
     return f"E < H in {n} of {len(pairs)} pairs" + (f" ({'; '.join(notes)})" if notes else "")
 
 
-def engine_description(engine: str | None) -> str:
-    """The risk engine by name with its settings, e.g. 'mujoco (mujoco 3.3.0; timestep 0.001, ...)'."""
+def engine_description(engine: str | None, settings: dict | None = None) -> str:
+    """The risk engine by name with its settings, e.g. 'mujoco 3.3.0 (timestep 0.002, ...)'."""
     from models.risk.core import DEFAULT_ENGINE
     from models.risk.engine import get_engine
 
     name = engine or DEFAULT_ENGINE
-    settings = dict(get_engine(name).settings())
+    settings = dict(get_engine(name).settings() if settings is None else settings)
     settings.pop("engine", None)
     version = settings.pop("version", None)
     text = ", ".join(f"{k} {v}" for k, v in settings.items())
@@ -197,10 +213,12 @@ def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
 
 
 def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None,
-                 elapsed: float, compute: tuple[float, int] = (float("nan"), 0), engine: str | None = None) -> Path:
-    """report.md: settings, engine, both times, the tables, and the pair orderings under the one tie rule."""
+                 elapsed: float, software: dict | None = None, compute: tuple[float, int] = (float("nan"), 0)) -> Path:
+    """report.md: settings, the engine with its settings, both times, the tables, and
+    the pair orderings under the one tie rule (analysis.pairs.TIE_REL)."""
     from analysis.pairs import TIE_REL
 
+    engine = engine_description(args.engine, (software or {}).get("engine"))
     wide = risk.pivot_table(index="trial", columns="sigma", values="risk").reindex(effort["trial"])
     wide.columns = [f"{s:g}" for s in wide.columns]
     compute_s, unknown = compute
@@ -254,11 +272,15 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
                 lines += [f"## {key.replace('_', ' ')}", "", _markdown(analysis[key]), ""]
         if "orderings" in analysis:
             lines += ["## Pair orderings by source (orderings.csv)", "", _markdown(analysis["orderings"]), ""]
+    if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers
+        lines += ["## Software", "", "Libraries: " + ", ".join(f"{k} {v}" for k, v in software["libraries"].items()) + ".",
+                  "", f"Risk engine settings: `{json.dumps(software['engine'], sort_keys=True, default=str)}`.", ""]
     path = out / "report.md"
     tmp = path.with_suffix(".md.tmp")
     tmp.write_text("\n".join(lines))
     os.replace(tmp, path)
     return path
+
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -267,7 +289,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="results", type=cli.output_dir,
                    help="output directory (default: results/); an earlier run's outputs in it are removed, its cache kept")
-    p.add_argument("--trials", nargs="+", type=cli.trial_id, help="trial ids, case-insensitive (default: all 24)")
+    p.add_argument("--trials", nargs="+", type=cli.trial_id_or_all,
+                   help="trial ids (case-insensitive), or 'all' for every trial file (default: the paper's 24)")
     p.add_argument("--samples", type=cli.positive_int, help="M, random layouts of A per trial (default 30; --quick 3)")
     p.add_argument("--n-sims", type=cli.positive_int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
     p.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
@@ -275,7 +298,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--jobs", type=cli.positive_int, default=default_jobs(), help="processes, >= 1 (default: all cores, %(default)s here)")
     p.add_argument("--seed", type=cli.seed, default=0)
     p.add_argument("--n-boot", type=cli.positive_int, help="bootstrap resamples (default 1000; --quick 200)")
-    p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs all 24 trials")
+    p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
     p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--risk-chunk", type=cli.positive_int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
@@ -287,21 +310,52 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.n_boot = args.n_boot if args.n_boot is not None else q.get("n_boot", N_BOOT)
     if args.trials:
         args.trials = list(dict.fromkeys(args.trials))  # 7h and 7H are one trial
-    if args.human_data and args.trials and not set(args.trials) >= set(TRIAL_IDS):
-        p.error("--human-data needs all 24 trials (the fits compare the 12 pairs); drop --trials")
+        if "all" in args.trials and len(args.trials) > 1:
+            p.error("--trials all runs every trial file; give it alone")
+    if args.human_data and args.trials and args.trials != ["all"] and not set(args.trials) >= set(TRIAL_IDS):
+        p.error("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     return args
 
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    with sigterm_as_interrupt():  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
+        try:
+            return run(args, argv)
+        except KeyboardInterrupt as e:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not interrupt the goodbye
+            how = "terminated (SIGTERM)" if getattr(e, "signal", None) == signal.SIGTERM else "interrupted"
+            resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
+            print(f"{PROG}: {how}; {resume}", file=sys.stderr)
+            return 128 + int(getattr(e, "signal", signal.SIGINT))
+
+
+def select_trials(ids: list[str] | None, directory=None) -> list:
+    """The trials of a run: the paper's 24 by default (other trial files in the
+    directory are named, not run), ``all`` for every trial file, or the ids given."""
+    if not ids:
+        extra = stimuli.extra_ids(directory)
+        if extra:
+            _log(f"the trial folder also holds {', '.join(extra)} (not among the paper's 24): "
+                 f"run them with --trials {' '.join(extra)} or --trials all")
+        return stimuli.load_paper(directory)
+    if [t.lower() for t in ids] == ["all"]:
+        return stimuli.load_all(directory)
+    return [stimuli.load_trial(t, directory) for t in ids]
+
+
+def run(args, argv=None) -> int:
+    """The pipeline for parsed command-line `args` (see `main`)."""
     t0 = time.perf_counter()
     # Validate every input before anything is written or computed.
-    trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
+    trials = select_trials(args.trials)
     human = None
     if args.human_data:
         from analysis import load_human_data
 
         human = load_human_data(args.human_data)
+        if not {t.id for t in trials} >= set(TRIAL_IDS):
+            raise ValueError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs)")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     removed = clear_previous(out)  # this folder describes this run only (lgp/manifest.py)
@@ -326,31 +380,40 @@ def main(argv=None) -> int:
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
-    complete = {t.id for t in trials} >= set(TRIAL_IDS)
     pairs, analysis = None, None
-    if complete:  # pair orderings, figures and fits are defined on the 24 trials
+    if {t.id for t in trials} >= set(TRIAL_IDS):
+        # Pair orderings, figures and fits are the paper's: on its 24 trials only;
+        # other trials of the run are in the effort and risk tables.
         from analysis import run_analysis
 
-        pairs = pair_orderings(effort, risk, sigma, trials)
+        paper = [t for t in trials if t.id in TRIAL_IDS]
+        extra = [t.id for t in trials if t.id not in TRIAL_IDS]
+        if extra:
+            _log(f"pair table, figures and fits use the paper's 24 trials; {', '.join(extra)} are in the effort and risk tables only")
+        e_samples, e_mean, r = (df[df["trial"].isin(TRIAL_IDS)] for df in (effort_samples, effort, risk))
+        pairs = pair_orderings(e_mean, r, sigma, paper)
         written.append(write_csv_atomic(pairs, out / "pairs.csv"))
-        analysis = run_analysis(human, effort_samples, risk, out / ("analysis" if human is not None else "figures"),
+        analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma)
         written += [Path(path) for path in analysis["files"]["path"]]
     else:
-        _log("a subset of trials: no pair table, figures or fits (they need all 24)")
-    engine = engine_description(args.engine)
+        _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
+    software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
     compute = cache.compute_time()
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None,
-                          time.perf_counter() - t0, compute, engine)
+                          time.perf_counter() - t0, software, compute)
     written.append(report)
+    _log(f"cache: {cache.summary()}")
     parameters = {"trials": [t.id for t in trials], "samples": args.samples, "n_sims": args.n_sims,
-                  "sigmas": list(args.sigmas), "sigma_of_pairs": sigma, "engine": args.engine, "seed": args.seed,
-                  "n_boot": args.n_boot, "quick": args.quick, "no_cache": args.no_cache}
+                  "sigmas": list(args.sigmas), "sigma_of_pairs": sigma if pairs is not None else None,
+                  "engine": args.engine, "seed": args.seed, "n_boot": args.n_boot, "quick": args.quick,
+                  "no_cache": args.no_cache}
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
     manifest = write_manifest(out, expand(written), command=[PROG, *(sys.argv[1:] if argv is None else argv)],
                               parameters=parameters, inputs=inputs, input_hash=input_hash(**parameters, **inputs),
-                              engine=engine, run_time_s=round(time.perf_counter() - t0, 1),
+                              engine=engine_description(args.engine, software["engine"]), software=software,
+                              run_time_s=round(time.perf_counter() - t0, 1),
                               compute_time_s=round(compute[0], 1), compute_time_unknown_results=compute[1])
     print(f"Outputs of this run in {out.resolve()} (listed in {manifest.name}):")
     for path in expand(written) + [manifest]:
@@ -359,4 +422,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(cli.run_cli(main, prog=PROG, interrupted=INTERRUPTED))
+    raise SystemExit(cli.run_cli(main, prog=PROG))

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-
 from lgp.paper import DISPLAY_RGB as COLOURS
 
 
@@ -68,6 +67,8 @@ def write_png(plan, path) -> str:
     """Write a figure of block paths (top view x-y, side view x-z) and speeds to `path`."""
     import matplotlib
 
+    from models.effort import kinetic_energy
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -93,7 +94,7 @@ def write_png(plan, path) -> str:
     side.set(xlabel="x (m)", ylabel="z (m)", title="side view")
     side.set_aspect("equal")
     speed.set(xlabel="time (s)", ylabel="block speed (m/s)",
-              title=f"speeds; effort {plan.kinetic_energy():.3f} J s, {len(plan.actions)} actions")
+              title=f"speeds; effort {kinetic_energy(plan):.3f} J s, {len(plan.actions)} actions")
     if len(moved) <= 12:
         speed.legend(fontsize=7, ncol=2)
     label = f"{plan.initial.label} -> {plan.target.label}"

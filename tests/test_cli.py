@@ -57,12 +57,14 @@ def files_in(folder: Path) -> list[Path]:
 # and {tmp} the test's temporary folder.
 BAD = [
     ("lgp.show", ["99X"], 2, "unknown trial id '99X'"),
+    ("lgp.show", ["13E"], 1, "no trial '13E'"),
     ("lgp.show", ["7H", "--sample", "-1"], 2, "--sample"),
     ("lgp.show", ["7H", "--seed", "x"], 2, "--seed"),
     ("lgp.show", ["7H", "--png", "/nonexistent/dir/x.png"], 2, "does not exist"),
     ("lgp.show", ["7H", "--html", "/nonexistent/dir/x.html"], 2, "does not exist"),
     ("lgp.reproduce", ["--out", "{out}", "--trials", "99X"], 2, "unknown trial id"),
     ("lgp.reproduce", ["--out", "{out}", "--trials"], 2, "--trials"),
+    ("lgp.reproduce", ["--out", "{out}", "--trials", "13h"], 1, "no trial '13H'"),
     ("lgp.reproduce", ["--out", "{out}", "--samples", "0"], 2, "--samples"),
     ("lgp.reproduce", ["--out", "{out}", "--samples", "-1"], 2, "--samples"),
     ("lgp.reproduce", ["--out", "{out}", "--samples", "1.5"], 2, "--samples"),
@@ -76,7 +78,7 @@ BAD = [
     ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/missing.csv"], 2, "does not exist"),
     ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/wrong_columns.csv"], 1, "missing column(s) response"),
     ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/non_numeric.csv"], 1, "non-numeric response 'lots'"),
-    ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/good.csv", "--trials", "1E"], 2, "all 24 trials"),
+    ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/good.csv", "--trials", "1E"], 2, "24 trials"),
     ("lgp.reproduce", ["--out", "{tmp}/a_file"], 2, "not a directory"),
     ("models.risk", ["--table", "{tmp}/t.csv", "--n-sims", "0"], 2, "--n-sims"),
     ("models.risk", ["--table", "{tmp}/t.csv", "--n", "0"], 2, "--n-sims"),
@@ -131,7 +133,9 @@ def test_trial_ids_are_case_insensitive_on_the_command_line_and_in_the_loaders(t
                  columns=["dataset", "participant", "trial", "response"]).to_csv(path, index=False)
     assert list(load_human_data(path)["trial"]) == list(TRIAL_IDS)
     with pytest.raises(argparse.ArgumentTypeError):
-        cli.trial_id("13E")
+        cli.trial_id("7X")
+    with pytest.raises(stimuli.StimulusError, match="no trial '13E'"):
+        stimuli.load_trial("13e")  # a well-formed id without a file: the loader's one-line error
 
 
 def test_counts_and_sigmas_are_checked_exactly():
@@ -216,7 +220,7 @@ def test_ctrl_c_during_a_run_prints_one_line_and_exits_130(tmp_path, after):
     """SIGINT while Drake loads (0.3 s) or effort is being planned: one line, exit 130, no traceback."""
     proc = subprocess.Popen([sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "3H", "--samples", "30", "--jobs", "1",
                              "--no-cache", "--out", str(tmp_path / "r")], stderr=subprocess.PIPE, text=True, env=_env(),
-                            cwd=tmp_path)
+                            cwd=tmp_path, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as in a terminal
     first = proc.stderr.readline()  # "lgp.reproduce: 2 trials ..." once validation is over
     assert first.startswith("lgp.reproduce:"), first
     time.sleep(after)
@@ -224,4 +228,5 @@ def test_ctrl_c_during_a_run_prints_one_line_and_exits_130(tmp_path, after):
     rest = proc.stderr.read()
     assert proc.wait(timeout=60) == 130, rest
     assert "Traceback" not in rest
-    assert rest.strip().splitlines()[-1] == "python -m lgp.reproduce: interrupted; finished trials are cached, rerun to resume"
+    last = rest.strip().splitlines()[-1]
+    assert last == "python -m lgp.reproduce: interrupted; nothing cached (--no-cache)"
