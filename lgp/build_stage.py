@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lgp.cache import Cache, code_version, input_key, write_csv_atomic
+from lgp.cache import Cache, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.paper import PAIRS
 
 #: The noise levels the build-risk report uses (issue 11: 0.065 d and 0.10 d).
@@ -27,18 +27,28 @@ def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
+def build_key_inputs(engine: str | None) -> dict:
+    """What a stage table depends on besides the trial and the parameters: the source
+    of every project module build_risk can run (the engine module is loaded by name),
+    the engine's settings and the libraries."""
+    from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
+
+    name = DEFAULT_ENGINE if engine is None else engine
+    return {"code": modules_digest("models.risk.build", ENGINES[name].split(":")[0], "stimuli"),
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
+
+
 def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, engine: str | None, executor,
                       cache: Cache) -> pd.DataFrame:
     """The stage table of every trial (models.risk.build_risk), one cached file per
     trial keyed by the trial file, the parameters and the code it depends on."""
     from models.risk.build import build_risk
 
-    version = code_version("lgp/scene.py", "lgp/assignment.py", "lgp/symbolic.py", "lgp/planner.py",
-                           "models/risk/*.py", "models/effort.py", "stimuli/__init__.py")
+    depends = build_key_inputs(engine)
     out = []
     for k, trial in enumerate(trials, 1):
         key = input_key(trial=trial.id, digest=trial.digest, sigmas=[float(s) for s in sigmas], n_sims=n_sims,
-                        samples=samples, seed=seed, engine=engine, code=version)
+                        samples=samples, seed=seed, **depends)
         t0 = time.perf_counter()
         df = cache.get("buildrisk", key)
         how = "cached"
