@@ -115,6 +115,52 @@ def test_no_cache_simulates_each_trial_once(tmp_path, monkeypatch):
     assert sorted(sum(calls, [])) == ["10E", "6H", "9E"]
 
 
+def _fake_physics(monkeypatch):
+    """Effort and risk tables without planning or simulating: this checks which
+    trials reach which stage, not model numbers (those have their own tests)."""
+    def effort(trials, samples, seed, executor, cache):
+        return pd.DataFrame([{"trial": t.id, "sample": s, "effort": 1.0 + t.pair / 10 + (t.level == "H") + s / 100}
+                             for t in trials for s in range(samples)])
+
+    def risk(trials, sigmas, n_sims, seed, engine, executor, cache, chunk=6):
+        return pd.DataFrame([{"trial": t.id, "sigma": s, "risk": min(1.0, s * (2 if t.level == "H" else 1)),
+                              "falls": 0, "n": n_sims, "engine": "none"} for t in trials for s in sigmas])
+
+    monkeypatch.setattr(reproduce, "effort_tables", effort)
+    monkeypatch.setattr(reproduce, "risk_tables", risk)
+
+
+def test_an_extra_trial_file_does_not_break_the_paper_run(tmp_path, monkeypatch, capsys):
+    """A valid 13E.yaml beside the paper's 24 (as stimuli/README.md invites): the
+    default run is the paper's 24 and names 13E; `--trials all` runs 13E too, in
+    the effort and risk tables, while pairs and figures stay on the paper's 24."""
+    import yaml
+
+    import stimuli
+
+    folder = tmp_path / "trials"
+    folder.mkdir()
+    for path in stimuli.TRIAL_DIR.glob("*.yaml"):
+        (folder / path.name).write_text(path.read_text())
+    data = yaml.safe_load((folder / "7H.yaml").read_text())
+    data.update(id="13E", pair=13, level="E")
+    (folder / "13E.yaml").write_text(yaml.safe_dump(data))
+    monkeypatch.setattr(stimuli, "TRIAL_DIR", folder)
+    _fake_physics(monkeypatch)
+    args = ["--samples", "2", "--n-sims", "4", "--sigmas", "0.05", "0.065", "--jobs", "1", "--n-boot", "10"]
+
+    assert reproduce.main([*args, "--out", str(tmp_path / "paper")]) == 0
+    assert "also holds 13E" in capsys.readouterr().err
+    effort = pd.read_csv(tmp_path / "paper" / "effort.csv")
+    assert list(effort["trial"]) == [f"{p}{l}" for p in range(1, 13) for l in "EH"]
+
+    assert reproduce.main([*args, "--trials", "all", "--out", str(tmp_path / "all")]) == 0
+    assert list(pd.read_csv(tmp_path / "all" / "effort.csv")["trial"])[-1] == "13E"
+    assert "13E" in set(pd.read_csv(tmp_path / "all" / "risk.csv")["trial"])
+    assert sorted(pd.read_csv(tmp_path / "all" / "pairs.csv")["pair"]) == list(range(1, 13))
+    assert "13E are in the effort and risk tables only" in capsys.readouterr().err
+
+
 # ----------------------------------------------------------------------------- damaged cache entries (issue 16, item 6)
 
 
