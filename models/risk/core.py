@@ -16,7 +16,6 @@ drop counts under "3d" when it exceeds the threshold, never under "horizontal".
 """
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 from typing import Callable, Iterable, Sequence
 
@@ -24,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 from lgp.executor import borrowed, default_jobs
+from lgp.geometry import digest
 from lgp.paper import N_SIMS, SIGMA_GRID
 from lgp.scene import Scene
 from models.risk.engine import (
@@ -111,12 +111,9 @@ _STABLE: dict[tuple, Rollout] = {}
 
 
 def _scene_key(scene: Scene) -> str:
-    h = hashlib.sha1(scene.label.encode())
-    for b in scene.blocks:
-        h.update(b.name.encode() + b.p_WB.tobytes() + b.size.tobytes() + np.float64(b.yaw).tobytes())
-    for f in scene.fixed:
-        h.update(f.p_WO.tobytes() + f.size.tobytes())
-    return h.hexdigest()
+    """What an unperturbed simulation depends on: the label and every block and box pose and size."""
+    return digest(scene.label, *(part for b in scene.blocks for part in (b.name, b.p_WB, b.size, np.float64(b.yaw))),
+                  *(part for f in scene.fixed for part in (f.p_WO, f.size)))
 
 
 def check_stable(scene: Scene, engine: str | None = None, *, profile: str | None = None,
@@ -167,8 +164,9 @@ class _Task:
 
 
 def _task_worker(args):
-    scene, sigma, z, start, engine, fall_rule, threshold = args
-    return _simulate_runs(scene, sigma, z, range(start, start + len(z)), engine, fall_rule, threshold)
+    """args: (scene, sigma, z, start, engine[, fall_rule, fall_threshold])."""
+    scene, sigma, z, start, engine, *rule = args
+    return _simulate_runs(scene, sigma, z, range(start, start + len(z)), engine, *rule)
 
 
 def run_grid(
