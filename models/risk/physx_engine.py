@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from lgp.geometry import quaternion_from_yaw
 from lgp.paper import BLOCK_SIZE
 from lgp.scene import Scene
 from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds
@@ -91,12 +92,6 @@ def _import_sapien():
     return sapien
 
 
-def quaternion_wxyz(yaw: np.ndarray) -> np.ndarray:
-    """Unit quaternions (w, x, y, z) of rotations by `yaw` about z, shape (n, 4)."""
-    yaw = np.asarray(yaw, dtype=float)
-    return np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=-1)
-
-
 class _Layout:
     """One PhysX scene with a table, the fixed boxes and the blocks of a scene at
     their poses, at rest."""
@@ -131,7 +126,7 @@ class _Layout:
         for blk in scene.blocks:
             b = self.scene.create_actor_builder()
             b.add_box_collision(half_size=blk.size * k / 2, material=material, density=s.density)
-            b.set_initial_pose(sapien.Pose(blk.p_WB * k, quaternion_wxyz(blk.yaw)))
+            b.set_initial_pose(sapien.Pose(blk.p_WB * k, quaternion_from_yaw(np.array([blk.yaw]))[0]))
             entity = b.build(name=blk.name)
             self.bodies.append(entity.find_component_by_type(px.PhysxRigidDynamicComponent))
         self.scale = k
