@@ -34,7 +34,7 @@ def build_key_inputs(engine: str | None) -> dict:
     from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
 
     name = DEFAULT_ENGINE if engine is None else engine
-    return {"code": modules_digest("models.risk.build", ENGINES[name].split(":")[0], "stimuli"),
+    return {"code": modules_digest("models.risk.build", ENGINES[name].target.split(":")[0], "stimuli"),
             "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
 
 
