@@ -139,17 +139,17 @@ class Plan:
         lines.append(f"physical effort: {self.kinetic_energy():.4f} J s over {len(self.actions)} actions")
         return "\n".join(lines)
 
-    def write_html(self, path) -> str:
-        """Self-contained 3-D replay (Meshcat recording, works offline); returns the path."""
+    def write_html(self, path, title: str = "") -> str:
+        """Self-contained 3-D replay (Meshcat recording, works offline) captioned `title`; returns the path."""
         from lgp.komo.view import write_html
 
-        return write_html(self, path)
+        return write_html(self, path, title)
 
-    def write_png(self, path) -> str:
+    def write_png(self, path, title: str = "") -> str:
         """Figure of block paths (top and side views) and speed profiles; returns the path."""
         from lgp.komo.view import write_png
 
-        return write_png(self, path)
+        return write_png(self, path, title)
 
 
 # ----------------------------------------------------------------------------- planning

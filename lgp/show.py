@@ -37,10 +37,11 @@ def main(argv=None) -> int:
         print(f"KOMO {komo.formulation} / {komo.solver}: {komo.status}, cost {komo.cost:.4f}, {komo.n_variables} variables, "
               f"{komo.solve_time:.3f} s solving, planned in {result.planning_time:.3f} s")
     print(f"effort {result.kinetic_energy():.12g} J*s")
+    title = f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})"
     if args.html:
-        print("replay:", result.write_html(args.html))
+        print("replay:", result.write_html(args.html, title))
     if args.png:
-        print("figure:", result.write_png(args.png))
+        print("figure:", result.write_png(args.png, title))
     return 0
 
 
