@@ -36,7 +36,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from lgp.arm import Arm, X_WG_from_above
 from lgp.assignment import assign_blocks
-from lgp.komo import Komo, KomoResult, kinetic_energy
+from lgp.komo import Komo, KomoResult
 from lgp.scene import Scene
 from lgp.symbolic import Grasp, SymbolicPlan, symbolic_plan
 
@@ -139,17 +139,6 @@ class Plan:
         lines.append(f"physical effort: {self.kinetic_energy():.4f} J s over {len(self.actions)} actions")
         return "\n".join(lines)
 
-    def write_html(self, path, title: str = "") -> str:
-        """Self-contained 3-D replay (Meshcat recording, works offline) captioned `title`; returns the path."""
-        from lgp.komo.view import write_html
-
-        return write_html(self, path, title)
-
-    def write_png(self, path, title: str = "") -> str:
-        """Figure of block paths (top and side views) and speed profiles; returns the path."""
-        from lgp.komo.view import write_png
-
-        return write_png(self, path, title)
 
 
 # ----------------------------------------------------------------------------- planning
@@ -420,6 +409,11 @@ def _declare(symbolic, arm, waypoints, turns, phases, slices_per_phase) -> Komo:
     komo.add_objective([float(phases)], "qItself", type="eq", target=arm.q_home)
     komo.add_rest(float(phases), after=False)
     return komo
+
+
+def kinetic_energy(p, tau, mass):
+    v = np.diff(np.asarray(p, float), axis=0) / tau
+    return float(0.5 * mass * np.sum(v * v) * tau)
 
 
 def _triples(waypoints):

@@ -7,7 +7,8 @@ import pytest
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
-from lgp.komo import Komo, KomoError, kinetic_energy
+from lgp.komo import Komo, KomoError
+from lgp.planner import kinetic_energy
 from lgp.planner import APPROACH, default_arm, plan
 from lgp.scene import BLOCK_SIZE, Block, Scene
 from lgp.symbolic import Grasp, Place

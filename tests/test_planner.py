@@ -103,15 +103,17 @@ def test_ipopt_reaches_the_snopt_optimum():
 
 
 def test_replay_html_is_self_contained_and_figure_is_written(tmp_path):
+    from lgp.view import write_html, write_png
+
     trial = stimuli.load_trial("1E")
     p = plan(trial.sample_initial(np.random.default_rng(0)), trial.target)
     html = (tmp_path / "replay.html")
-    p.write_html(html)
+    write_html(p, html)
     text = html.read_text()
     assert "<script src=" not in text.replace(" ", "")  # the viewer is inlined: opens offline
     assert "animation" in text.lower() and len(text) > 100_000
     png = tmp_path / "plan.png"
-    p.write_png(png)
+    write_png(p, png)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
