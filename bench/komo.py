@@ -27,6 +27,7 @@ sys.path.insert(0, str(ROOT))
 
 import lgp.planner as planner  # noqa: E402
 from lgp.paper import BUILD_SITE  # noqa: E402
+from models.effort import kinetic_energy  # noqa: E402
 from lgp.scene import BLOCK_SIZE, Block, Scene  # noqa: E402
 
 SIZES = (1, 5, 10, 15)
@@ -84,17 +85,17 @@ def main(argv=None) -> int:
         A, B = tower_task(n)
         t_red, red = run(A, B, repeats=REPEATS)
         row = {"n": n, "actions": len(red.actions), "reduced_snopt_s": t_red, "reduced_vars": red.komo.n_variables,
-               "effort": red.kinetic_energy(), "cost": red.komo.cost}
+               "effort": kinetic_energy(red), "cost": red.komo.cost}
         t_ip, ip = run(A, B, solver="ipopt")
         row.update(reduced_ipopt_s=t_ip, ipopt_dcost=ip.komo.cost / red.komo.cost - 1)
         if n <= args.full_max:
             t_full, full = run(A, B, formulation="full")
             row.update(full_snopt_s=t_full, full_vars=full.komo.n_variables, full_dcost=full.komo.cost / red.komo.cost - 1,
-                       full_deffort=full.kinetic_energy() / red.kinetic_energy() - 1)
+                       full_deffort=kinetic_energy(full) / kinetic_energy(red) - 1)
         if n == 10:
-            fine = [(S, run(A, B, slices_per_phase=S)[1].kinetic_energy()) for S in (40, 80)]
+            fine = [(S, kinetic_energy(run(A, B, slices_per_phase=S)[1])) for S in (40, 80)]
             notes.append("10-block tower, effort (J s) against slices per phase: "
-                         + ", ".join(f"{S}: {e:.4f}" for S, e in [(20, red.kinetic_energy()), *fine]))
+                         + ", ".join(f"{S}: {e:.4f}" for S, e in [(20, kinetic_energy(red)), *fine]))
         rows.append(row)
         print(row, flush=True)
     t_unlifted, c_unlifted, s_unlifted = unlifted_full(A1, B1, {"Hessian full memory": 1})

@@ -546,9 +546,12 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         settings = get_engine(engine).settings()
     except Exception as e:  # an engine that cannot load here still ran elsewhere: say so
         settings = {"error": str(e)}
-    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv is None and Path(sys.argv[0]).name == "reproduce.py":
+        argv = sys.argv[1:]
+    command = ("python -m lgp.reproduce " + shlex.join(str(a) for a in argv) if argv is not None
+               else f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below")
     run = {
-        "command": "python -m lgp.reproduce " + shlex.join(str(a) for a in argv),
+        "command": command,
         "parameters": {k: (", ".join(f"{x:g}" for x in v) if isinstance(v, tuple) else ("(default)" if v is None else str(v)))
                        for k, v in vars(args).items()},
         "engine": engine,

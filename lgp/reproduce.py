@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -25,6 +26,7 @@ import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import executor_for
 from lgp.cache import Cache, code_version, input_key, write_csv_atomic
+from lgp.executor import sigterm_as_interrupt
 from lgp.page import Stopwatch, write_index, write_replays
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
@@ -233,7 +235,18 @@ def main(argv=None) -> int:
     args.n_sims = args.n_sims or q.get("n_sims", N_SIMS)
     args.sigmas = tuple(args.sigmas or q.get("sigmas", SIGMA_GRID))
     args.n_boot = args.n_boot or q.get("n_boot", N_BOOT)
+    with sigterm_as_interrupt():  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
+        try:
+            return run(args)
+        except KeyboardInterrupt as e:
+            how = "terminated (SIGTERM)" if getattr(e, "signal", None) == signal.SIGTERM else "interrupted"
+            resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
+            print(f"{p.prog}: {how}; {resume}", file=sys.stderr)
+            return 128 + int(getattr(e, "signal", signal.SIGINT))
 
+
+def run(args) -> int:
+    """The pipeline for parsed command-line `args` (see `main`)."""
     t0 = time.perf_counter()
     clock = Stopwatch()  # wall time per stage, for the results page
     out = Path(args.out)
@@ -276,7 +289,7 @@ def main(argv=None) -> int:
     clock.lap("analysis")
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0)
     written.append(report)
-    written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays, argv))
+    written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
     print(f"Outputs in {out.resolve()}:")
     for path in written:
         print(f"  {path}")

@@ -29,6 +29,16 @@ MIN_SUPPORT_AREA = 1e-6
 #: Name of the table in support graphs.
 TABLE = "table"
 
+#: The workspace of a table-top task, which every solid (block or fixed box) of a
+#: scene must lie in: centre within |x|, |y| <= WORKSPACE_XY and WORKSPACE_Z[0] <=
+#: z <= WORKSPACE_Z[1] (m), every edge longer than SOLID_SIZE[0] and at most
+#: SOLID_SIZE[1] (m), yaw within one turn (|yaw| <= 2 pi). Not the paper's numbers:
+#: bounds well beyond the arm's reach and the 1-inch blocks, there to refuse absurd
+#: input (a size of 1e300 hangs a physics engine) before anything plans or simulates.
+WORKSPACE_XY = 2.0
+WORKSPACE_Z: tuple[float, float] = (0.0, 2.0)
+SOLID_SIZE: tuple[float, float] = (1e-3, 0.5)
+
 
 class StimulusError(ValueError):
     """A trial, state or block breaks a rule of the stimulus format.
@@ -230,18 +240,38 @@ def rests_on(upper: Block, lower, tol: float = CONTACT_TOLERANCE) -> bool:
 # ----------------------------------------------------------------------------- validation
 
 
+def check_solid(label: str, kind: str, name: str, p, size, yaw: float = 0.0) -> None:
+    """Raise StimulusError unless a solid's centre `p` (m), edges `size` (m) and `yaw`
+    (rad) are finite and inside the workspace (WORKSPACE_XY, WORKSPACE_Z, SOLID_SIZE).
+    `kind` is ``block`` or ``fixed``; the message names label, solid and rule."""
+    where = f"{label} {kind} {name}"
+    p, size = np.asarray(p, dtype=float), np.asarray(size, dtype=float)
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(size)) and np.isfinite(yaw)):
+        raise StimulusError(f"{where}: pose or size is not finite (position {p}, size {size}, yaw {yaw})")
+    lo, hi = SOLID_SIZE
+    if np.any(size <= lo) or np.any(size > hi):
+        raise StimulusError(f"{where}: size {size} m breaks the workspace rule: every edge longer than "
+                            f"{lo * 1000:g} mm and at most {hi:g} m")
+    if np.any(np.abs(p[:2]) > WORKSPACE_XY) or not WORKSPACE_Z[0] <= p[2] <= WORKSPACE_Z[1]:
+        raise StimulusError(f"{where}: centre {p} m lies outside the workspace |x|, |y| <= {WORKSPACE_XY:g} m, "
+                            f"{WORKSPACE_Z[0]:g} <= z <= {WORKSPACE_Z[1]:g} m")
+    if abs(yaw) > 2 * np.pi:
+        raise StimulusError(f"{where}: yaw {yaw} rad is more than one turn (|yaw| <= 2 pi)")
+
+
 def validate_scene(scene: Scene) -> None:
     """Check the rules every stimulus state obeys (see stimuli/README.md)."""
     label = scene.label
+    for f in scene.fixed:  # first: a NaN box would otherwise surface as an overlap
+        check_solid(label, "fixed", f.name, f.p_WO, f.size)
+        if f.bottom < -CONTACT_TOLERANCE:
+            raise StimulusError(f"{label} fixed {f.name}: lies under the table (bottom at z = {f.bottom * 1000:.1f} mm)")
     seen: set[str] = set()
     for b in scene.blocks:
         if b.name in seen:
             raise StimulusError(f"{label}: duplicate block name {b.name!r}")
         seen.add(b.name)
-        if not (np.all(np.isfinite(b.p_WB)) and np.isfinite(b.yaw) and np.all(np.isfinite(b.size))):
-            raise StimulusError(f"{label} block {b.name}: pose or size is not finite (p_WB={b.p_WB}, yaw={b.yaw})")
-        if np.any(b.size <= 0):
-            raise StimulusError(f"{label} block {b.name}: size must be positive, got {b.size}")
+        check_solid(label, "block", b.name, b.p_WB, b.size, b.yaw)
         if b.colour not in COLOURS:
             raise StimulusError(f"{label} block {b.name}: unknown colour {b.colour!r} (known: {', '.join(COLOURS)})")
         if b.bottom < -CONTACT_TOLERANCE:

@@ -26,17 +26,17 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     import stimuli
-    from models.effort import plan_of_sample
+    from models.effort import describe, kinetic_energy, plan_of_sample
 
     trial = stimuli.load_trial(args.trial)
     result = plan_of_sample(trial, args.seed, args.sample, formulation=args.formulation, solver=args.solver)
     komo = result.komo
     print(f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})")
-    print(result.describe())
+    print(describe(result))
     if komo is not None:
         print(f"KOMO {komo.formulation} / {komo.solver}: {komo.status}, cost {komo.cost:.4f}, {komo.n_variables} variables, "
               f"{komo.solve_time:.3f} s solving, planned in {result.planning_time:.3f} s")
-    print(f"effort {result.kinetic_energy():.12g} J*s")
+    print(f"effort {kinetic_energy(result):.12g} J*s")
     title = f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})"
     if args.html or args.png:
         from lgp.view import write_html, write_png

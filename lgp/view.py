@@ -56,11 +56,11 @@ def order_colours(plan) -> dict[str, tuple[float, float, float]]:
 
 def cumulative_effort(plan) -> np.ndarray:
     """Effort (J s) integrated from time 0 to each slice; the last entry is the plan's effort."""
-    from lgp.planner import BLOCK_MASS
+    from models.effort import BLOCK_MASS
 
     v = np.stack([np.diff(p, axis=0) for p in plan.p_WB.values()]) / plan.tau  # (blocks, n-1, 3)
-    # The same rule as lgp.planner.kinetic_energy, one slice interval at a time, so the
-    # last value equals plan.kinetic_energy() (checked in tests/test_view.py).
+    # The same rule as models.effort.kinetic_energy, one slice interval at a time, so the
+    # last value equals kinetic_energy(plan) (checked in tests/test_view.py).
     per_step = 0.5 * BLOCK_MASS * (v ** 2).sum(axis=(0, 2)) * plan.tau
     return np.concatenate([[0.0], np.cumsum(per_step)])
 
@@ -82,9 +82,10 @@ def camera_frame(plan) -> tuple[np.ndarray, np.ndarray]:
 
 def _caption_data(plan, title: str) -> dict:
     from lgp.planner import PHASE_DURATION
+    from models.effort import kinetic_energy_by_action
 
     cum = cumulative_effort(plan)
-    energies = plan.kinetic_energy_by_action() if plan.actions else []
+    energies = kinetic_energy_by_action(plan) if plan.actions else []
     return {
         "title": title,
         "phase": PHASE_DURATION,
@@ -211,6 +212,7 @@ def write_png(plan, path, title: str = "") -> str:
     from matplotlib.colors import BoundaryNorm
 
     from lgp.planner import PHASE_DURATION
+    from models.effort import kinetic_energy, kinetic_energy_by_action
 
     order = placement_order(plan)
     colours = order_colours(plan)
@@ -235,7 +237,7 @@ def write_png(plan, path, title: str = "") -> str:
 
     # Speed of each block over time; each action's span shaded (alternately), the
     # carrying actions in the carried block's colour, the action's effort above it.
-    energies = plan.kinetic_energy_by_action() if plan.actions else []
+    energies = kinetic_energy_by_action(plan) if plan.actions else []
     top_speed = max((plan.speed(n).max() for n in order), default=0.0) or 1.0
     for k, (a, e) in enumerate(zip(plan.actions, energies)):
         lo, hi = plan.t[0] + k * PHASE_DURATION, plan.t[0] + (k + 1) * PHASE_DURATION
@@ -248,7 +250,7 @@ def write_png(plan, path, title: str = "") -> str:
     speed.set_ylim(0, top_speed * 1.28)
     speed.set(xlabel="time (s)", ylabel="block speed (m/s)",
               title=f"speed per block; shaded: the action carrying it, number: its effort (J s; grasps 0)\n"
-                    f"effort {plan.kinetic_energy():.3f} J s over {len(plan.actions)} actions")
+                    f"effort {kinetic_energy(plan):.3f} J s over {len(plan.actions)} actions")
     if order:
         n = len(order)
         from matplotlib.colors import ListedColormap

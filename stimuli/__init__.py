@@ -16,7 +16,8 @@ import numpy as np
 import yaml
 
 from lgp.paper import BLOCK_SIZE, BUILD_SITE
-from lgp.scene import Block, FixedBox, Scene, StimulusError, colour_shortfall, horizontal_penetration
+from lgp.scene import (SOLID_SIZE, WORKSPACE_XY, Block, FixedBox, Scene, StimulusError, colour_shortfall,
+                       horizontal_penetration)
 
 TRIAL_DIR = Path(__file__).parent / "trials"
 TRIAL_ID = re.compile(r"^(\d+)([EH])$")
@@ -181,9 +182,14 @@ def _fixed(where: str, data: list) -> tuple[FixedBox, ...]:
     boxes = []
     for obstacle in data or []:
         _check_keys(where, obstacle, {"name", "boxes"})
-        for box in obstacle["boxes"]:
-            _check_keys(f"{where} {obstacle['name']}", box, {"p_WO", "size"})
-            boxes.append(FixedBox(obstacle["name"], _vector(where, box["p_WO"], 3), _vector(where, box["size"], 3)))
+        if "name" not in obstacle or not isinstance(obstacle.get("boxes"), list):
+            raise StimulusError(f"{where}: an obstacle needs a name and a list of boxes")
+        for k, box in enumerate(obstacle["boxes"]):
+            at = f"{where} {obstacle['name']} box {k + 1}"
+            _check_keys(at, box, {"p_WO", "size"})
+            if "p_WO" not in box or "size" not in box:
+                raise StimulusError(f"{at}: a box needs p_WO and size")
+            boxes.append(FixedBox(str(obstacle["name"]), _vector(at + " p_WO", box["p_WO"], 3), _vector(at + " size", box["size"], 3)))
     return tuple(boxes)
 
 
@@ -199,6 +205,8 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
         raise StimulusError(f"{tid}: pair/level fields disagree with the id")
     fixed = _fixed(f"{tid} fixed", data.get("fixed"))
     build_site = tuple(_vector(f"{tid} build_site", data.get("build_site", list(BUILD_SITE)), 2))
+    if not (np.all(np.isfinite(build_site)) and np.all(np.abs(build_site) <= WORKSPACE_XY)):
+        raise StimulusError(f"{tid} build_site: {build_site} must lie inside the workspace |x|, |y| <= {WORKSPACE_XY:g} m")
 
     target_data = data.get("target") or {}
     _check_keys(f"{tid}-B", target_data, {"blocks"})
@@ -224,6 +232,14 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
         except (KeyError, TypeError, ValueError):
             raise StimulusError(f"{tid}-A scattered region: needs x: [min, max] and y: [min, max]") from None
         kw = {k: float(s[k]) for k in ("min_gap", "clearance") if k in s}
+        for k, v in kw.items():
+            if not 0.0 <= v <= SOLID_SIZE[1]:
+                raise StimulusError(f"{tid}-A scattered {k}: {v} m must lie in [0, {SOLID_SIZE[1]:g}] m")
+        bounds = [*region.x, *region.y, *(region.r_S or ())]
+        if not (np.all(np.isfinite(bounds)) and np.all(np.abs(bounds[:4]) <= WORKSPACE_XY)
+                and region.x[0] <= region.x[1] and region.y[0] <= region.y[1]):
+            raise StimulusError(f"{tid}-A scattered region: x {region.x}, y {region.y} must be finite ranges "
+                                f"[min, max] inside the workspace |x|, |y| <= {WORKSPACE_XY:g} m")
     recolour = None
     if "recolour" in init:
         rc = init["recolour"]

@@ -158,3 +158,30 @@ def test_a_run_does_not_depend_on_the_runs_before_it(engine):
     again = eng.simulate(scene)
     np.testing.assert_array_equal(first.p_WB_final, again.p_WB_final)
     assert first.sim_time == again.sim_time
+
+
+def test_mujoco_warnings_do_not_write_a_log_into_the_users_directory(tmp_path):
+    """MuJoCo's default appends warnings to MUJOCO_LOG.TXT in the current directory;
+    the engine keeps them in memory instead (models.risk.mujoco_engine.WARNINGS)."""
+    import subprocess
+    import sys
+    import textwrap
+    from pathlib import Path
+
+    script = textwrap.dedent("""
+        import mujoco
+        from models.risk import get_engine
+        from models.risk.mujoco_engine import WARNINGS
+        get_engine("mujoco")
+        xml = ('<mujoco><worldbody><body pos="0 0 1e300"><freejoint/>'
+               '<geom type="box" size="1e300 1 1"/></body></worldbody></mujoco>')
+        m = mujoco.MjModel.from_xml_string(xml)
+        d = mujoco.MjData(m)
+        mujoco.mj_step(m, d)  # a huge value: MuJoCo warns
+        assert any("unstable" in w for w in WARNINGS), WARNINGS
+    """)
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True,
+                          env={**__import__("os").environ, "PYTHONPATH": str(root)})
+    assert done.returncode == 0, done.stderr
+    assert list(tmp_path.iterdir()) == []

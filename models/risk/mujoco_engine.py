@@ -46,6 +46,23 @@ def mjcf(scene: Scene, sleep: bool = True) -> str:
     )
 
 
+#: MuJoCo's warnings in this process (most recent last, at most 100): kept here
+#: instead of MuJoCo's default, which appends them to MUJOCO_LOG.TXT in the
+#: current directory, i.e. the user's.
+WARNINGS: list[str] = []
+
+
+def _keep_warning(message: str) -> None:
+    if len(WARNINGS) >= 100:
+        del WARNINGS[0]
+    WARNINGS.append(message)
+
+
+def quiet_log(mj) -> None:
+    """Route MuJoCo's warnings to `WARNINGS` (no MUJOCO_LOG.TXT in the cwd)."""
+    mj.set_mju_user_warning(_keep_warning)
+
+
 def _v(x) -> str:
     return " ".join(repr(float(c)) for c in x)
 
@@ -57,6 +74,7 @@ class MujocoEngine(Engine):
         import mujoco
 
         self._mj = mujoco
+        quiet_log(mujoco)
         self.sleep = sleep
         self._models: dict[str, tuple] = {}
 
