@@ -285,7 +285,7 @@ def library_versions() -> dict[str, str]:
 
 
 def _run_section(run: dict) -> str:
-    params = pd.DataFrame([(k, v) for k, v in run.get("parameters", {}).items()], columns=["parameter", "value"])
+    chips = " ".join(f"<code>{_e(k)}={_e(v)}</code>" for k, v in run.get("parameters", {}).items())
     versions = pd.DataFrame(list(library_versions().items()), columns=["library", "version"])
     stages = pd.DataFrame(list(run.get("stages", {}).items()), columns=["stage", "wall time (s)"])
     settings = pd.DataFrame(list(run.get("engine_settings", {}).items()), columns=["setting", "value"])
@@ -297,8 +297,8 @@ def _run_section(run: dict) -> str:
 <p>Finished {_e(run.get("finished", ""))}; wall time {total:.1f} s in all on {_e(run.get("machine", platform.node()))}
 ({_e(run.get("load", ""))}). Cache: {cache.get("hits", 0)} results reused, {cache.get("misses", 0)} computed
 (<code>{_e(cache.get("root", ""))}</code>).</p>
+<p class="params"><b>Parameters</b> {chips}</p>
 <div class="grid4">
-<div><h3>Parameters</h3>{table_html(params, "plain")}</div>
 <div><h3>Wall time per stage</h3>{table_html(stages)}</div>
 <div><h3>Risk engine: {_e(run.get("engine", ""))}</h3>{table_html(settings, "plain")}</div>
 <div><h3>Libraries</h3>{table_html(versions, "plain")}</div>
@@ -577,15 +577,15 @@ table{border-collapse:collapse;background:#fff;font-size:12.5px;margin:4px 0}th,
 th{background:#eceae4}table.sortable th{cursor:pointer;user-select:none}table.sortable th:after{content:" \\2195";color:#999}
 th.asc:after{content:" \\2191"!important;color:#333}th.desc:after{content:" \\2193"!important;color:#333}
 tr.differs td{background:#fde8e6}tr.differs td:last-child{color:#b3261e;font-weight:700;font-size:15px}.differs-key{color:#b3261e;font-weight:700}
-.grid4{display:grid;grid-template-columns:repeat(auto-fit,minmax(260px,1fr));gap:14px}
+.grid4{display:grid;grid-template-columns:repeat(auto-fit,minmax(240px,max-content));gap:24px}
 #figures{display:block}figure{display:inline-block;vertical-align:top;margin:6px 12px 12px 0;max-width:680px;background:#fff;padding:8px;border:1px solid #ddd}
 figure img{max-width:100%;height:auto}figcaption{font-size:12.5px;color:#333}.file{color:#888}
 .trialnav a{display:inline-block;margin:0 4px 4px 0;padding:1px 6px;background:#fff;border:1px solid #ccc;border-radius:3px;text-decoration:none}
-.cards{display:grid;grid-template-columns:repeat(auto-fill,minmax(460px,1fr));gap:12px}
+.cards{display:grid;grid-template-columns:repeat(auto-fill,minmax(380px,1fr));gap:12px}.params code{display:inline-block;margin:0 4px 4px 0}
 .card{background:#fff;border:1px solid #d6d6d0;border-radius:6px;padding:8px 10px}.card:target{outline:3px solid #3b82f6}
 .card h3{font-size:16px;margin:0}.card h3 a{color:inherit;text-decoration:none}.dim{font-weight:400;color:#666;font-size:13px}
 .desc{margin:2px 0 4px;color:#444;font-size:12.5px}.card img{display:block;max-width:100%;height:auto}
-.stats{display:flex;gap:18px;font-size:12.5px}.stats small{color:#777}
+.stats{display:flex;flex-wrap:wrap;gap:14px;font-size:12.5px}.stats small{color:#777}
 svg text{font-size:9px;fill:#555}svg.hist rect{fill:#6b8fb5}svg.risk polyline{fill:none;stroke:#c0392b;stroke-width:1.5}
 svg.risk circle{fill:#c0392b}svg.risk .frame{fill:#fafafa;stroke:#ccc}svg.risk .mark{stroke:#888;stroke-dasharray:2 2}
 a.replay{font-weight:600}.none{color:#999}details{font-size:12.5px;margin-top:4px}.warn{background:#fff3cd;padding:6px;font-weight:700}
