@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lgp.cache import Cache, code_version, input_key
+from lgp.cache import Cache, files_digest, input_key, library_versions as _library_versions, modules_digest
 
 #: |(H - E) / E| below this is a solver-level tie of effort (docs/results.md, pair 6).
 EFFORT_TIE = 1e-4
@@ -157,7 +157,7 @@ def trial_picture(trial, seed: int, path: Path) -> Path:
 
 def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None) -> dict[str, Path]:
     """Picture of every trial under `out_dir`, copied from `cache` when drawn before."""
-    version = code_version("stimuli/__init__.py", "stimuli/sheet.py", "lgp/scene.py", "lgp/paper.py")
+    version = modules_digest("stimuli.sheet", "stimuli", "models.effort")
     paths = {}
     for trial in trials:
         path = Path(out_dir) / f"{trial.id}.png"
@@ -167,14 +167,14 @@ def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None)
             if cached.exists():
                 path.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(cached, path)
-                cache.hits += 1
+                cache.counts["picture", "hit"] += 1
                 paths[trial.id] = path
                 continue
         trial_picture(trial, seed, path)
         if cached is not None:
             cached.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(path, cached)
-            cache.misses += 1
+            cache.counts["picture", "miss"] += 1
         paths[trial.id] = path
     return paths
 
@@ -233,10 +233,10 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    version = code_version("lgp/scene.py", "lgp/assignment.py", "lgp/symbolic.py", "lgp/planner.py", "lgp/arm.py",
-                           "lgp/komo/*.py", "lgp/view.py", "lgp/page.py", "models/effort.py", "models/*.sdf",
-                           "models/*.urdf", "models/*.yaml", "stimuli/__init__.py")
     drake = library_versions()["drake"]
+    version = input_key(code=modules_digest("lgp.page", "lgp.view", "models.effort", "stimuli"),
+                        data=files_digest("models/*.sdf", "models/*.urdf", "models/*.yaml"),
+                        libraries=_library_versions(("drake", "numpy", "scipy", "matplotlib")))
     paths, todo, cached = {}, [], {}
     for trial in trials:
         paths[trial.id] = out_dir / f"{trial.id}.html"
@@ -252,7 +252,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
         c = cached.get(trial.id)
         if c is not None and c.exists() and lib.exists():
             shutil.copyfile(c, paths[trial.id])
-            cache.hits += 1
+            cache.counts["replay", "hit"] += 1
         else:
             todo.append(trial)
     if todo:
@@ -264,7 +264,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
             if trial.id in cached:
                 cached[trial.id].parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(paths[trial.id], cached[trial.id])
-                cache.misses += 1
+                cache.counts["replay", "miss"] += 1
         if lib_cache is not None and lib.exists():
             lib_cache.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(lib, lib_cache)
@@ -296,7 +296,7 @@ def _run_section(run: dict) -> str:
 <p class="cmd"><code>{_e(run.get("command", ""))}</code></p>
 <p>Finished {_e(run.get("finished", ""))}; wall time {total:.1f} s in all on {_e(run.get("machine", platform.node()))}
 ({_e(run.get("load", ""))}). Cache: {cache.get("hits", 0)} results reused, {cache.get("misses", 0)} computed
-(<code>{_e(cache.get("root", ""))}</code>).</p>
+(<code>{_e(cache.get("root", ""))}</code>: {_e(cache.get("summary", ""))}).</p>
 <p class="params"><b>Parameters</b> {chips}</p>
 <div class="grid4">
 <div><h3>Wall time per stage</h3>{table_html(stages)}</div>
@@ -557,7 +557,7 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         "engine": engine,
         "engine_settings": settings,
         "stages": dict(clock.laps),
-        "cache": {"hits": cache.hits, "misses": cache.misses, "root": str(cache.root)},
+        "cache": {"hits": cache.hits, "misses": cache.misses, "root": str(cache.root), "summary": cache.summary()},
         "finished": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": f"{platform.node()}, {os.cpu_count()} cores",
         "load": "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),

@@ -13,6 +13,7 @@ half way resumes with nothing lost.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import signal
 import sys
@@ -25,7 +26,7 @@ import pandas as pd
 import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import executor_for
-from lgp.cache import Cache, code_version, input_key, write_csv_atomic
+from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.executor import sigterm_as_interrupt
 from lgp.page import Stopwatch, write_index, write_replays
 
@@ -34,6 +35,26 @@ QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot
 
 def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
+
+
+def effort_key_inputs() -> dict:
+    """What an effort table depends on besides the trial and the parameters: the
+    source of every project module physical_effort can run (stimuli draws the
+    layouts of A), the arm's model files, and the numerical libraries (SNOPT is Drake's)."""
+    return {"code": modules_digest("models.effort", "stimuli"),
+            "data": files_digest("models/*.sdf", "models/*.urdf", "models/*.yaml"),
+            "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
+
+
+def risk_key_inputs(engine: str | None) -> dict:
+    """What a risk table depends on besides the trial and the parameters: the source
+    of every project module risk_table can run (the engine module is loaded by name,
+    so it is named here), the engine's settings, and the libraries."""
+    from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
+
+    name = DEFAULT_ENGINE if engine is None else engine
+    return {"code": modules_digest("models.risk", ENGINES[name].split(":")[0], "stimuli"),
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd.DataFrame:
@@ -46,11 +67,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
     """
     from models.effort import effort_of_unit, effort_table, effort_units
 
-    # The code effort depends on (not the CLI or this cache), so editing them re-plans.
-    version = code_version("lgp/scene.py", "lgp/assignment.py", "lgp/symbolic.py", "lgp/planner.py", "lgp/arm.py",
-                           "lgp/komo/*.py", "models/effort.py", "models/*.sdf", "models/*.urdf", "models/*.yaml",
-                           "stimuli/__init__.py")  # draws the layouts of A
-    keys = {t.id: input_key(trial=t.id, digest=t.digest, samples=samples, seed=seed, code=version) for t in trials}
+    depends = effort_key_inputs()
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, samples=samples, seed=seed, **depends) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
         cached = cache.get("effort", keys[t.id])
@@ -90,22 +108,20 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     """
     from models.risk import risk_table
 
-    version = code_version("lgp/scene.py", "models/risk/*.py", "stimuli/__init__.py")
-    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, code=version) for t in trials}
-    todo = [t for t in trials if not (cache.enabled and cache.path("risk", keys[t.id]).exists())]
-    fresh: dict[str, pd.DataFrame] = {}
+    depends = risk_key_inputs(engine)
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
+    tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
+    todo = [t for t in trials if tables[t.id] is None]
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
         table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor)
         for t in group:
-            fresh[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
+            tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     out = []
     for k, trial in enumerate(trials, 1):
-        df = fresh.get(trial.id)
-        if df is None:
-            df = cache.get_or_compute("risk", keys[trial.id], lambda: risk_table([trial], sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor))
+        df = tables[trial.id]
         curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
         _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)
@@ -163,7 +179,8 @@ def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
     return "\n".join(lines)
 
 
-def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None, elapsed: float) -> Path:
+def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None, elapsed: float,
+                 software: dict | None = None) -> Path:
     wide = risk.pivot_table(index="trial", columns="sigma", values="risk").reindex(effort["trial"])
     wide.columns = [f"{s:g}" for s in wide.columns]
     lines = [
@@ -206,6 +223,9 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         if "pairs" in analysis:
             model_pairs = analysis["pairs"]
             lines += ["## Pair orderings by source", "", _markdown(model_pairs), ""]
+    if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers
+        lines += ["## Software", "", "Libraries: " + ", ".join(f"{k} {v}" for k, v in software["libraries"].items()) + ".",
+                  "", f"Risk engine settings: `{json.dumps(software['engine'], sort_keys=True, default=str)}`.", ""]
     path = out / "report.md"
     tmp = path.with_suffix(".md.tmp")
     tmp.write_text("\n".join(lines))
@@ -287,9 +307,11 @@ def run(args) -> int:
     else:
         _log("a subset of trials: no pair table, figures or fits (they need all 24)")
     clock.lap("analysis")
-    report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0)
+    software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
+    report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0, software)
     written.append(report)
     written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
+    _log(f"cache: {cache.summary()}")
     print(f"Outputs in {out.resolve()}:")
     for path in written:
         print(f"  {path}")

@@ -21,3 +21,12 @@ from lgp.paper import N_SIMS, SIGMA_GRID  # noqa: F401  (re-exported for conveni
 from models.risk.engine import DURATION, ENGINES, FALL_THRESHOLD, Rollout, get_engine  # noqa: F401
 from models.risk.noise import draw_normals, perturb, perturb_from_normals  # noqa: F401
 from models.risk.static import static_stable  # noqa: F401
+from models.risk.build import (  # noqa: F401  (risk through the build; beyond the paper)
+    MEASURES,
+    build_risk,
+    build_risk_aggregates,
+    build_risk_table,
+    measure_table,
+    plan_stages,
+    stage_curve,
+)

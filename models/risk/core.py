@@ -9,7 +9,6 @@ scenes of a table, on the order of runs, or on the number of worker processes.
 """
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 from typing import Callable, Iterable, Sequence
 
@@ -17,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from lgp.executor import borrowed, default_jobs
+from lgp.geometry import digest
 from lgp.paper import N_SIMS, SIGMA_GRID
 from lgp.scene import Scene
 from models.risk.engine import ENGINES, FALL_THRESHOLD, Rollout, _smallest_width, get_engine
@@ -63,12 +63,9 @@ _STABLE: dict[tuple[str, str], Rollout] = {}
 
 
 def _scene_key(scene: Scene) -> str:
-    h = hashlib.sha1(scene.label.encode())
-    for b in scene.blocks:
-        h.update(b.name.encode() + b.p_WB.tobytes() + b.size.tobytes() + np.float64(b.yaw).tobytes())
-    for f in scene.fixed:
-        h.update(f.p_WO.tobytes() + f.size.tobytes())
-    return h.hexdigest()
+    """What an unperturbed simulation depends on: the label and every block and box pose and size."""
+    return digest(scene.label, *(part for b in scene.blocks for part in (b.name, b.p_WB, b.size, np.float64(b.yaw))),
+                  *(part for f in scene.fixed for part in (f.p_WO, f.size)))
 
 
 def check_stable(scene: Scene, engine: str | None = None) -> Rollout:

@@ -8,11 +8,11 @@ instance of each, so a worker of a process pool compiles each layout once.
 """
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 
 import numpy as np
 
+from lgp.geometry import digest
 from lgp.paper import BLOCK_SIZE, DURATION
 from lgp.scene import Scene
 
@@ -125,11 +125,8 @@ def _smallest_width(scene: Scene) -> float:
 def layout_key(scene: Scene) -> str:
     """What a compiled model depends on: block sizes and the fixed boxes (not the
     block poses, which are set per run)."""
-    h = hashlib.sha1()
-    h.update(np.array([b.size for b in scene.blocks]).tobytes())
-    for f in scene.fixed:
-        h.update(f.p_WO.tobytes() + f.size.tobytes())
-    return f"{len(scene)}:{h.hexdigest()[:16]}"
+    h = digest(*(b.size for b in scene.blocks), *(part for f in scene.fixed for part in (f.p_WO, f.size)))
+    return f"{len(scene)}:{h[:16]}"
 
 
 def block_speeds(v_WB: np.ndarray, w_WB: np.ndarray, sizes: np.ndarray) -> np.ndarray:

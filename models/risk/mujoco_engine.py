@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lgp.geometry import quaternion_from_yaw
 from lgp.scene import Scene
 from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds, layout_key
 
@@ -97,8 +98,7 @@ class MujocoEngine(Engine):
         n = len(scene)
         qpos = d.qpos.reshape(n, 7)
         qpos[:, :3] = scene.positions
-        yaw = np.array([b.yaw for b in scene.blocks])
-        qpos[:, 3:] = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=1)
+        qpos[:, 3:] = quaternion_from_yaw([b.yaw for b in scene.blocks])
         mj.mj_forward(m, d)
         self._sizes = np.array([b.size for b in scene.blocks])
         self._n = n
