@@ -21,6 +21,7 @@ import os
 import platform
 import shlex
 import shutil
+from collections import Counter
 import sys
 import time
 from pathlib import Path
@@ -155,6 +156,14 @@ def trial_picture(trial, seed: int, path: Path) -> Path:
     return path
 
 
+def _files(cache: Cache) -> Counter:
+    """(kind, "hit" | "miss") counts of the page's files (pictures, replays) kept beside
+    `cache`'s own table counts, which are about computed results only."""
+    if not hasattr(cache, "page_files"):
+        cache.page_files = Counter()
+    return cache.page_files
+
+
 def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None) -> dict[str, Path]:
     """Picture of every trial under `out_dir`, copied from `cache` when drawn before."""
     version = modules_digest("stimuli.sheet", "stimuli", "models.effort")
@@ -167,14 +176,14 @@ def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None)
             if cached.exists():
                 path.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(cached, path)
-                cache.counts["picture", "hit"] += 1
+                _files(cache)["picture", "hit"] += 1
                 paths[trial.id] = path
                 continue
         trial_picture(trial, seed, path)
         if cached is not None:
             cached.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(path, cached)
-            cache.counts["picture", "miss"] += 1
+            _files(cache)["picture", "miss"] += 1
         paths[trial.id] = path
     return paths
 
@@ -252,7 +261,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
         c = cached.get(trial.id)
         if c is not None and c.exists() and lib.exists():
             shutil.copyfile(c, paths[trial.id])
-            cache.counts["replay", "hit"] += 1
+            _files(cache)["replay", "hit"] += 1
         else:
             todo.append(trial)
     if todo:
@@ -264,7 +273,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
             if trial.id in cached:
                 cached[trial.id].parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(paths[trial.id], cached[trial.id])
-                cache.counts["replay", "miss"] += 1
+                _files(cache)["replay", "miss"] += 1
         if lib_cache is not None and lib.exists():
             lib_cache.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(lib, lib_cache)
@@ -557,7 +566,11 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         "engine": engine,
         "engine_settings": settings,
         "stages": dict(clock.laps),
-        "cache": {"hits": cache.hits, "misses": cache.misses, "root": str(cache.root), "summary": cache.summary()},
+        "cache": {"hits": cache.hits + sum(n for (_, o), n in _files(cache).items() if o == "hit"),
+                  "misses": cache.misses + sum(n for (_, o), n in _files(cache).items() if o == "miss"),
+                  "root": str(cache.root),
+                  "summary": "; ".join([cache.summary()] + [f"{k} {_files(cache)[k, 'hit']} hit, {_files(cache)[k, 'miss']} miss"
+                                                            for k in sorted({k for k, _ in _files(cache)})])},
         "finished": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": f"{platform.node()}, {os.cpu_count()} cores",
         "load": "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),
