@@ -50,7 +50,7 @@ def grid_sample_seconds(engine: str, per_trial: int) -> float:
     the lowest, middle and highest sigma), one process."""
     import stimuli
 
-    trials = stimuli.load_all()
+    trials = stimuli.load_paper()
     for t in trials:
         check_stable(t.target, engine)
     t0 = time.perf_counter()
@@ -62,7 +62,7 @@ def measured_grid_seconds(engine: str, jobs: int) -> float:
     import stimuli
 
     t0 = time.perf_counter()
-    risk_table(stimuli.load_all(), SIGMA_GRID, n_sims=100, seed=0, engine=engine, jobs=jobs)
+    risk_table(stimuli.load_paper(), SIGMA_GRID, n_sims=100, seed=0, engine=engine, jobs=jobs)
     return time.perf_counter() - t0
 
 
@@ -121,7 +121,7 @@ def main(argv=None) -> int:
             "",
             "| engine | how | wall time |",
             "|---|---|---|",
-            f"| mujoco | measured, `risk_table(stimuli.load_all(), SIGMA_GRID, n_sims=100, jobs={jobs})` | "
+            f"| mujoco | measured, `risk_table(stimuli.load_paper(), SIGMA_GRID, n_sims=100, jobs={jobs})` | "
             f"{wall:.0f} s ({wall / 60:.1f} min) |",
             f"| mujoco | projected from a 1-process sample ({1000 * mj_s:.1f} ms/run) / {jobs} cores | "
             f"{GRID_RUNS * mj_s / jobs / 60:.1f} min |",

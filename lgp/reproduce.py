@@ -128,6 +128,30 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     return pd.concat(out, ignore_index=True)
 
 
+def check_targets(trials, engine: str | None, cache: Cache) -> None:
+    """Before the long work: B of every trial must stand unperturbed (the risk
+    model's sigma = 0 run), one simulation per trial, cached like the results.
+    Raises UnstableSceneError naming every trial whose B falls and its blocks."""
+    from models.risk import UnstableSceneError, check_stable
+
+    depends = risk_key_inputs(engine)
+    problems = []
+    for t in trials:
+        key = input_key(trial=t.id, digest=t.digest, check="B stands unperturbed", **depends)
+        df = cache.get("stable", key)
+        if df is None:
+            try:
+                check_stable(t.target, engine)
+                df = pd.DataFrame([{"trial": t.id, "stable": True, "problem": ""}])
+            except UnstableSceneError as e:
+                df = pd.DataFrame([{"trial": t.id, "stable": False, "problem": str(e)}])
+            cache.put("stable", key, df)
+        if not bool(df["stable"].iloc[0]):
+            problems.append(str(df["problem"].iloc[0]))
+    if problems:
+        raise UnstableSceneError("; ".join(problems))
+
+
 def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
     order = {t.id: i for i, t in enumerate(trials)}
     g = samples.groupby("trial")["effort"]
@@ -236,7 +260,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m lgp.reproduce", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="results", help="output directory (default: results/)")
-    p.add_argument("--trials", nargs="+", help="trial ids (default: all 24)")
+    p.add_argument("--trials", nargs="+", help="trial ids, or 'all' for every trial file (default: the paper's 24)")
     p.add_argument("--samples", type=int, help="M, random layouts of A per trial (default 30; --quick 3)")
     p.add_argument("--n-sims", type=int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
     p.add_argument("--sigmas", type=float, nargs="+", help="noise levels in units of d (default: 0.05..0.10 step 0.005)")
@@ -265,6 +289,20 @@ def main(argv=None) -> int:
             return 128 + int(getattr(e, "signal", signal.SIGINT))
 
 
+def select_trials(ids: list[str] | None, directory=None) -> list:
+    """The trials of a run: the paper's 24 by default (other trial files in the
+    directory are named, not run), ``all`` for every trial file, or the ids given."""
+    if not ids:
+        extra = stimuli.extra_ids(directory)
+        if extra:
+            _log(f"the trial folder also holds {', '.join(extra)} (not among the paper's 24): "
+                 f"run them with --trials {' '.join(extra)} or --trials all")
+        return stimuli.load_paper(directory)
+    if [t.lower() for t in ids] == ["all"]:
+        return stimuli.load_all(directory)
+    return [stimuli.load_trial(t, directory) for t in ids]
+
+
 def run(args) -> int:
     """The pipeline for parsed command-line `args` (see `main`)."""
     t0 = time.perf_counter()
@@ -272,7 +310,7 @@ def run(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Cache(out / "cache", enabled=not args.no_cache)
-    trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
+    trials = select_trials(args.trials)
     human = None
     if args.human_data:
         from analysis import load_human_data
@@ -285,6 +323,7 @@ def run(args) -> int:
     with executor_for(args.jobs) as executor:
         if hasattr(executor, "start"):
             executor.start()
+        check_targets(trials, args.engine, cache)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
@@ -295,17 +334,23 @@ def run(args) -> int:
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
-    complete = {t.id for t in trials} >= set(TRIAL_IDS)
     pairs, analysis = None, None
-    if complete:  # pair orderings, figures and fits are defined on the 24 trials
+    if {t.id for t in trials} >= set(TRIAL_IDS):
+        # Pair orderings, figures and fits are the paper's: on its 24 trials only;
+        # other trials of the run are in the effort and risk tables.
         from analysis import run_analysis
 
-        pairs = pair_orderings(effort, risk, sigma, trials)
+        paper = [t for t in trials if t.id in TRIAL_IDS]
+        extra = [t.id for t in trials if t.id not in TRIAL_IDS]
+        if extra:
+            _log(f"pair table, figures and fits use the paper's 24 trials; {', '.join(extra)} are in the effort and risk tables only")
+        e_samples, e_mean, r = (df[df["trial"].isin(TRIAL_IDS)] for df in (effort_samples, effort, risk))
+        pairs = pair_orderings(e_mean, r, sigma, paper)
         written.append(write_csv_atomic(pairs, out / "pairs.csv"))
-        analysis = run_analysis(human, effort_samples, risk, out / ("analysis" if human is not None else "figures"),
+        analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma)
     else:
-        _log("a subset of trials: no pair table, figures or fits (they need all 24)")
+        _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
     clock.lap("analysis")
     software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0, software)
