@@ -398,8 +398,12 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
     sd = float(np.std(e, ddof=1)) if len(e) > 1 else 0.0
     curve = risk.sort_values("sigma")
     at = curve.loc[np.isclose(curve["sigma"], sigma), "risk"]
-    n_actions = samples["n_actions"].to_numpy()
-    plan_len = f"{int(n_actions[0])} actions" if len(set(n_actions)) == 1 else f"{int(n_actions.min())} to {int(n_actions.max())} actions (sample 0: {int(n_actions[0])})"
+    if "n_actions" not in samples:
+        plan_len = "length not recorded"
+    else:
+        n_actions = samples.sort_values("sample")["n_actions"].to_numpy()
+        plan_len = (f"{int(n_actions[0])} actions" if len(set(n_actions)) == 1
+                    else f"{int(n_actions.min())} to {int(n_actions.max())} actions (sample 0: {int(n_actions[0])})")
     pic = (f'<img src="{_e(os.path.relpath(picture, out))}" alt="{_e(trial.id)}: A and B" width="440" height="220">'
            if picture is not None else "")
     link = (f'<a class="replay" href="{_e(os.path.relpath(replay, out))}">3-D replay of sample 0 &#9654;</a>'
