@@ -9,7 +9,8 @@ import models.risk.build
 from lgp import build_stage, reproduce
 from lgp.paper import TRIAL_IDS
 
-ARGS = ["--trials", "6E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.065", "--jobs", "1", "--build-risk"]
+ARGS = ["--trials", "6E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.065", "--jobs", "1", "--build-risk",
+        "--no-replays"]
 
 
 def test_build_risk_flag_writes_stages_and_reuses_the_cache(tmp_path, monkeypatch):
