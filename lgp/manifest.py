@@ -3,8 +3,8 @@
 An output folder describes one run only. Before the expensive stages a run
 removes what an earlier run left in the folder (the files its manifest lists,
 and the pipeline's own names for a folder written before manifests existed:
-effort_samples.csv, effort.csv, risk.csv, pairs.csv, report.md, figures/,
-analysis/); the cache (``<out>/cache``) is kept, so nothing expensive is lost and
+effort_samples.csv, effort.csv, risk.csv, pairs.csv, report.md, index.html,
+build_risk*.csv, participant_sigma.csv, figures/, analysis/, replays/, page/); the cache (``<out>/cache``) is kept, so nothing expensive is lost and
 a rerun of the earlier command rewrites its outputs in seconds. At the end it
 writes ``manifest.json``: the command's parameters, a hash of its inputs, the
 engine, both times (see below) and every file it wrote (path, bytes, sha256).
@@ -29,7 +29,9 @@ from lgp.cache import Cache
 
 MANIFEST = "manifest.json"
 #: What the pipeline writes at the top of an output folder (besides the manifest and the cache).
-OUTPUT_NAMES = ("effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv", "report.md", "figures", "analysis")
+OUTPUT_NAMES = ("effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv", "report.md", "index.html",
+                "build_risk_stages.csv", "build_risk.csv", "build_risk_pairs.csv", "participant_sigma.csv",
+                "figures", "analysis", "replays", "page")
 TIMES = "compute_times.json"
 
 
@@ -68,7 +70,7 @@ def clear_previous(out: Path) -> list[str]:
         else:
             continue
         removed.append(name)
-    dirs = {name for name in removed if name in OUTPUT_NAMES and not name.endswith((".csv", ".md"))}
+    dirs = {name for name in removed if name in OUTPUT_NAMES and not name.endswith((".csv", ".md", ".html"))}
     return sorted({name for name in removed if Path(name).parts[0] not in dirs or name in dirs})
 
 

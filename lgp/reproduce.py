@@ -1,5 +1,5 @@
 """The paper's pipeline end to end: stimuli -> physical effort -> physical risk ->
-(analysis, when human data are given) -> tidy CSVs, figures and report.md.
+(analysis, when human data are given) -> tidy CSVs, figures, report.md and the results page index.html (lgp/page.py).
 
     python -m lgp.reproduce --quick                 # a small version, about a minute
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
@@ -26,9 +26,10 @@ import pandas as pd
 import stimuli
 from lgp import cli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import default_jobs, executor_for, sigterm_as_interrupt
+from lgp.executor import default_jobs, executor_for, stop_signals
 from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
+from lgp.page import Stopwatch, write_index, write_replays
 
 PROG = "python -m lgp.reproduce"
 
@@ -55,7 +56,7 @@ def risk_key_inputs(engine: str | None) -> dict:
     from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
 
     name = DEFAULT_ENGINE if engine is None else engine
-    return {"code": modules_digest("models.risk", ENGINES[name].split(":")[0], "stimuli"),
+    return {"code": modules_digest("models.risk", ENGINES[name].target.split(":")[0], "stimuli"),
             "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
 
 
@@ -128,6 +129,30 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
         _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)
     return pd.concat(out, ignore_index=True)
+
+
+def check_targets(trials, engine: str | None, cache: Cache) -> None:
+    """Before the long work: B of every trial must stand unperturbed (the risk
+    model's sigma = 0 run), one simulation per trial, cached like the results.
+    Raises UnstableSceneError naming every trial whose B falls and its blocks."""
+    from models.risk import UnstableSceneError, check_stable
+
+    depends = risk_key_inputs(engine)
+    problems = []
+    for t in trials:
+        key = input_key(trial=t.id, digest=t.digest, check="B stands unperturbed", **depends)
+        df = cache.get("stable", key)
+        if df is None:
+            try:
+                check_stable(t.target, engine)
+                df = pd.DataFrame([{"trial": t.id, "stable": True, "problem": ""}])
+            except UnstableSceneError as e:
+                df = pd.DataFrame([{"trial": t.id, "stable": False, "problem": str(e)}])
+            cache.put("stable", key, df)
+        if not bool(df["stable"].iloc[0]):
+            problems.append(str(df["problem"].iloc[0]))
+    if problems:
+        raise UnstableSceneError("; ".join(problems))
 
 
 def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
@@ -301,8 +326,21 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
     p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
+    p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=cli.positive_int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
+    p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/build_stage.py)")
+    p.add_argument("--build-sigmas", type=cli.sigma, nargs="+", help="noise levels of --build-risk in (0, 1] (default 0.065 0.1)")
+    p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
+                   help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
+    p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
+    p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
+                   help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
     args = p.parse_args(argv)
+    if args.risk_measure and not (args.build_risk and args.human_data):
+        p.error("--risk-measure needs --build-risk and --human-data")
+    if args.per_participant_sigma and not args.human_data:
+        p.error("--per-participant-sigma needs --human-data FILE")
+    args.command = "python -m lgp.reproduce " + " ".join(argv if argv is not None else sys.argv[1:])
     q = QUICK if args.quick else {}
     args.samples = args.samples if args.samples is not None else q.get("samples", SAMPLES)
     args.n_sims = args.n_sims if args.n_sims is not None else q.get("n_sims", N_SIMS)
@@ -312,22 +350,22 @@ def parse_args(argv=None) -> argparse.Namespace:
         args.trials = list(dict.fromkeys(args.trials))  # 7h and 7H are one trial
         if "all" in args.trials and len(args.trials) > 1:
             p.error("--trials all runs every trial file; give it alone")
-    if args.human_data and args.trials and args.trials != ["all"] and not set(args.trials) >= set(TRIAL_IDS):
-        p.error("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     return args
 
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    with sigterm_as_interrupt():  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
+    with stop_signals() as stop:  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
         try:
             return run(args, argv)
-        except KeyboardInterrupt as e:
-            signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not interrupt the goodbye
-            how = "terminated (SIGTERM)" if getattr(e, "signal", None) == signal.SIGTERM else "interrupted"
+        except BaseException as e:
+            if stop.received is None and not isinstance(e, KeyboardInterrupt):
+                raise
+            sig = stop.received or getattr(e, "signal", signal.SIGINT)
+            how = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
             resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
             print(f"{PROG}: {how}; {resume}", file=sys.stderr)
-            return 128 + int(getattr(e, "signal", signal.SIGINT))
+            return 128 + int(sig)
 
 
 def select_trials(ids: list[str] | None, directory=None) -> list:
@@ -347,6 +385,7 @@ def select_trials(ids: list[str] | None, directory=None) -> list:
 def run(args, argv=None) -> int:
     """The pipeline for parsed command-line `args` (see `main`)."""
     t0 = time.perf_counter()
+    clock = Stopwatch()  # wall time per stage, for the results page
     # Validate every input before anything is written or computed.
     trials = select_trials(args.trials)
     human = None
@@ -355,7 +394,7 @@ def run(args, argv=None) -> int:
 
         human = load_human_data(args.human_data)
         if not {t.id for t in trials} >= set(TRIAL_IDS):
-            raise ValueError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs)")
+            raise ValueError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     removed = clear_previous(out)  # this folder describes this run only (lgp/manifest.py)
@@ -366,20 +405,36 @@ def run(args, argv=None) -> int:
 
     # One executor for the whole run: its workers start now, before this process
     # imports Drake or MuJoCo, and stay warm across trials and stages.
-    with executor_for(args.jobs) as executor:
+    with executor_for(args.jobs) as executor, cache.stage():
         if hasattr(executor, "start"):
             executor.start()
         with cli.deferred_interrupt():  # Drake loads here; a Ctrl-C meanwhile waits until it has
             import models.effort  # noqa: F401
             import models.risk  # noqa: F401
-        with cache.stage():
-            effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
+        check_targets(trials, args.engine, cache)  # an unstable B fails now, not after the effort stage
+        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
+        clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
-        with cache.stage():
-            risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk)
+        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk)
+        clock.lap("risk")
+        if args.build_risk:
+            from lgp import build_stage
+
+            stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
+                                                   args.samples, args.seed, args.engine, executor, cache)
+            clock.lap("build risk")
+        replays = None if args.no_replays else write_replays(trials, args.seed, out / "replays", cache, executor, _log)
+        clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
+    if replays:
+        written += [Path(p) for p in replays.values()]
+    sections, build = [], None
+    if args.build_risk:
+        paths, section, build = build_stage.build_risk_outputs(stages, out, args.command)
+        written += paths
+        sections.append(section)
     pairs, analysis = None, None
     if {t.id for t in trials} >= set(TRIAL_IDS):
         # Pair orderings, figures and fits are the paper's: on its 24 trials only;
@@ -394,29 +449,48 @@ def run(args, argv=None) -> int:
         pairs = pair_orderings(e_mean, r, sigma, paper)
         written.append(write_csv_atomic(pairs, out / "pairs.csv"))
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
-                                seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma)
+                                seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
+                                build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
+                                risk_measure=args.risk_measure)
         written += [Path(path) for path in analysis["files"]["path"]]
+        if args.per_participant_sigma:
+            from lgp import build_stage
+
+            paths, section = build_stage.participant_sigma_outputs(human, e_samples, r, out,
+                                                                   args.participant_betas, args.command)
+            written += paths
+            sections.append(section)
     else:
         _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
+    clock.lap("analysis")
     software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
     compute = cache.compute_time()
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None,
                           time.perf_counter() - t0, software, compute)
+    if sections:
+        from lgp.build_stage import append_report
+
+        append_report(report, sections)
     written.append(report)
+    written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
+    if (out / "page").is_dir():
+        written.append(out / "page")
     _log(f"cache: {cache.summary()}")
     parameters = {"trials": [t.id for t in trials], "samples": args.samples, "n_sims": args.n_sims,
                   "sigmas": list(args.sigmas), "sigma_of_pairs": sigma if pairs is not None else None,
                   "engine": args.engine, "seed": args.seed, "n_boot": args.n_boot, "quick": args.quick,
-                  "no_cache": args.no_cache}
+                  "no_cache": args.no_cache, "build_risk": args.build_risk, "build_sigmas": args.build_sigmas,
+                  "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma}
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
-    manifest = write_manifest(out, expand(written), command=[PROG, *(sys.argv[1:] if argv is None else argv)],
+    files = list(dict.fromkeys(expand(written)))
+    manifest = write_manifest(out, files, command=[PROG, *(sys.argv[1:] if argv is None else argv)],
                               parameters=parameters, inputs=inputs, input_hash=input_hash(**parameters, **inputs),
                               engine=engine_description(args.engine, software["engine"]), software=software,
                               run_time_s=round(time.perf_counter() - t0, 1),
                               compute_time_s=round(compute[0], 1), compute_time_unknown_results=compute[1])
     print(f"Outputs of this run in {out.resolve()} (listed in {manifest.name}):")
-    for path in expand(written) + [manifest]:
+    for path in files + [manifest]:
         print(f"  {path}")
     return 0
 

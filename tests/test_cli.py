@@ -78,7 +78,7 @@ BAD = [
     ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/missing.csv"], 2, "does not exist"),
     ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/wrong_columns.csv"], 1, "missing column(s) response"),
     ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/non_numeric.csv"], 1, "non-numeric response 'lots'"),
-    ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/good.csv", "--trials", "1E"], 2, "24 trials"),
+    ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/good.csv", "--trials", "1E"], 1, "24 trials"),
     ("lgp.reproduce", ["--out", "{tmp}/a_file"], 2, "not a directory"),
     ("models.risk", ["--table", "{tmp}/t.csv", "--n-sims", "0"], 2, "--n-sims"),
     ("models.risk", ["--table", "{tmp}/t.csv", "--n", "0"], 2, "--n-sims"),
