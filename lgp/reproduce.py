@@ -1,5 +1,5 @@
 """The paper's pipeline end to end: stimuli -> physical effort -> physical risk ->
-(analysis, when human data are given) -> tidy CSVs, figures and report.md.
+(analysis, when human data are given) -> tidy CSVs, figures, report.md and the results page index.html (lgp/page.py).
 
     python -m lgp.reproduce --quick                 # a small version, about a minute
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
@@ -27,9 +27,9 @@ import pandas as pd
 
 import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import executor_for
+from lgp.executor import executor_for, stop_signals
 from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
-from lgp.executor import sigterm_as_interrupt
+from lgp.page import Stopwatch, write_index, write_replays
 from lgp import sensitivity
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
@@ -209,7 +209,7 @@ def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
 
 
 def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None, elapsed: float,
-                 software: dict | None = None, sections: list[str] | None = None) -> Path:
+                 software: dict | None = None) -> Path:
     wide = risk.pivot_table(index="trial", columns="sigma", values="risk").reindex(effort["trial"])
     wide.columns = [f"{s:g}" for s in wide.columns]
     lines = [
@@ -253,7 +253,6 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         if "pairs" in analysis:
             model_pairs = analysis["pairs"]
             lines += ["## Pair orderings by source", "", _markdown(model_pairs), ""]
-    lines += sections or []  # e.g. the --sensitivity sections (lgp/sensitivity.py)
     if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers
         lines += ["## Software", "", "Libraries: " + ", ".join(f"{k} {v}" for k, v in software["libraries"].items()) + ".",
                   "", f"Risk engine settings: `{json.dumps(software['engine'], sort_keys=True, default=str)}`.", ""]
@@ -281,7 +280,15 @@ def main(argv=None) -> int:
     p.add_argument("--human-data", help="CSV of human responses (docs/human-data.md)")
     p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
+    p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
+    p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/build_stage.py)")
+    p.add_argument("--build-sigmas", type=float, nargs="+", help="noise levels of --build-risk (default 0.065 0.1)")
+    p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
+                   help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
+    p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
+    p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
+                   help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
     sensitivity.add_arguments(p)
     args = p.parse_args(argv)
     try:  # bad engine, profile, rule or threshold: one line, before any work
@@ -293,19 +300,27 @@ def main(argv=None) -> int:
         sensitivity.check_arguments(args)
     except ValueError as e:
         p.exit(2, f"{p.prog}: error: {e}\n")
+    if args.risk_measure and not (args.build_risk and args.human_data):
+        p.error("--risk-measure needs --build-risk and --human-data")
+    if args.per_participant_sigma and not args.human_data:
+        p.error("--per-participant-sigma needs --human-data FILE")
+    args.command = "python -m lgp.reproduce " + " ".join(argv if argv is not None else sys.argv[1:])
     q = QUICK if args.quick else {}
     args.samples = args.samples or q.get("samples", SAMPLES)
     args.n_sims = args.n_sims or q.get("n_sims", N_SIMS)
     args.sigmas = tuple(args.sigmas or q.get("sigmas", SIGMA_GRID))
     args.n_boot = args.n_boot or q.get("n_boot", N_BOOT)
-    with sigterm_as_interrupt():  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
+    with stop_signals() as stop:  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
         try:
             return run(args)
-        except KeyboardInterrupt as e:
-            how = "terminated (SIGTERM)" if getattr(e, "signal", None) == signal.SIGTERM else "interrupted"
+        except BaseException as e:
+            if stop.received is None and not isinstance(e, KeyboardInterrupt):
+                raise
+            sig = stop.received or getattr(e, "signal", signal.SIGINT)
+            how = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
             resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
             print(f"{p.prog}: {how}; {resume}", file=sys.stderr)
-            return 128 + int(getattr(e, "signal", signal.SIGINT))
+            return 128 + int(sig)
 
 
 def select_trials(ids: list[str] | None, directory=None) -> list:
@@ -325,6 +340,7 @@ def select_trials(ids: list[str] | None, directory=None) -> list:
 def run(args) -> int:
     """The pipeline for parsed command-line `args` (see `main`)."""
     t0 = time.perf_counter()
+    clock = Stopwatch()  # wall time per stage, for the results page
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Cache(out / "cache", enabled=not args.no_cache)
@@ -343,14 +359,34 @@ def run(args) -> int:
             executor.start()
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
+        clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
                            fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
-        sections = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log)) \
+        clock.lap("risk")
+        sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log)) \
             if args.sensitivity else []
+        if args.sensitivity:
+            clock.lap("sensitivity")
+        if args.build_risk:
+            from lgp import build_stage
+
+            stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
+                                                   args.samples, args.seed, args.engine, executor, cache)
+            clock.lap("build risk")
+        replays = None if args.no_replays else write_replays(trials, args.seed, out / "replays", cache, executor, _log)
+        clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
+    sections, build = [], None
+    for s in sensitive:  # --sensitivity (lgp/sensitivity.py)
+        written += s.files
+        sections.append("\n".join(s.lines))
+    if args.build_risk:
+        paths, section, build = build_stage.build_risk_outputs(stages, out, args.command)
+        written += paths
+        sections.append(section)
     pairs, analysis = None, None
     if {t.id for t in trials} >= set(TRIAL_IDS):
         # Pair orderings, figures and fits are the paper's: on its 24 trials only;
@@ -365,14 +401,27 @@ def run(args) -> int:
         pairs = pair_orderings(e_mean, r, sigma, paper)
         written.append(write_csv_atomic(pairs, out / "pairs.csv"))
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
-                                seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma)
+                                seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
+                                build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
+                                risk_measure=args.risk_measure)
+        if args.per_participant_sigma:
+            from lgp import build_stage
+
+            paths, section = build_stage.participant_sigma_outputs(human, e_samples, r, out,
+                                                                   args.participant_betas, args.command)
+            written += paths
+            sections.append(section)
     else:
         _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
+    clock.lap("analysis")
     software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
-    written += [f for s in sections for f in s.files]
-    report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0, software,
-                          [line for s in sections for line in s.lines])
+    report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0, software)
+    if sections:
+        from lgp.build_stage import append_report
+
+        append_report(report, sections)
     written.append(report)
+    written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
     _log(f"cache: {cache.summary()}")
     print(f"Outputs in {out.resolve()}:")
     for path in written:
