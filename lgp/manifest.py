@@ -31,6 +31,7 @@ MANIFEST = "manifest.json"
 #: What the pipeline writes at the top of an output folder (besides the manifest and the cache).
 OUTPUT_NAMES = ("effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv", "report.md", "index.html",
                 "build_risk_stages.csv", "build_risk.csv", "build_risk_pairs.csv", "participant_sigma.csv",
+                "risk_sensitivity.csv", "risk_sensitivity_summary.csv",
                 "figures", "analysis", "replays", "page")
 TIMES = "compute_times.json"
 
