@@ -1,8 +1,10 @@
 """The 24 construction trials of the paper (Figure 1) as data files, and their loader.
 
 Each trial is a YAML file in ``stimuli/trials/`` (format: ``stimuli/README.md``).
-``load_trial("7H")`` returns a validated :class:`Trial`; ``load_all()`` the 24 trials
-in order 1E, 1H, ..., 12H plus any extra trial file a user drops in (sorted after).
+``load_trial("7H")`` returns a validated :class:`Trial`; ``load_paper()`` the paper's
+24 trials (lgp.paper.TRIAL_IDS) in order 1E, 1H, ..., 12H; ``load_all()`` those plus
+any extra trial file a user drops in (sorted after). Every loader takes a
+``directory`` (default ``stimuli/trials``) to read another set of trial files.
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from lgp.paper import BLOCK_SIZE, BUILD_SITE
+from lgp.paper import BLOCK_SIZE, BUILD_SITE, TRIAL_IDS
 from lgp.scene import (SOLID_SIZE, WORKSPACE_XY, Block, FixedBox, Scene, StimulusError, colour_shortfall,
                        horizontal_penetration)
 
@@ -279,18 +281,22 @@ def _sort_key(tid: str):
     return (int(m.group(1)), m.group(2)) if m else (10**6, tid)
 
 
-def trial_ids(directory: Path = TRIAL_DIR) -> list[str]:
+def trial_ids(directory: str | Path | None = None) -> list[str]:
+    """Ids of every trial file in `directory` (default ``stimuli/trials``), in order."""
+    directory = TRIAL_DIR if directory is None else Path(directory)
     return sorted((p.stem for p in directory.glob("*.yaml")), key=_sort_key)
 
 
 _cache: dict[tuple[str, str], Trial] = {}
 
 
-def load_trial(trial_id: str, directory: str | Path = TRIAL_DIR) -> Trial:
-    """The trial ``trial_id`` (e.g. ``"7H"``) from ``directory``, validated."""
-    path = Path(directory) / f"{trial_id}.yaml"
+def load_trial(trial_id: str, directory: str | Path | None = None) -> Trial:
+    """The trial ``trial_id`` (e.g. ``"7H"``) from `directory` (default
+    ``stimuli/trials``), validated."""
+    directory = TRIAL_DIR if directory is None else Path(directory)
+    path = directory / f"{trial_id}.yaml"
     if not path.exists():
-        raise StimulusError(f"no trial {trial_id!r}: {path} does not exist (known: {', '.join(trial_ids(Path(directory)))})")
+        raise StimulusError(f"no trial {trial_id!r}: {path} does not exist (known: {', '.join(trial_ids(directory))})")
     key = (str(path), hashlib.sha256(path.read_bytes()).hexdigest())
     if key not in _cache:
         trial = load_file(path)
@@ -300,6 +306,18 @@ def load_trial(trial_id: str, directory: str | Path = TRIAL_DIR) -> Trial:
     return _cache[key]
 
 
-def load_all(directory: str | Path = TRIAL_DIR) -> list[Trial]:
-    """Every trial in ``directory``: 1E, 1H, ..., 12H, then any others."""
-    return [load_trial(t, directory) for t in trial_ids(Path(directory))]
+def load_all(directory: str | Path | None = None) -> list[Trial]:
+    """Every trial in `directory`: 1E, 1H, ..., 12H, then any others (e.g. a
+    user's 13E). The paper's set alone is `load_paper`."""
+    return [load_trial(t, directory) for t in trial_ids(directory)]
+
+
+def load_paper(directory: str | Path | None = None) -> list[Trial]:
+    """The paper's 24 trials (lgp.paper.TRIAL_IDS, in the paper's order) from
+    `directory`, ignoring any other trial file there."""
+    return [load_trial(t, directory) for t in TRIAL_IDS]
+
+
+def extra_ids(directory: str | Path | None = None) -> list[str]:
+    """Ids of the trial files in `directory` that are not among the paper's 24."""
+    return [t for t in trial_ids(directory) if t not in TRIAL_IDS]

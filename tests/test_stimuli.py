@@ -93,6 +93,8 @@ def test_a_user_can_add_a_25th_trial(tmp_path):
     (tmp_path / "13E.yaml").write_text(yaml.safe_dump(data))
     trials = stimuli.load_all(tmp_path)
     assert len(trials) == 25 and trials[-1].id == "13E"
+    assert [t.id for t in stimuli.load_paper(tmp_path)] == IDS  # the paper's set is a named set
+    assert stimuli.extra_ids(tmp_path) == ["13E"]
 
 
 # ----------------------------------------------------------------------------- bad input
