@@ -25,9 +25,8 @@ import pandas as pd
 
 import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import executor_for
+from lgp.executor import executor_for, stop_signals
 from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
-from lgp.executor import sigterm_as_interrupt
 from lgp.page import Stopwatch, write_index, write_replays
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
@@ -279,14 +278,17 @@ def main(argv=None) -> int:
     args.n_sims = args.n_sims or q.get("n_sims", N_SIMS)
     args.sigmas = tuple(args.sigmas or q.get("sigmas", SIGMA_GRID))
     args.n_boot = args.n_boot or q.get("n_boot", N_BOOT)
-    with sigterm_as_interrupt():  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
+    with stop_signals() as stop:  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
         try:
             return run(args)
-        except KeyboardInterrupt as e:
-            how = "terminated (SIGTERM)" if getattr(e, "signal", None) == signal.SIGTERM else "interrupted"
+        except BaseException as e:
+            if stop.received is None and not isinstance(e, KeyboardInterrupt):
+                raise
+            sig = stop.received or getattr(e, "signal", signal.SIGINT)
+            how = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
             resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
             print(f"{p.prog}: {how}; {resume}", file=sys.stderr)
-            return 128 + int(getattr(e, "signal", signal.SIGINT))
+            return 128 + int(sig)
 
 
 def select_trials(ids: list[str] | None, directory=None) -> list:
