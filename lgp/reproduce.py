@@ -52,7 +52,7 @@ def risk_key_inputs(engine: str | None) -> dict:
     from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
 
     name = DEFAULT_ENGINE if engine is None else engine
-    return {"code": modules_digest("models.risk", ENGINES[name].split(":")[0], "stimuli"),
+    return {"code": modules_digest("models.risk", ENGINES[name].target.split(":")[0], "stimuli"),
             "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
 
 
