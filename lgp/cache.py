@@ -62,6 +62,20 @@ class Cache:
     def path(self, kind: str, key: str) -> Path:
         return self.root / f"{kind}-{key}.csv"
 
+    def get(self, kind: str, key: str) -> pd.DataFrame | None:
+        """The cached entry, or None when there is none (or the cache is off)."""
+        path = self.path(kind, key)
+        if self.enabled and path.exists():
+            self.hits += 1
+            return pd.read_csv(path, dtype={"trial": str})
+        return None
+
+    def put(self, kind: str, key: str, df: pd.DataFrame) -> pd.DataFrame:
+        """Store a freshly computed entry (counted as a miss) and return it."""
+        self.misses += 1
+        write_csv_atomic(df, self.path(kind, key))
+        return df
+
     def get_or_compute(self, kind: str, key: str, compute: Callable[[], pd.DataFrame]) -> pd.DataFrame:
         path = self.path(kind, key)
         if self.enabled and path.exists():

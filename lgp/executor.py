@@ -104,6 +104,11 @@ class ProcessExecutor:
         self.start_method = start_method
         self._pool = None
 
+    def start(self) -> "ProcessExecutor":
+        """Start the workers now (by default they start on the first map)."""
+        self._get_pool()
+        return self
+
     def _get_pool(self):
         if self._pool is None:
             import multiprocessing as mp

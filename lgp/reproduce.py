@@ -23,6 +23,7 @@ import pandas as pd
 
 import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
+from lgp.executor import executor_for
 from lgp.cache import Cache, code_version, input_key, write_csv_atomic
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
@@ -32,31 +33,57 @@ def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def effort_tables(trials, samples: int, seed: int, jobs: int, cache: Cache) -> pd.DataFrame:
-    """Per (trial, sample) effort, one cached file per trial."""
-    from models.effort import physical_effort
+def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd.DataFrame:
+    """Per (trial, sample) effort, one cached file per trial.
+
+    The layouts of every uncached trial are one stream of work units on the run's
+    one executor (warm workers plan across trial boundaries); a trial's file is
+    written as soon as its last layout arrives, so an interruption loses at most
+    the trials still in flight.
+    """
+    from models.effort import effort_of_unit, effort_table, effort_units
 
     # The code effort depends on (not the CLI or this cache), so editing them re-plans.
     version = code_version("lgp/scene.py", "lgp/assignment.py", "lgp/symbolic.py", "lgp/planner.py", "lgp/arm.py",
                            "lgp/komo/*.py", "models/effort.py", "models/*.sdf", "models/*.urdf", "models/*.yaml",
                            "stimuli/__init__.py")  # draws the layouts of A
-    out = []
-    for k, trial in enumerate(trials, 1):
-        key = input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, code=version)
-        t0 = time.perf_counter()
-        hit = cache.path("effort", key).exists() and cache.enabled
-        df = cache.get_or_compute("effort", key, lambda: physical_effort(trial, samples=samples, seed=seed, jobs=jobs)[1])
-        _log(f"[effort {k:2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
-             f"  ({'cached' if hit else f'{time.perf_counter() - t0:.1f} s'})")
-        out.append(df)
-    return pd.concat(out, ignore_index=True)
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, samples=samples, seed=seed, code=version) for t in trials}
+    tables: dict[str, pd.DataFrame] = {}
+    for t in trials:
+        cached = cache.get("effort", keys[t.id])
+        if cached is not None:
+            tables[t.id] = cached
+    todo = [t for t in trials if t.id not in tables]
+    units = [u for t in todo for u in effort_units(t, samples, seed)]
+    owner = [u[0] for u in units]
+    pending = {t.id: len(effort_units(t, samples, seed)) for t in todo}
+    rows: dict[str, list[dict]] = {t.id: [] for t in todo}
+    started = {t.id: None for t in todo}
+    t0 = time.perf_counter()
+
+    def arrived(k, row):
+        trial = owner[k]
+        rows[trial.id].append(row)
+        pending[trial.id] -= 1
+        if pending[trial.id] == 0:
+            tables[trial.id] = cache.put("effort", keys[trial.id], effort_table(trial, samples, rows[trial.id]))
+            df = tables[trial.id]
+            _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
+                 f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
+
+    for t in trials:
+        if t.id in tables and t.id not in rows:
+            _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
+                 f" over {len(tables[t.id])} layouts  (cached)")
+    executor.map(effort_of_unit, units, arrived)
+    return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
-def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, jobs: int, cache: Cache, chunk: int = 6) -> pd.DataFrame:
+def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6) -> pd.DataFrame:
     """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
 
-    Uncached trials are simulated a few at a time in one process pool, so the
-    grid keeps both cores busy and an interruption loses at most one chunk.
+    Uncached trials are simulated a few at a time on the run's one executor, so
+    the grid keeps every worker busy and an interruption loses at most one chunk.
     """
     from models.risk import risk_table
 
@@ -67,16 +94,15 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, jobs
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
-        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, jobs=jobs)
+        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor)
         for t in group:
-            fresh[t.id] = table[table["trial"] == t.id].reset_index(drop=True)
-            write_csv_atomic(fresh[t.id], cache.path("risk", keys[t.id]))
+            fresh[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     out = []
     for k, trial in enumerate(trials, 1):
         df = fresh.get(trial.id)
         if df is None:
-            df = cache.get_or_compute("risk", keys[trial.id], lambda: risk_table([trial], sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, jobs=jobs))
+            df = cache.get_or_compute("risk", keys[trial.id], lambda: risk_table([trial], sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor))
         curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
         _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)
@@ -218,9 +244,14 @@ def main(argv=None) -> int:
         human = load_human_data(args.human_data)  # validate before the long work
     _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}; cache {cache.root}")
 
-    effort_samples = effort_tables(trials, args.samples, args.seed, args.jobs, cache)
-    effort = summarise_effort(effort_samples, trials)
-    risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, args.jobs, cache, args.risk_chunk)
+    # One executor for the whole run: its workers start now, before this process
+    # imports Drake or MuJoCo, and stay warm across trials and stages.
+    with executor_for(args.jobs) as executor:
+        if hasattr(executor, "start"):
+            executor.start()
+        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
+        effort = summarise_effort(effort_samples, trials)
+        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk)
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]

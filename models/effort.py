@@ -74,9 +74,24 @@ def effort_of_sample(trial, seed: int, sample: int) -> dict:
     }
 
 
-def _row(args):
-    trial, seed, sample = args
+def effort_units(trial, samples: int, seed: int) -> list[tuple]:
+    """The work units of a trial's effort, (trial, seed, sample), one per layout
+    that needs planning: every sample, or only sample 0 when A is not random."""
+    return [(trial, seed, i) for i in (range(samples) if trial.initial.is_random else [0])]
+
+
+def effort_of_unit(unit) -> dict:
+    """effort_of_sample for one unit of `effort_units` (what executors map)."""
+    trial, seed, sample = unit
     return effort_of_sample(trial, seed, sample)
+
+
+def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
+    """The tidy (trial, sample) table from the rows of a trial's units (any order);
+    a trial whose A is not random has its one row repeated for every sample."""
+    if not trial.initial.is_random:
+        rows = [{**rows[0], "sample": i} for i in range(samples)]
+    return pd.DataFrame(rows, columns=COLUMNS).sort_values("sample").reset_index(drop=True)
 
 
 def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
@@ -96,22 +111,18 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
         trial = stimuli.load_trial(trial)
     if samples < 1:
         raise ValueError(f"physical_effort needs samples >= 1, got {samples}")
-    todo = list(range(samples)) if trial.initial.is_random else [0]
-    rows: list[dict] = []
+    units = effort_units(trial, samples, seed)
     done = 0
 
-    def record(row):
+    def record(_, row):
         nonlocal done
-        rows.append(row)
         done += 1 if trial.initial.is_random else samples
         if progress is not None:
             progress(done, samples)
 
-    with borrowed(executor, jobs if len(todo) > 1 else 1) as ex:
-        ex.map(_row, [(trial, seed, i) for i in todo], lambda _, row: record(row))
-    if not trial.initial.is_random:
-        rows = [{**rows[0], "sample": i} for i in range(samples)]
-    table = pd.DataFrame(rows, columns=COLUMNS).sort_values("sample").reset_index(drop=True)
+    with borrowed(executor, jobs if len(units) > 1 else 1) as ex:
+        rows = ex.map(effort_of_unit, units, record)
+    table = effort_table(trial, samples, rows)
     return float(table["effort"].mean()), table
 
 
