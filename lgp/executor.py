@@ -281,7 +281,24 @@ def _connect(Client, address: str, timeout: float):
     parts = urlsplit(address if "://" in address else f"tcp://{address}")
     if parts.scheme in ("tcp", "tls") and parts.hostname:
         socket.create_connection((parts.hostname, parts.port or 8786), timeout=timeout).close()
-    return Client(address, timeout=f"{timeout}s", set_as_default=False)
+    # Client's own timeout does not cover a peer that accepts TCP and then stays
+    # silent, so the connection is made in a daemon thread with a hard deadline.
+    box: dict = {}
+
+    def connect():
+        try:
+            box["client"] = Client(address, timeout=f"{timeout}s", set_as_default=False)
+        except BaseException as e:  # handed to the caller
+            box["error"] = e
+
+    thread = threading.Thread(target=connect, name="dask-connect", daemon=True)
+    thread.start()
+    thread.join(timeout + 1.0)
+    if thread.is_alive():
+        raise TimeoutError(f"no answer within {timeout:g} s")
+    if "error" in box:
+        raise box["error"]
+    return box["client"]
 
 
 def executor_for_scheduler(scheduler: str | None, jobs: int | None = None):

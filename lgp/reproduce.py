@@ -23,7 +23,8 @@ import pandas as pd
 
 import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import executor_for
+from lgp.executor import SchedulerUnreachable, executor_for_scheduler
+from lgp.progress import Progress
 from lgp.cache import Cache, code_version, input_key, write_csv_atomic
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
@@ -60,8 +61,10 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
     started = {t.id: None for t in todo}
     t0 = time.perf_counter()
+    bar = Progress("effort", len(units), "plans")
 
     def arrived(k, row):
+        bar.advance()
         trial = owner[k]
         rows[trial.id].append(row)
         pending[trial.id] -= 1
@@ -75,7 +78,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
         if t.id in tables and t.id not in rows:
             _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
                  f" over {len(tables[t.id])} layouts  (cached)")
-    executor.map(effort_of_unit, units, arrived)
+    with bar:
+        executor.map(effort_of_unit, units, arrived)
     return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
@@ -91,13 +95,18 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, code=version) for t in trials}
     todo = [t for t in trials if not (cache.enabled and cache.path("risk", keys[t.id]).exists())]
     fresh: dict[str, pd.DataFrame] = {}
+    bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs")
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
-        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor)
+        base = bar.done
+        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
+                           progress=lambda done, total: bar.advance(base + done - bar.done))
         for t in group:
             fresh[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
+    if todo:
+        bar.close()
     out = []
     for k, trial in enumerate(trials, 1):
         df = fresh.get(trial.id)
@@ -218,7 +227,9 @@ def main(argv=None) -> int:
     p.add_argument("--n-sims", type=int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
     p.add_argument("--sigmas", type=float, nargs="+", help="noise levels in units of d (default: 0.05..0.10 step 0.005)")
     p.add_argument("--engine", choices=["mujoco", "drake"], help="physics engine for risk (default: the models.risk default)")
-    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes, or LocalCluster workers with --scheduler local-dask (default: all cores)")
+    p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
+                   "(a LocalCluster of --jobs workers); default: a local process pool. Needs the [dask] extra (docs/scaling.md)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--n-boot", type=int, help="bootstrap resamples (default 1000; --quick 200)")
     p.add_argument("--human-data", help="CSV of human responses (docs/human-data.md)")
@@ -242,11 +253,16 @@ def main(argv=None) -> int:
         from analysis import load_human_data
 
         human = load_human_data(args.human_data)  # validate before the long work
-    _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}; cache {cache.root}")
+    _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}"
+         f"{f', scheduler ' + args.scheduler if args.scheduler else ''}; cache {cache.root}")
 
     # One executor for the whole run: its workers start now, before this process
     # imports Drake or MuJoCo, and stay warm across trials and stages.
-    with executor_for(args.jobs) as executor:
+    try:
+        executor = executor_for_scheduler(args.scheduler, args.jobs)
+    except (SchedulerUnreachable, ImportError) as e:
+        p.exit(2, f"{p.prog}: error: {e}\n")
+    with executor:
         if hasattr(executor, "start"):
             executor.start()
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
