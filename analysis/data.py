@@ -9,8 +9,11 @@ read what a user supplies (see docs/human-data.md) or, in tests only, what
 """
 from __future__ import annotations
 
+import codecs
 import csv
+import io
 import math
+import re
 from pathlib import Path
 from typing import Iterable, Mapping
 
@@ -85,25 +88,28 @@ def load_human_data(path: str | Path, *, allow_simulated: bool = False) -> pd.Da
     simulated participants cannot be loaded as human data by accident.
     """
     path = Path(path)
-    with path.open(newline="", encoding="utf-8-sig") as handle:
-        reader = csv.reader(handle)
-        header = next(reader, None)
-        if header is None:
-            raise HumanDataError(f"{path}: line 1: empty file, expected a header with "
-                                 f"columns {', '.join(REQUIRED_COLUMNS)}", line=1)
-        header = [name.strip() for name in header]
-        rows, lines = [], []
-        for record in reader:
-            if not record or all(not field.strip() for field in record):
-                continue  # blank line
-            # Short rows are padded so the missing field fails its own check below.
-            record = record + [""] * (len(header) - len(record))
-            rows.append(record[: len(header)])
-            lines.append(reader.line_num)
+    text = _read_text(path)
+    reader = csv.reader(io.StringIO(text, newline=""))
+    header = next(reader, None)
+    if header is None:
+        raise HumanDataError(f"{path}: line 1: empty file, expected a header with "
+                             f"columns {', '.join(REQUIRED_COLUMNS)}", line=1)
+    header = [name.strip() for name in header]
+    rows, lines = [], []
+    for record in reader:
+        if not record or all(not field.strip() for field in record):
+            continue  # blank line
+        # Short rows are padded so the missing field fails its own check below.
+        record = record + [""] * (len(header) - len(record))
+        rows.append(record[: len(header)])
+        lines.append(reader.line_num)
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     if missing:
         raise HumanDataError(f"{path}: line 1 (header): missing column(s) {', '.join(missing)}; "
                              f"found {', '.join(header) or 'none'}", line=1)
+    if not rows:
+        raise HumanDataError(f"{path}: line 1 (header): no responses after the header; expected one row "
+                             f"per (dataset, participant, trial)", line=1)
     table = pd.DataFrame(rows, columns=header, dtype=str)
     return validate_human_data(table, lines=lines, source=str(path), allow_simulated=allow_simulated)
 
@@ -132,50 +138,76 @@ def validate_human_data(
     elif "line" not in table.columns:  # a table from load_human_data keeps its CSV lines
         table["line"] = np.arange(len(table)) + 2
     for column in ("dataset", "participant", "trial"):
-        table[column] = table[column].map(lambda v: "" if _is_missing(v) else str(v).strip())
+        col = table[column]
+        table[column] = col.where(col.notna(), "").astype(str).str.strip()
     table["trial"] = table["trial"].str.upper()
+    if len(table) == 0:
+        raise HumanDataError(f"{source}: no responses; expected one row per (dataset, participant, trial)", line=1)
 
+    # One vectorised test per rule; messages only for the rows that break it. A
+    # stable sort by line in _raise_if keeps each line's problems in rule order.
     allowed = set(DATASETS) | ({SIMULATED_PREFIX + d for d in DATASETS} if allow_simulated else set())
+    line = table["line"].to_numpy()
     problems: list[tuple[int, str]] = []
-    values = np.full(len(table), np.nan)
-    for k, (line, dataset, participant, trial, response) in enumerate(
-        zip(table["line"], table["dataset"], table["participant"], table["trial"], table["response"])
-    ):
-        if dataset not in allowed:
-            hint = (" (simulated participants are not human data; pass allow_simulated=True "
-                    "only in tests)" if is_simulated_dataset(dataset) else "")
-            problems.append((line, f"unknown dataset {dataset!r}; expected one of "
-                                   f"{', '.join(sorted(allowed))}{hint}"))
-        if participant == "":
-            problems.append((line, "empty participant id"))
-        if trial not in TRIAL_IDS:
-            problems.append((line, f"unknown trial id {trial!r}; expected 1E, 1H, ..., 12H"))
-        value = _parse_response(response)
-        if isinstance(value, str):
-            problems.append((line, value))
-        else:
-            values[k] = value
+    for k in np.flatnonzero(~table["dataset"].isin(allowed).to_numpy()):
+        dataset = table["dataset"].iat[k]
+        hint = (" (simulated participants are not human data; pass allow_simulated=True "
+                "only in tests)" if is_simulated_dataset(dataset) else "")
+        problems.append((line[k], f"unknown dataset {dataset!r}; expected one of "
+                                  f"{', '.join(sorted(allowed))}{hint}"))
+    for k in np.flatnonzero((table["participant"] == "").to_numpy()):
+        problems.append((line[k], "empty participant id"))
+    for k in np.flatnonzero(~table["trial"].isin(TRIAL_IDS).to_numpy()):
+        problems.append((line[k], f"unknown trial id {table['trial'].iat[k]!r}; expected 1E, 1H, ..., 12H"))
+    values, bad = _parse_responses(table["response"])
+    problems += [(line[k], message) for k, message in bad]
+    problems.sort(key=lambda p: p[0])  # stable: rule order within a line
     _raise_if(problems, source)
     table["response"] = values
 
-    duplicated = table.duplicated(["dataset", "participant", "trial"], keep=False)
-    for _, group in table[duplicated].groupby(["dataset", "participant", "trial"], sort=False):
+    keys = ["dataset", "participant", "trial"]
+    duplicated = table.duplicated(keys, keep=False)
+    for _, group in table[duplicated].groupby(keys, sort=False):
         first, *others = group["line"].tolist()
-        for line in others:
-            d, p, t = group.iloc[0][["dataset", "participant", "trial"]]
-            problems.append((line, f"duplicate response of participant {p!r} in dataset {d!r} "
-                                   f"to trial {t} (first given on line {first})"))
+        for line_k in others:
+            d, p, t = group.iloc[0][keys]
+            problems.append((line_k, f"duplicate response of participant {p!r} in dataset {d!r} "
+                                     f"to trial {t} (first given on line {first})"))
     _raise_if(problems, source)
 
-    for (dataset, participant), group in table.groupby(["dataset", "participant"], sort=False):
-        absent = [t for t in TRIAL_IDS if t not in set(group["trial"])]
-        if absent:
-            line_list = group["line"].tolist()
-            problems.append((min(line_list), f"participant {participant!r} in dataset {dataset!r} "
-                                             f"(rows on lines {_line_ranges(line_list)}) is missing "
-                                             f"trial(s) {', '.join(absent)}"))
+    # Trials are known and unique per participant now, so fewer than 24 rows means
+    # some are missing; only those participants are looked at one by one.
+    by_participant = table.groupby(["dataset", "participant"], sort=False)
+    sizes = by_participant["trial"].transform("size")
+    for (dataset, participant), group in table[sizes < len(TRIAL_IDS)].groupby(["dataset", "participant"], sort=False):
+        answered = set(group["trial"])
+        absent = [t for t in TRIAL_IDS if t not in answered]
+        line_list = group["line"].tolist()
+        problems.append((min(line_list), f"participant {participant!r} in dataset {dataset!r} "
+                                         f"(rows on lines {_line_ranges(line_list)}) is missing "
+                                         f"trial(s) {', '.join(absent)}"))
+    _raise_if(problems, source)
+    problems += _unscalable(table)
     _raise_if(problems, source)
     return table
+
+
+def _unscalable(table: pd.DataFrame) -> list[tuple[int, str]]:
+    """Participants whose responses cannot be z-scored in floating point: mean or
+    SD overflow (a response of 1e308), as (first line, message)."""
+    keys = [table["dataset"], table["participant"]]
+    with np.errstate(over="ignore", invalid="ignore"):
+        grouped = table["response"].groupby(keys, sort=False)
+        stats = pd.DataFrame({"mean": grouped.mean(), "sd": grouped.std(ddof=0),
+                              "biggest": table["response"].abs().groupby(keys, sort=False).max()})
+    broken = stats[~(np.isfinite(stats["mean"]) & np.isfinite(stats["sd"]))]
+    out = []
+    for (dataset, participant), row in broken.iterrows():
+        line_list = table.loc[(table["dataset"] == dataset) & (table["participant"] == participant), "line"].tolist()
+        out.append((min(line_list), f"participant {participant!r} in dataset {dataset!r} (rows on lines "
+                                    f"{_line_ranges(line_list)}): responses too large to z-score (largest "
+                                    f"|response| {row['biggest']:.3g}; the mean or SD overflows)"))
+    return out
 
 
 def exclude_constant_participants(responses: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -208,7 +240,8 @@ def zscore_responses(responses: pd.DataFrame, ddof: int = 0) -> pd.DataFrame:
 
     Returns a copy of `responses` with a column ``z``. Raises ValueError naming
     the participant if their SD is zero (drop them first with
-    `exclude_constant_participants`).
+    `exclude_constant_participants`), and HumanDataError naming the participant if
+    a z-score is not finite (responses so large that the mean or SD overflows).
     """
     grouped = responses.groupby(["dataset", "participant"], sort=False)["response"]
     mean = grouped.transform("mean")
@@ -220,7 +253,14 @@ def zscore_responses(responses: pd.DataFrame, ddof: int = 0) -> pd.DataFrame:
         d, p = flat.iloc[0]
         raise ValueError(f"participant {p!r} in dataset {d!r} gave the same response on every "
                          "trial, so their z-scores are undefined; use exclude_constant_participants")
-    return responses.assign(z=(responses["response"] - mean) / sd)
+    with np.errstate(over="ignore", invalid="ignore"):
+        z = (responses["response"] - mean) / sd
+    broken = ~(np.isfinite(z) & np.isfinite(sd))
+    if broken.any():
+        d, p = responses.loc[broken, ["dataset", "participant"]].iloc[0]
+        raise HumanDataError(f"participant {p!r} in dataset {d!r}: z-scores are not finite (responses too "
+                             "large to z-score: the mean or SD overflows)")
+    return responses.assign(z=z)
 
 
 def participant_matrices(zscored: pd.DataFrame) -> dict[str, tuple[list[str], np.ndarray]]:
@@ -295,6 +335,13 @@ def _is_missing(value) -> bool:
     return value is None or (isinstance(value, float) and math.isnan(value))
 
 
+#: A number as a CSV cell writes it: optional sign, digits with an optional decimal
+#: point, optional exponent. Stricter than Python's float(), which also takes
+#: ``1_000`` and non-ASCII digits.
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_NON_FINITE = {"inf", "infinity", "nan"}
+
+
 def _parse_response(raw) -> float | str:
     """The response as a finite float, or a message saying why it is not one."""
     if isinstance(raw, (int, float, np.integer, np.floating)) and not isinstance(raw, bool):
@@ -304,13 +351,66 @@ def _parse_response(raw) -> float | str:
         text = "" if _is_missing(raw) else str(raw).strip()
         if text == "":
             return "empty response (expected a number)"
-        try:
+        if _NUMBER.fullmatch(text) or text.lower().lstrip("+-") in _NON_FINITE:
             value = float(text)
-        except ValueError:
+        elif "_" in text and _NUMBER.fullmatch(text.replace("_", "")):
+            return f"non-numeric response {text!r} (a CSV number has no '_' digit separators)"
+        else:
             return f"non-numeric response {text!r}"
     if not math.isfinite(value):
         return f"non-finite response {text!r} (expected a finite number)"
     return value
+
+
+def _parse_responses(raw: pd.Series) -> tuple[np.ndarray, list[tuple[int, str]]]:
+    """Vectorised `_parse_response` over a column: (floats, [(row, message)] for
+    the rows that are not finite numbers). Plain number cells are converted in
+    one pass; only the others go through `_parse_response` one by one."""
+    values = np.full(len(raw), np.nan)
+    if pd.api.types.is_numeric_dtype(raw) and not pd.api.types.is_bool_dtype(raw):
+        with np.errstate(invalid="ignore"):
+            values[:] = raw.to_numpy(dtype=float)
+        ok = np.isfinite(values)
+    else:
+        cells = raw.to_numpy(dtype=object)
+        text = pd.Series(cells, dtype=object).str.strip()  # NaN where a cell is not a string
+        ok = np.array(text.str.fullmatch(_NUMBER.pattern).fillna(False), dtype=bool)
+        with np.errstate(over="ignore"):
+            values[ok] = text[ok].to_numpy(dtype=object).astype(float)
+        ok &= np.isfinite(values)
+    bad = []
+    for k in np.flatnonzero(~ok):
+        parsed = _parse_response(raw.iat[k])
+        if isinstance(parsed, str):
+            bad.append((k, parsed))
+        else:
+            values[k] = parsed
+    return values, bad
+
+
+def _read_text(path: Path) -> str:
+    """The file's text: UTF-8 (with or without BOM), or UTF-16/32 when a byte-order
+    mark says so; anything else raises HumanDataError naming file, line and encoding."""
+    data = path.read_bytes()
+    for bom, encoding in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
+                          (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"),
+                          (codecs.BOM_UTF16_BE, "utf-16")):
+        if data.startswith(bom):
+            break
+    else:
+        encoding = "utf-8"
+        if b"\x00" in data:  # no CSV text holds NUL; UTF-16/32 text of ASCII is full of them
+            line = data[: data.index(b"\x00")].count(b"\n") + 1
+            raise HumanDataError(f"{path}: line {line}: not UTF-8 text (NUL bytes: UTF-16 or UTF-32 without a "
+                                 "byte-order mark?); save the file as UTF-8", line=line)
+    try:
+        return data.decode(encoding)
+    except UnicodeDecodeError as e:
+        line = data[: e.start].count(b"\n") + 1 if encoding == "utf-8" else None
+        where = f"line {line}" if line else "file"
+        raise HumanDataError(f"{path}: {where}: not {encoding.upper().replace('-SIG', '')} text (byte "
+                             f"0x{data[e.start]:02x} at offset {e.start}); save the file as UTF-8 (a "
+                             "UTF-16 or UTF-32 file needs its byte-order mark)", line=line) from None
 
 
 def _raise_if(problems: list[tuple[int, str]], source: str) -> None:

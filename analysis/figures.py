@@ -202,6 +202,38 @@ def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
     return _finish(fig, "Model quantities per easy/hard pair", from_fits, out_dir, stem)
 
 
+def plot_participant_sigma(table: pd.DataFrame, out_dir: str | Path,
+                           stem: str = "participant_sigma") -> list[Path]:
+    """Per dataset: a histogram of participants' sigmas (identified ones filled,
+    ones whose interval is the whole range hatched) above their profile-likelihood
+    intervals, sorted. `table` from `analysis.fit_participant_sigma`."""
+    datasets = ordered_datasets(table["dataset"].unique())
+    fig = Figure(figsize=(max(5.5, 3.6 * len(datasets)), 5.2))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, len(datasets), squeeze=False, sharex=True, gridspec_kw={"height_ratios": [1, 1.3]})
+    lo, hi = float(table["sigma_low"].min()), float(table["sigma_high"].max())
+    bins = np.linspace(lo, hi, 11) if hi > lo else 10
+    for k, dataset in enumerate(datasets):
+        g = table[table["dataset"] == dataset]
+        ident = g[g["identified"]]
+        ax = axes[0, k]
+        ax.hist([ident["sigma"], g.loc[~g["identified"], "sigma"]], bins=bins, stacked=True,
+                color=["tab:blue", "white"], edgecolor="tab:blue", hatch=None,
+                label=["interval inside the range", "interval = whole range"])
+        ax.set_title(f"{dataset_label(dataset)} (n = {len(g)})", fontsize=9)
+        ax.set_ylabel("participants")
+        if k == 0:
+            ax.legend(fontsize=7, frameon=False)
+        ax = axes[1, k]
+        g = g.sort_values(["sigma", "sigma_low"]).reset_index(drop=True)
+        ax.hlines(np.arange(len(g)), g["sigma_low"], g["sigma_high"], color="0.5", lw=1)
+        ax.plot(g["sigma"], np.arange(len(g)), "o", ms=3, color="tab:blue")
+        ax.set_xlabel("sigma (units of d)")
+        ax.set_ylabel(f"participant (sorted), {int(100 * g['level'].iloc[0])}% interval")
+    return _finish(fig, "Each participant's sigma, Eq. 1 (profile-likelihood intervals)", datasets,
+                   out_dir, stem)
+
+
 def _trial_x() -> np.ndarray:
     """x positions of the 24 trials: E and H of a pair 1 apart, pairs 2.6 apart."""
     return np.array([2.6 * (int(t[:-1]) - 1) + (t[-1] == "H") for t in TRIAL_IDS], dtype=float)

@@ -32,6 +32,14 @@ MODELS: tuple[str, ...] = ("full", "effort", "risk")
 MODEL_LABELS = {"full": "Full (effort + risk)", "effort": "Effort only", "risk": "Risk only"}
 #: What b1, b2 multiply in each model (b0 is the intercept).
 MODEL_TERMS = {"full": ("E(1-R)", "E*R"), "effort": ("E",), "risk": ("R",)}
+#: Aggregates of risk through the build (models/risk/build.py, docs/results.md) that
+#: may stand in for R: final-stage risk, max over stages, expected number of
+#: collapses, probability of at least one, and the care-weighted sum. Only
+#: final, max and any are probabilities; expected and care may exceed 1.
+RISK_MEASURES: tuple[str, ...] = ("final", "max", "expected", "any", "care")
+PROBABILITY_MEASURES = ("final", "max", "any")
+#: Models whose R is a build-risk aggregate are named like ``full[max]``.
+MEASURE_BASES: tuple[str, ...] = ("full", "risk")
 #: Two sigmas closer than this are the same grid value (0.065 vs 0.0650000001).
 SIGMA_ATOL = 1e-9
 
@@ -115,9 +123,77 @@ def risk_at_sigma(risk_table: pd.DataFrame, sigma: float) -> pd.Series:
     return series
 
 
-def design_matrix(model: str, effort: pd.Series, risk: pd.Series | None = None) -> np.ndarray:
+def measure_model(base: str, measure: str) -> str:
+    """Name of model `base` ('full' or 'risk') with build-risk aggregate `measure` as R."""
+    if base not in MEASURE_BASES or measure not in RISK_MEASURES:
+        raise ModelInputError(f"no model {base}[{measure}]: bases {', '.join(MEASURE_BASES)}, "
+                              f"measures {', '.join(RISK_MEASURES)}")
+    return f"{base}[{measure}]"
+
+
+def split_model(model: str) -> tuple[str, str | None]:
+    """'full[max]' -> ('full', 'max'); 'full' -> ('full', None)."""
+    if model.endswith("]") and "[" in model:
+        base, measure = model[:-1].split("[", 1)
+        measure_model(base, measure)  # validates
+        return base, measure
+    return model, None
+
+
+def measure_at_sigma(build_table: pd.DataFrame, sigma: float, measure: str) -> pd.Series:
+    """One build-risk aggregate per trial at one sigma, a Series indexed by TRIAL_IDS.
+
+    `build_table` has columns trial, sigma, measure, risk (models.risk.build's
+    `measure_table`). Raises ModelInputError naming the measure, sigma and trial
+    for a missing row, a negative or non-finite value, or a probability measure
+    above 1.
+    """
+    for column in ("trial", "sigma", "measure", "risk"):
+        if column not in build_table.columns:
+            raise ModelInputError(f"build-risk table lacks column {column!r}; "
+                                  f"found {', '.join(map(str, build_table.columns))}")
+    if measure not in RISK_MEASURES:
+        raise ModelInputError(f"unknown risk measure {measure!r}; expected one of {', '.join(RISK_MEASURES)}")
+    rows = build_table[(build_table["measure"] == measure)
+                       & np.isclose(build_table["sigma"].astype(float), sigma, rtol=0, atol=SIGMA_ATOL)]
+    if rows.empty:
+        have = np.unique(np.round(build_table["sigma"].astype(float), 9))
+        raise ModelInputError(f"build-risk table has no {measure!r} rows at sigma {sigma:g}; it has sigma "
+                              f"{', '.join(f'{s:g}' for s in have)}")
+    series = pd.Series(pd.to_numeric(rows["risk"], errors="coerce").to_numpy(),
+                       index=rows["trial"].astype(str).str.strip().str.upper(), name="risk")
+    series = _check_per_trial(series, f"build risk {measure!r} at sigma {sigma:g}", nonnegative=True)
+    if measure in PROBABILITY_MEASURES and (series > 1).any():
+        t = series.index[(series > 1).to_numpy()][0]
+        raise ModelInputError(f"build risk {measure!r} of trial {t} at sigma {sigma:g} is {series[t]:g}, "
+                              "above 1 (it is a probability)")
+    return series
+
+
+def risk_inputs(R: pd.Series, build_table: pd.DataFrame | None = None, sigma: float | None = None) -> pd.DataFrame:
+    """The risks the models read, one column per source, indexed by TRIAL_IDS:
+    ``R`` (used by full and risk) and one column per build-risk measure (used by
+    ``full[measure]`` and ``risk[measure]``) when `build_table` is given."""
+    out = pd.DataFrame({"R": R.reindex(list(TRIAL_IDS))})
+    if build_table is not None:
+        for m in RISK_MEASURES:
+            out[m] = measure_at_sigma(build_table, sigma, m)
+    return out
+
+
+def design_matrix(model: str, effort: pd.Series, risk: pd.Series | pd.DataFrame | None = None) -> np.ndarray:
     """The (24, p) regressor matrix of `model`, rows in TRIAL_IDS order, first
-    column the intercept."""
+    column the intercept. `risk` is a per-trial Series, or a DataFrame from
+    `risk_inputs` (column R for full and risk, column m for full[m] and risk[m])."""
+    model, measure = split_model(model)
+    if isinstance(risk, pd.DataFrame):
+        column = measure or "R"
+        if column not in risk.columns:
+            raise ModelInputError(f"model {model}[{measure}] needs build risk {measure!r}; "
+                                  f"the risk inputs have {', '.join(risk.columns)}")
+        risk = risk[column]
+    elif measure is not None:
+        raise ModelInputError(f"model {model}[{measure}] needs the build-risk aggregates (risk_inputs)")
     E = effort.reindex(list(TRIAL_IDS)).to_numpy(dtype=float)
     ones = np.ones_like(E)
     if model == "effort":

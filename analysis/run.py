@@ -7,13 +7,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.bootstrap import bootstrap_model_correlations, bootstrap_tests, summarize_bootstrap
+from analysis.bootstrap import COMPARISONS, bootstrap_model_correlations, bootstrap_tests, summarize_bootstrap
 from analysis.data import (exclude_constant_participants, is_simulated, load_human_data,
                            resample_trial_means, trial_mean_intervals, validate_human_data,
                            zscore_responses)
 from analysis.figures import (plot_effort_risk, plot_model_correlations, plot_sigma_profile,
                               plot_trial_means)
-from analysis.models import effort_per_trial, fit_models, risk_at_sigma, risk_sigmas
+from analysis.models import (MEASURE_BASES, MODELS, RISK_MEASURES, effort_per_trial, fit_models,
+                             measure_at_sigma, measure_model, risk_at_sigma, risk_inputs, risk_sigmas)
 from analysis.pairs import pair_table
 from analysis.sigma import PAPER_SIGMA, choose_sigma, sigma_profile
 
@@ -21,7 +22,8 @@ from analysis.sigma import PAPER_SIGMA, choose_sigma, sigma_profile
 def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
                  risk_table: pd.DataFrame, out_dir: str | Path, seed: int,
                  n_boot: int = 1000, jobs: int = 2, sigma: float | None = None,
-                 sigmas=None, figures: bool = True) -> dict[str, pd.DataFrame]:
+                 sigmas=None, figures: bool = True, build_risk: pd.DataFrame | None = None,
+                 risk_measure: str | None = None) -> dict[str, pd.DataFrame]:
     """Run the paper's analysis and write tidy CSVs and figures into `out_dir`.
 
     Parameters
@@ -45,6 +47,15 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         risk table has it, else the table's sigma nearest to 0.065.
     sigmas : sigmas for the RMSE profile (default: all in the risk table).
     figures : write figures (PNG and PDF) as well as CSVs.
+    build_risk : optional aggregates of risk through the build, long form
+        (trial, sigma, measure, risk; models.risk.build.measure_table). With
+        human data, every measure m adds models full[m] and risk[m] (Eq. 1 and
+        the risk lesion with m in place of R) to the fits, the bootstrap and the
+        tests (full[m] against full). They are read at the table's sigma
+        nearest the chosen sigma (settings: build_risk_sigma).
+    risk_measure : one of final, max, expected, any, care: the plain models
+        full and risk use that aggregate as R instead of the final-state risk
+        table (needs `build_risk`). None: the paper's R.
 
     Returns
     -------
@@ -99,8 +110,23 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     else:
         rule = "given by caller"
     R = risk_at_sigma(risk_table, sigma)
-    fits, predictions = fit_models(means, E, R, sigma)
-    boot = bootstrap_model_correlations(boot_means, E, R, jobs=jobs)
+    models, comparisons, build_sigma = list(MODELS), list(COMPARISONS), None
+    if risk_measure is not None and risk_measure not in RISK_MEASURES:
+        raise ValueError(f"unknown risk measure {risk_measure!r}; expected one of {', '.join(RISK_MEASURES)}")
+    if build_risk is not None:
+        have = np.unique(np.round(build_risk["sigma"].astype(float), 9))
+        build_sigma = float(have[np.argmin(np.abs(have - sigma))])
+        if risk_measure is not None:
+            R = measure_at_sigma(build_risk, build_sigma, risk_measure)
+        inputs = risk_inputs(R, build_risk, build_sigma)
+        models += [measure_model(b, m) for m in RISK_MEASURES for b in MEASURE_BASES]
+        comparisons += [(measure_model("full", m), "full") for m in RISK_MEASURES]
+    elif risk_measure is not None:
+        raise ValueError(f"risk measure {risk_measure!r} needs the build-risk table (build_risk=...)")
+    else:
+        inputs = R
+    fits, predictions = fit_models(means, E, inputs, sigma, models=models)
+    boot = bootstrap_model_correlations(boot_means, E, inputs, models=models, jobs=jobs)
 
     pairs = [_model_pairs(E, R)]
     for dataset, group in means.groupby("dataset", sort=True):
@@ -115,6 +141,8 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         "settings": pd.DataFrame([{
             "human_data": not simulated, "simulated": simulated, "seed": seed, "n_boot": n_boot,
             "jobs": jobs, "sigma": sigma, "sigma_rule": rule, "zscore_sd": "population (ddof=0)",
+            "risk_measure": risk_measure or "paper (final-state risk table)",
+            "build_risk_sigma": build_sigma if build_sigma is not None else np.nan,
             "participants": "; ".join(f"{d}={n}" for d, n in counts.items()),
             "excluded": len(excluded)}]),
         "excluded_participants": excluded,
@@ -126,7 +154,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         "predictions": predictions,
         "bootstrap_correlations": boot,
         "bootstrap_summary": summarize_bootstrap(boot, fits),
-        "bootstrap_tests": bootstrap_tests(boot, fits),
+        "bootstrap_tests": bootstrap_tests(boot, fits, comparisons),
         "pairs": _tidy_pairs(pd.concat(pairs, ignore_index=True)),
     })
     if figures:

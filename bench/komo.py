@@ -21,16 +21,13 @@ from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
-from scipy import sparse
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from pydrake.solvers import MathematicalProgram  # noqa: E402
-
 import lgp.planner as planner  # noqa: E402
-from lgp.komo import Komo  # noqa: E402
 from lgp.paper import BUILD_SITE  # noqa: E402
+from models.effort import kinetic_energy  # noqa: E402
 from lgp.scene import BLOCK_SIZE, Block, Scene  # noqa: E402
 
 SIZES = (1, 5, 10, 15)
@@ -61,26 +58,6 @@ def run(A, B, repeats=1, **kw):
     return float(np.median(times)), p
 
 
-class _UnliftedKomo(Komo):
-    """The full program with the control cost written on q directly (no residual variables)."""
-
-    def _solve_full(self, W, w0, C, E, nonlinear, X0, backend):
-        prog = MathematicalProgram()
-        x = prog.NewContinuousVariables(self.N, self.nq, "q")
-        xs = x.reshape(-1)
-        eye = sparse.eye(self.nq)
-        prog.AddQuadraticCost(sparse.kron(2 * (W.T @ W), eye).toarray(), 2 * (W.T @ w0).reshape(-1), float(np.sum(w0 * w0)), xs, is_convex=True)
-        if C.shape[0]:
-            prog.AddLinearEqualityConstraint(sparse.kron(C, eye).tocsc(), E.reshape(-1), xs)
-        prog.AddBoundingBoxConstraint(np.tile(self.q_lower, self.N), np.tile(self.q_upper, self.N), xs)
-        for o, s in nonlinear:
-            for c in self._constraints(o, s):
-                prog.AddConstraint(c, x[s])
-        prog.SetInitialGuess(x, X0)
-        result = backend.solve(prog)
-        return result.GetSolution(x).reshape(self.N, self.nq), result, prog.num_vars()
-
-
 def unlifted_full(A, B, options):
     """Solve the 1-block plan's full program with the cost on q: (seconds, cost, status)."""
     from lgp.assignment import assign_blocks
@@ -89,11 +66,8 @@ def unlifted_full(A, B, options):
     arm = planner.default_arm()
     symbolic = symbolic_plan(A, B, assign_blocks(A, B))
     komo, seeds, turns = planner.declare(symbolic, arm, np.random.default_rng(0))
-    unlifted = _UnliftedKomo(arm, komo.phases, komo.slices_per_phase, komo.k_order, phase_duration=komo.phase_duration,
-                             q_home=komo.q_home, objects=komo.objects)
-    unlifted.objectives, unlifted.switches, unlifted.rests = komo.objectives, komo.switches, komo.rests
     t0 = time.perf_counter()
-    r = unlifted.solve("full", seeds=seeds, options=options)
+    r = komo.solve("full", seeds=seeds, options=options, lifted=False)
     return time.perf_counter() - t0, r.cost, r.status
 
 
@@ -111,17 +85,17 @@ def main(argv=None) -> int:
         A, B = tower_task(n)
         t_red, red = run(A, B, repeats=REPEATS)
         row = {"n": n, "actions": len(red.actions), "reduced_snopt_s": t_red, "reduced_vars": red.komo.n_variables,
-               "effort": red.kinetic_energy(), "cost": red.komo.cost}
+               "effort": kinetic_energy(red), "cost": red.komo.cost}
         t_ip, ip = run(A, B, solver="ipopt")
         row.update(reduced_ipopt_s=t_ip, ipopt_dcost=ip.komo.cost / red.komo.cost - 1)
         if n <= args.full_max:
             t_full, full = run(A, B, formulation="full")
             row.update(full_snopt_s=t_full, full_vars=full.komo.n_variables, full_dcost=full.komo.cost / red.komo.cost - 1,
-                       full_deffort=full.kinetic_energy() / red.kinetic_energy() - 1)
+                       full_deffort=kinetic_energy(full) / kinetic_energy(red) - 1)
         if n == 10:
-            fine = [(S, run(A, B, slices_per_phase=S)[1].kinetic_energy()) for S in (40, 80)]
+            fine = [(S, kinetic_energy(run(A, B, slices_per_phase=S)[1])) for S in (40, 80)]
             notes.append("10-block tower, effort (J s) against slices per phase: "
-                         + ", ".join(f"{S}: {e:.4f}" for S, e in [(20, red.kinetic_energy()), *fine]))
+                         + ", ".join(f"{S}: {e:.4f}" for S, e in [(20, kinetic_energy(red)), *fine]))
         rows.append(row)
         print(row, flush=True)
     t_unlifted, c_unlifted, s_unlifted = unlifted_full(A1, B1, {"Hessian full memory": 1})

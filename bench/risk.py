@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import re
 import sys
 import time
 from pathlib import Path
@@ -23,9 +22,12 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
 
+from common import write_section  # noqa: E402
 from models.risk import SIGMA_GRID, draw_normals, get_engine, perturb_from_normals, risk_table  # noqa: E402
-from models.risk.core import _default_jobs, check_stable  # noqa: E402
+from lgp.executor import default_jobs as _default_jobs  # noqa: E402
+from models.risk.core import check_stable  # noqa: E402
 from models.risk.structures import line, tower  # noqa: E402
 
 SIGMA = 0.065
@@ -48,7 +50,7 @@ def grid_sample_seconds(engine: str, per_trial: int) -> float:
     the lowest, middle and highest sigma), one process."""
     import stimuli
 
-    trials = stimuli.load_all()
+    trials = stimuli.load_paper()
     for t in trials:
         check_stable(t.target, engine)
     t0 = time.perf_counter()
@@ -60,19 +62,8 @@ def measured_grid_seconds(engine: str, jobs: int) -> float:
     import stimuli
 
     t0 = time.perf_counter()
-    risk_table(stimuli.load_all(), SIGMA_GRID, n_sims=100, seed=0, engine=engine, jobs=jobs)
+    risk_table(stimuli.load_paper(), SIGMA_GRID, n_sims=100, seed=0, engine=engine, jobs=jobs)
     return time.perf_counter() - t0
-
-
-def write_section(out: Path, text: str) -> None:
-    """Replace the '## risk' section of `out` (up to the next '## ' heading) or append it."""
-    old = out.read_text() if out.exists() else "# Benchmarks\n"
-    pattern = re.compile(r"^## risk\b.*?(?=^## |\Z)", re.S | re.M)
-    if pattern.search(old):
-        new = pattern.sub(lambda _: text.rstrip("\n") + "\n\n", old, count=1)
-    else:
-        new = old.rstrip("\n") + "\n\n" + text.rstrip("\n") + "\n"
-    out.write_text(new.rstrip("\n") + "\n")
 
 
 def main(argv=None) -> int:
@@ -130,7 +121,7 @@ def main(argv=None) -> int:
             "",
             "| engine | how | wall time |",
             "|---|---|---|",
-            f"| mujoco | measured, `risk_table(stimuli.load_all(), SIGMA_GRID, n_sims=100, jobs={jobs})` | "
+            f"| mujoco | measured, `risk_table(stimuli.load_paper(), SIGMA_GRID, n_sims=100, jobs={jobs})` | "
             f"{wall:.0f} s ({wall / 60:.1f} min) |",
             f"| mujoco | projected from a 1-process sample ({1000 * mj_s:.1f} ms/run) / {jobs} cores | "
             f"{GRID_RUNS * mj_s / jobs / 60:.1f} min |",
@@ -138,7 +129,7 @@ def main(argv=None) -> int:
             f"{SIGMA_GRID[0]}, {SIGMA_GRID[5]}, {SIGMA_GRID[-1]}: {1000 * drake_s:.0f} ms/run) / {jobs} cores | "
             f"{GRID_RUNS * drake_s / jobs / 60:.0f} min |",
         ]
-    write_section(args.out, "\n".join(lines))
+    write_section(args.out, "risk", "\n".join(lines))
     print(f"wrote the risk section of {args.out}")
     return 0
 

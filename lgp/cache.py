@@ -1,33 +1,169 @@
-"""Results cached by a hash of their inputs, written atomically.
+"""Results cached by a hash of their inputs, checked on every read, written atomically.
 
-A result is a pandas DataFrame stored as CSV under ``<root>/<kind>-<key>.csv``.
-The key hashes everything the result depends on: the trial file's bytes, the
-parameters, and the source code that computes it. A run killed half way leaves
-only whole files behind (each is written to a temporary name, then renamed), so
-the next run resumes where it stopped and computes nothing twice.
+A result is a pandas DataFrame stored under ``<root>/<kind>-<key>.csv``: one header
+line ``# lgp.cache v1 rows=<n> sha256=<hex>`` (the row count and the SHA-256 of the
+bytes that follow), then the CSV (``pd.read_csv(path, skiprows=1)`` reads it).
+
+The key hashes everything the result depends on (the caller passes it to
+`input_key`): the trial file's bytes, the parameters, the source of every project
+module the computation imports (`modules_digest`, found by reading the imports, so
+it cannot drift from the code), the data files it reads (`files_digest`), the
+versions of the numerical libraries (`library_versions`) and, for risk, the physics
+engine's settings.
+
+A run killed half way leaves only whole files behind (each is written to a
+temporary name, then renamed), so the next run resumes where it stopped. An entry
+that is damaged anyway (truncated, emptied, garbled, lines lost, not UTF-8) fails
+its checksum: it is reported in one line on stderr and recomputed, never used.
+`Cache.counts` says how many lookups were hits, misses and recomputed entries.
 """
 from __future__ import annotations
 
+import ast
 import hashlib
+import io
 import json
 import os
+import platform
+import re
+import sys
 import tempfile
+from collections import Counter
+from importlib import metadata
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable
 
 import pandas as pd
 
 ROOT = Path(__file__).resolve().parent.parent
+#: The project's top-level packages: imports of anything else are libraries.
+PACKAGES = ("lgp", "models", "stimuli", "analysis")
+#: Libraries whose version can change a number the pipeline computes.
+LIBRARIES = ("mujoco", "drake", "numpy", "scipy", "pandas")
 
 
-def code_version(*patterns: str) -> str:
-    """Hash of the source files matching `patterns` (globs relative to the repo root)."""
+# ----------------------------------------------------------------------------- what a result depends on
+
+
+def library_versions(names: Iterable[str] = LIBRARIES) -> dict[str, str]:
+    """Installed version of each library (and of Python); "not installed" if absent."""
+    versions = {"python": platform.python_version()}
+    for name in names:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def module_path(module: str, root: Path = ROOT) -> Path | None:
+    """Source file of project module `module` under `root`, None if there is none."""
+    base = root.joinpath(*module.split("."))
+    for path in (base.with_suffix(".py"), base / "__init__.py"):
+        if path.is_file():
+            return path
+    return None
+
+
+def module_imports(module: str, root: Path = ROOT) -> list[tuple[str, bool]]:
+    """Project modules that `module` imports, read from its source with `ast`, as
+    (imported module, at_import_time) pairs: at_import_time is False for an import
+    inside a function (it runs only when the function is called).
+
+    ``import a.b`` and ``from a import b`` (b a submodule) import ``a.b``;
+    ``from a.b import name`` imports ``a.b``. Relative imports are resolved.
+    Parent packages that Python runs on the way (``a`` for ``a.b``) are not listed.
+    """
+    path = module_path(module, root)
+    if path is None:
+        raise ModuleNotFoundError(f"no project module {module!r} under {root}")
+    tree = ast.parse(path.read_bytes(), filename=str(path))
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found: dict[str, bool] = {}
+
+    def add(name: str, at_import_time: bool) -> None:
+        if name.split(".")[0] in PACKAGES and module_path(name, root) is not None:
+            found[name] = found.get(name, False) or at_import_time
+
+    def visit(node: ast.AST, in_function: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.Import):
+                for alias in child.names:
+                    add(alias.name, not in_function)
+            elif isinstance(child, ast.ImportFrom):
+                if child.level:
+                    base = package.split(".")
+                    base = base[: len(base) - (child.level - 1)]
+                    source = ".".join(base + ([child.module] if child.module else []))
+                else:
+                    source = child.module
+                for alias in child.names:
+                    sub = f"{source}.{alias.name}"
+                    if alias.name != "*" and module_path(sub, root) is not None:
+                        add(sub, not in_function)
+                    else:
+                        add(source, not in_function)
+            visit(child, in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)))
+
+    visit(tree, False)
+    return sorted(found.items())
+
+
+def _parents(module: str) -> list[str]:
+    parts = module.split(".")
+    return [".".join(parts[:k]) for k in range(1, len(parts))]
+
+
+def import_closure(*roots: str, root: Path = ROOT) -> list[str]:
+    """Every project module that importing `roots` and calling their functions can run.
+
+    A module imported by name contributes all its imports, those inside functions
+    too (the computation may call them). A package run only because a submodule was
+    imported (``lgp`` for ``lgp.scene``) contributes its import-time imports: its
+    functions run only if some module imports the package by name.
+    """
+    mode: dict[str, str] = {}  # module -> "full" | "parent"
+    todo: list[str] = []
+
+    def reach(module: str, how: str) -> None:
+        if mode.get(module) == "full" or mode.get(module) == how:
+            return
+        mode[module] = how
+        todo.append(module)
+        for parent in _parents(module):
+            if parent not in mode:
+                reach(parent, "parent")
+
+    for name in roots:
+        reach(name, "full")
+    while todo:
+        module = todo.pop()
+        full = mode[module] == "full"
+        for imported, at_import_time in module_imports(module, root):
+            if full or at_import_time:
+                reach(imported, "full")
+    return sorted(mode)
+
+
+def modules_digest(*roots: str, root: Path = ROOT) -> str:
+    """Hash of the source of every module in `import_closure(*roots)`: editing any
+    file the computation can run changes it; editing any other file does not."""
+    h = hashlib.sha256()
+    for module in import_closure(*roots, root=root):
+        path = module_path(module, root)
+        h.update(path.relative_to(root).as_posix().encode() + b"\0")
+        h.update(hashlib.sha256(path.read_bytes()).digest())
+    return h.hexdigest()[:16]
+
+
+def files_digest(*patterns: str, root: Path = ROOT) -> str:
+    """Hash of the data files matching `patterns` (globs relative to the repo root)."""
     h = hashlib.sha256()
     for pattern in patterns:
-        for path in sorted(ROOT.glob(pattern)):
+        for path in sorted(root.glob(pattern)):
             if path.is_file() and "__pycache__" not in path.parts:
-                h.update(path.relative_to(ROOT).as_posix().encode())
-                h.update(path.read_bytes())
+                h.update(path.relative_to(root).as_posix().encode() + b"\0")
+                h.update(hashlib.sha256(path.read_bytes()).digest())
     return h.hexdigest()[:16]
 
 
@@ -36,13 +172,33 @@ def input_key(**inputs) -> str:
     return hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
 
-def write_csv_atomic(df: pd.DataFrame, path: str | Path) -> Path:
+# ----------------------------------------------------------------------------- files
+
+
+def _umask() -> int:
+    """The process umask, read without changing it where Linux allows
+    (os.umask can only be read by setting it, which races with other threads)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def write_bytes_atomic(data: bytes, path: str | Path) -> Path:
+    """Write `data` to `path` whole or not at all, with the mode a new file gets
+    from the user's umask (0644 under the usual 022), not mkstemp's private 0600."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
-        with os.fdopen(fd, "w") as f:
-            df.to_csv(f, index=False)
+        os.fchmod(fd, 0o666 & ~_umask())
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -50,38 +206,105 @@ def write_csv_atomic(df: pd.DataFrame, path: str | Path) -> Path:
     return path
 
 
-class Cache:
-    """Directory of cached DataFrames; ``enabled=False`` recomputes everything."""
+def write_csv_atomic(df: pd.DataFrame, path: str | Path) -> Path:
+    """Write `df` as CSV (no index) to `path` atomically (see write_bytes_atomic)."""
+    return write_bytes_atomic(df.to_csv(index=False).encode(), path)
 
-    def __init__(self, root: str | Path, enabled: bool = True):
+
+# ----------------------------------------------------------------------------- entries
+
+_HEADER = re.compile(rb"# lgp\.cache v1 rows=(\d+) sha256=([0-9a-f]{64})")
+
+
+class DamagedEntry(ValueError):
+    """A cache entry whose bytes are not what was written (the message says how)."""
+
+
+def entry_bytes(df: pd.DataFrame) -> bytes:
+    """A cache entry: the checksum header line, then the CSV of `df`."""
+    body = df.to_csv(index=False).encode()
+    return b"# lgp.cache v1 rows=%d sha256=%s\n" % (len(df), hashlib.sha256(body).hexdigest().encode()) + body
+
+
+def read_entry(path: Path, dtype=None) -> pd.DataFrame:
+    """The DataFrame of a cache entry, or DamagedEntry if its checksum or row count fails."""
+    data = Path(path).read_bytes()
+    header, newline, body = data.partition(b"\n")
+    match = _HEADER.fullmatch(header)
+    if not newline or match is None:
+        raise DamagedEntry(f"no checksum header ({len(data)} bytes)")
+    if hashlib.sha256(body).hexdigest().encode() != match[2]:
+        raise DamagedEntry(f"checksum mismatch ({len(body)} bytes of CSV)")
+    df = pd.read_csv(io.BytesIO(body), dtype=dtype)
+    if len(df) != int(match[1]):  # only a hash collision gets here
+        raise DamagedEntry(f"{len(df)} rows, header says {int(match[1])}")
+    return df
+
+
+class Cache:
+    """Directory of cached DataFrames; ``enabled=False`` recomputes everything
+    (and rewrites the entries).
+
+    Every lookup is counted by kind and outcome in `counts`: ``"hit"`` (a sound
+    entry, used), ``"miss"`` (no entry, or the cache disabled) or ``"recomputed"``
+    (an entry failed its checksum, was reported on stderr, and is to be computed
+    again); `damaged` lists the paths of those entries.
+    """
+
+    OUTCOMES = ("hit", "miss", "recomputed")
+
+    def __init__(self, root: str | Path, enabled: bool = True, dtype=None):
         self.root = Path(root)
         self.enabled = enabled
-        self.hits = 0
-        self.misses = 0
+        self.dtype = {"trial": str} if dtype is None else dtype
+        self.counts: Counter = Counter()  # (kind, outcome) -> lookups
+        self.damaged: list[Path] = []
+
+    def count(self, outcome: str, kind: str | None = None) -> int:
+        """Lookups with `outcome`, of entries of `kind` (all kinds if None)."""
+        return sum(n for (k, o), n in self.counts.items() if o == outcome and kind in (None, k))
+
+    @property
+    def hits(self) -> int:
+        return self.count("hit")
+
+    @property
+    def misses(self) -> int:
+        return self.count("miss")
+
+    @property
+    def recomputed(self) -> int:
+        return self.count("recomputed")
+
+    def summary(self) -> str:
+        """One line: hits, misses and recomputed entries per kind."""
+        kinds = sorted({k for k, _ in self.counts})
+        return "; ".join(f"{kind} " + ", ".join(f"{self.count(o, kind)} {o}" for o in self.OUTCOMES) for kind in kinds) or "no lookups"
 
     def path(self, kind: str, key: str) -> Path:
         return self.root / f"{kind}-{key}.csv"
 
     def get(self, kind: str, key: str) -> pd.DataFrame | None:
-        """The cached entry, or None when there is none (or the cache is off)."""
+        """The cached table, or None when it must be computed (absent, disabled or damaged)."""
         path = self.path(kind, key)
-        if self.enabled and path.exists():
-            self.hits += 1
-            return pd.read_csv(path, dtype={"trial": str})
-        return None
+        if not self.enabled or not path.exists():
+            self.counts[kind, "miss"] += 1
+            return None
+        try:
+            df = read_entry(path, dtype=self.dtype)
+        except (DamagedEntry, OSError, ValueError, UnicodeDecodeError, pd.errors.ParserError) as e:
+            print(f"lgp.cache: damaged entry {path}: {e}; recomputing it", file=sys.stderr, flush=True)
+            self.counts[kind, "recomputed"] += 1
+            self.damaged.append(path)
+            return None
+        self.counts[kind, "hit"] += 1
+        return df
 
     def put(self, kind: str, key: str, df: pd.DataFrame) -> pd.DataFrame:
-        """Store a freshly computed entry (counted as a miss) and return it."""
-        self.misses += 1
-        write_csv_atomic(df, self.path(kind, key))
+        """Write `df` as the entry (kind, key), atomically, with its checksum; return `df`."""
+        write_bytes_atomic(entry_bytes(df), self.path(kind, key))
         return df
 
     def get_or_compute(self, kind: str, key: str, compute: Callable[[], pd.DataFrame]) -> pd.DataFrame:
-        path = self.path(kind, key)
-        if self.enabled and path.exists():
-            self.hits += 1
-            return pd.read_csv(path, dtype={"trial": str})
-        self.misses += 1
-        df = compute()
-        write_csv_atomic(df, path)
-        return df
+        df = self.get(kind, key)
+        return df if df is not None else self.put(kind, key, compute())

@@ -9,7 +9,10 @@ input order; ``on_result(index, result)`` as each arrives, for progress), with
   executor's whole life, so a run imports Drake and compiles models once per
   worker, not once per trial. An exception in the caller (Ctrl-C included)
   cancels what is queued and terminates the workers at once; workers die with
-  their parent (Linux: PR_SET_PDEATHSIG).
+  their parent, even on ``kill -9`` (Linux: PR_SET_PDEATHSIG). Create it in the
+  main thread: the kernel ties that signal to the thread that started the worker.
+
+``sigterm_as_interrupt()`` makes SIGTERM stop a command like Ctrl-C.
 
 - ``DaskExecutor(address)``: the tasks of a ``dask.distributed`` cluster (a
   running scheduler ``tcp://HOST:8786``, or ``"local-dask"`` for a LocalCluster
@@ -77,20 +80,58 @@ def _start_method() -> str:
     return "spawn"
 
 
-def _die_with_parent() -> None:
-    """Worker initialiser: the kernel sends SIGTERM to this worker when its parent
-    dies (Linux), so a killed run leaves no orphans; Ctrl-C is the parent's to handle."""
+def _die_with_parent(parent_pid: int) -> None:
+    """Worker initialiser: the worker dies with its parent, whatever kills the parent.
+
+    - Linux: the kernel sends SIGKILL to this worker when its parent dies
+      (PR_SET_PDEATHSIG), so even ``kill -9`` of the run leaves no orphan; SIGKILL
+      rather than SIGTERM because a worker cannot catch it and live on.
+    - SIGTERM gets its default action back (a forked worker inherits the parent's
+      handlers, e.g. `sigterm_as_interrupt`'s): ``Pool.terminate`` sends SIGTERM and
+      must kill the worker, not raise in it.
+    - Ctrl-C is the parent's to handle, so SIGINT is ignored here.
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if sys.platform.startswith("linux"):
         import ctypes
 
         PR_SET_PDEATHSIG = 1
         try:
-            ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
         except OSError:  # pragma: no cover - no libc by that name
             pass
-        if os.getppid() == 1:  # the parent died before prctl took effect
-            os._exit(1)
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect (re-parented, not always to pid 1)
+        os._exit(1)
+
+
+class _Interrupted(KeyboardInterrupt):
+    """Raised in the main thread by `sigterm_as_interrupt` when SIGTERM arrives."""
+
+    signal = signal.SIGTERM
+
+
+class sigterm_as_interrupt:
+    """Context manager for command-line entry points: SIGTERM (what ``timeout``,
+    ``kill`` and job schedulers send) raises KeyboardInterrupt in the main thread,
+    so a run stops exactly as on Ctrl-C: the executor terminates its workers,
+    atomic writes leave no partial file, and the caller prints one line. The
+    exception's ``signal`` attribute is ``signal.SIGTERM``. The previous handler is
+    restored on exit; outside the main thread this does nothing."""
+
+    def __enter__(self):
+        self._previous = None
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGTERM, self._raise)
+        return self
+
+    @staticmethod
+    def _raise(signum, frame):
+        raise _Interrupted("terminated (SIGTERM)")
+
+    def __exit__(self, *exc):
+        if self._previous is not None:
+            signal.signal(signal.SIGTERM, self._previous)
 
 
 class ProcessExecutor:
@@ -114,7 +155,7 @@ class ProcessExecutor:
             import multiprocessing as mp
 
             ctx = mp.get_context(self.start_method or _start_method())
-            self._pool = ctx.Pool(self.jobs, initializer=_die_with_parent)
+            self._pool = ctx.Pool(self.jobs, initializer=_die_with_parent, initargs=(os.getpid(),))
         return self._pool
 
     def map(self, fn, items, on_result=None) -> list:

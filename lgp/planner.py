@@ -36,7 +36,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from lgp.arm import Arm, X_WG_from_above
 from lgp.assignment import assign_blocks
-from lgp.komo import Komo, KomoResult, kinetic_energy
+from lgp.komo import Komo, KomoResult
 from lgp.scene import Scene
 from lgp.symbolic import Grasp, SymbolicPlan, symbolic_plan
 
@@ -51,8 +51,6 @@ APPROACH = 0.05
 #: Phases between the approach waypoint and the action (and the action and the
 #: retreat waypoint): 0.2 s of each 1 s phase.
 APPROACH_TIME = 0.2
-#: Mass of a unit block in the effort model [paper: "a unit mass to a unit block"], kg.
-BLOCK_MASS = 1.0
 #: Elbow swivel angles tried per waypoint when seeding (and 8 IK branches each).
 SWIVELS = 16
 #: At most this many KOMO re-solves with re-chosen quarter turns per seed.
@@ -85,6 +83,8 @@ class Plan:
 
     `t` (n,) s and `q` (n, 7) rad per slice, time 0 first; `p_WB[name]` (n, 3) and
     `R_WB[name]` (n, 3, 3) for every block of the initial scene (by its A name).
+    The effort of a plan is measured from these trajectories by the effort model
+    (models.effort.kinetic_energy), not here.
     """
 
     initial: Scene
@@ -106,50 +106,10 @@ class Plan:
     def tau(self) -> float:
         return float(self.t[1] - self.t[0]) if len(self.t) > 1 else 1.0
 
-    def kinetic_energy(self, mass: float = BLOCK_MASS) -> float:
-        """Physical effort: time integral of the carried blocks' kinetic energy, J s.
-
-        Sum over blocks of integral 1/2 m |v_WB|^2 dt, v the velocity of the block
-        centre. The integral (not a per-slice sum) keeps the number independent of
-        the slice count.
-        """
-        return float(sum(self.kinetic_energy_by_block(mass).values()))
-
-    def kinetic_energy_by_block(self, mass: float = BLOCK_MASS) -> dict[str, float]:
-        return {name: kinetic_energy(p, self.tau, mass) for name, p in self.p_WB.items()}
-
-    def kinetic_energy_by_action(self, mass: float = BLOCK_MASS) -> list[float]:
-        """Energy integral of each phase ending at each action (action k: phases k-1 to k)."""
-        S = int(round(PHASE_DURATION / self.tau))
-        out = []
-        for k in range(1, len(self.actions) + 1):
-            lo, hi = (k - 1) * S, k * S
-            out.append(sum(kinetic_energy(p[lo:hi + 1], self.tau, mass) for p in self.p_WB.values()))
-        return out
-
     def speed(self, name: str) -> np.ndarray:
         """Speed |v_WB| (m/s) of a block's centre at each slice (0 at time 0)."""
         v = np.diff(self.p_WB[name], axis=0) / self.tau
         return np.concatenate([[0.0], np.linalg.norm(v, axis=1)])
-
-    def describe(self) -> str:
-        """The action list with times and per-action energies, one line each."""
-        energies = self.kinetic_energy_by_action() if self.actions else []
-        lines = [f"{k + 1:3d}  t = {k + 1:5.1f} s  {a}   E = {e:.4f} J s" for k, (a, e) in enumerate(zip(self.actions, energies))]
-        lines.append(f"physical effort: {self.kinetic_energy():.4f} J s over {len(self.actions)} actions")
-        return "\n".join(lines)
-
-    def write_html(self, path) -> str:
-        """Self-contained 3-D replay (Meshcat recording, works offline); returns the path."""
-        from lgp.komo.view import write_html
-
-        return write_html(self, path)
-
-    def write_png(self, path) -> str:
-        """Figure of block paths (top and side views) and speed profiles; returns the path."""
-        from lgp.komo.view import write_png
-
-        return write_png(self, path)
 
 
 # ----------------------------------------------------------------------------- planning
@@ -345,32 +305,45 @@ def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_ph
 def _predicted_turn_changes(arm, G, g, X_K, B, slots) -> list[tuple[float, np.ndarray]]:
     """(predicted cost change, d) for joint-7 turns d over runs of actions, best first.
 
-    Cost = sum_j |G X_K[:, j] + g[:, j]|^2. The change is the exact quadratic change
-    of turning joint 7 by B d, minus the decrease from the best step along the
-    waypoints' swivel directions n_i (null vectors of the gripper Jacobian, which
-    joint 7 does not change: G lies on its axis). Turns that take joint 7 within
-    SEED_MARGIN of a limit are left out.
+    Cost c(X_K) = sum_j |G X_K[:, j] + g[:, j]|^2 over joints j (X_K: (|K|, 7)
+    keyframes); with H = G'G and the half gradient grad = G'(G X_K + g), a step
+    dX changes it by exactly 2 <grad, dX> + sum_j dX[:, j]' H dX[:, j].
+
+    The step: joint 7 turns by B d (B (|K|, n_actions) marks each action's
+    keyframes; d the turn per action), and each waypoint r (keyframe slots[r])
+    moves by alpha_r along its swivel direction n_r (a null vector of the gripper
+    Jacobian, which joint 7 does not change: G lies on its axis). Then
+
+        change(d, alpha) = d' B'HB d + 2 grad_7' B d                  (turn_cost)
+                         + 2 alpha' (b0 + P d) + alpha' A alpha
+        A  = (n_r . n_s) H[slots_r, slots_s]                          (swivel_hessian)
+        b0 = n_r . grad[slots_r]                                      (swivel_gradient)
+        P  = n_r[7] (H B)[slots_r]                                    (swivel_turn_coupling)
+
+    and the best alpha gives change(d) = turn_cost - (b_d' A^-1 b_d - b0' A^-1 b0),
+    b_d = b0 + P d, measured against the best swivel step without a turn (zero at
+    an exact optimum). Turns that take joint 7 within SEED_MARGIN of a limit are
+    left out.
     """
     from pydrake.multibody.tree import JacobianWrtVariable
 
     plant, context = arm.plant, arm.context
-    N = np.zeros((len(slots), arm.nq))
+    swivel = np.zeros((len(slots), arm.nq))  # row r: n_r, unit null vector of the gripper Jacobian
     for r, i in enumerate(slots):
         plant.SetPositions(context, X_K[i])
         J = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kQDot, arm.G, np.zeros(3), plant.world_frame(), plant.world_frame())
-        N[r] = np.linalg.svd(J)[2][-1]
-    H = G.T @ G
+        swivel[r] = np.linalg.svd(J)[2][-1]
+    H = G.T @ G  # half the Hessian of the cost, per joint, (|K|, |K|)
     grad = G.T @ (G @ X_K + g)  # half the gradient, (|K|, 7)
-    Hs = H[np.ix_(slots, slots)]
-    A = (N @ N.T) * Hs
-    b0 = np.einsum("rj,rj->r", N, grad[slots])
-    P = N[:, 6][:, None] * (H @ B)[slots]
-    HB = B.T @ H @ B
-    g7 = grad[:, 6] @ B
+    swivel_hessian = (swivel @ swivel.T) * H[np.ix_(slots, slots)]  # A
+    swivel_gradient = np.einsum("rj,rj->r", swivel, grad[slots])  # b0
+    swivel_turn_coupling = swivel[:, 6][:, None] * (H @ B)[slots]  # P, (waypoints, n_actions)
+    turn_hessian = B.T @ H @ B  # B'HB, (n_actions, n_actions)
+    turn_gradient = grad[:, 6] @ B  # grad_7' B, (n_actions,)
     n = B.shape[1]
     lo, hi = arm.q_lower[6] + SEED_MARGIN, arm.q_upper[6] - SEED_MARGIN
     x7 = [X_K[B[:, k] > 0, 6] for k in range(n)]
-    D = []
+    turns = []  # candidate d: the same step on a run i..j of consecutive actions
     for step in (np.pi / 2, -np.pi / 2, np.pi, -np.pi):
         ok = [bool(np.all(x + step >= lo) and np.all(x + step <= hi)) for x in x7]
         for i in range(n):
@@ -379,15 +352,15 @@ def _predicted_turn_changes(arm, G, g, X_K, B, slots) -> list[tuple[float, np.nd
                     break
                 d = np.zeros(n)
                 d[i:j + 1] = step
-                D.append(d)
-    if not D:
+                turns.append(d)
+    if not turns:
         return []
-    D = np.array(D).T  # (n, m)
-    held = np.einsum("km,kl,lm->m", D, HB, D) + 2 * g7 @ D  # joints 1-6 held
-    bd = b0[:, None] + P @ D
-    Ainv_bd = np.linalg.solve(A, bd)
-    step_gain = np.einsum("rm,rm->m", bd, Ainv_bd) - b0 @ np.linalg.solve(A, b0)
-    change = held - step_gain
+    D = np.array(turns).T  # (n_actions, m): column m is one candidate d
+    turn_cost = np.einsum("km,kl,lm->m", D, turn_hessian, D) + 2 * turn_gradient @ D  # joints 1-6 held
+    b_d = swivel_gradient[:, None] + swivel_turn_coupling @ D
+    Ainv_b_d = np.linalg.solve(swivel_hessian, b_d)
+    swivel_gain = np.einsum("rm,rm->m", b_d, Ainv_b_d) - swivel_gradient @ np.linalg.solve(swivel_hessian, swivel_gradient)
+    change = turn_cost - swivel_gain
     order = np.argsort(change)
     return [(float(change[m]), D[:, m]) for m in order]
 

@@ -13,7 +13,9 @@ half way resumes with nothing lost.
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -23,15 +25,35 @@ import pandas as pd
 
 import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import SchedulerUnreachable, executor_for_scheduler
+from lgp.executor import SchedulerUnreachable, executor_for_scheduler, sigterm_as_interrupt
 from lgp.progress import Progress
-from lgp.cache import Cache, code_version, input_key, write_csv_atomic
+from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
 
 
 def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
+
+
+def effort_key_inputs() -> dict:
+    """What an effort table depends on besides the trial and the parameters: the
+    source of every project module physical_effort can run (stimuli draws the
+    layouts of A), the arm's model files, and the numerical libraries (SNOPT is Drake's)."""
+    return {"code": modules_digest("models.effort", "stimuli"),
+            "data": files_digest("models/*.sdf", "models/*.urdf", "models/*.yaml"),
+            "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
+
+
+def risk_key_inputs(engine: str | None) -> dict:
+    """What a risk table depends on besides the trial and the parameters: the source
+    of every project module risk_table can run (the engine module is loaded by name,
+    so it is named here), the engine's settings, and the libraries."""
+    from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
+
+    name = DEFAULT_ENGINE if engine is None else engine
+    return {"code": modules_digest("models.risk", ENGINES[name].split(":")[0], "stimuli"),
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd.DataFrame:
@@ -44,11 +66,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
     """
     from models.effort import effort_of_unit, effort_table, effort_units
 
-    # The code effort depends on (not the CLI or this cache), so editing them re-plans.
-    version = code_version("lgp/scene.py", "lgp/assignment.py", "lgp/symbolic.py", "lgp/planner.py", "lgp/arm.py",
-                           "lgp/komo/*.py", "models/effort.py", "models/*.sdf", "models/*.urdf", "models/*.yaml",
-                           "stimuli/__init__.py")  # draws the layouts of A
-    keys = {t.id: input_key(trial=t.id, digest=t.digest, samples=samples, seed=seed, code=version) for t in trials}
+    depends = effort_key_inputs()
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, samples=samples, seed=seed, **depends) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
         cached = cache.get("effort", keys[t.id])
@@ -91,10 +110,10 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     """
     from models.risk import risk_table
 
-    version = code_version("lgp/scene.py", "models/risk/*.py", "stimuli/__init__.py")
-    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, code=version) for t in trials}
-    todo = [t for t in trials if not (cache.enabled and cache.path("risk", keys[t.id]).exists())]
-    fresh: dict[str, pd.DataFrame] = {}
+    depends = risk_key_inputs(engine)
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
+    tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
+    todo = [t for t in trials if tables[t.id] is None]
     bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs")
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
@@ -103,19 +122,41 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
         table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
                            progress=lambda done, total: bar.advance(base + done - bar.done))
         for t in group:
-            fresh[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
+            tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     if todo:
         bar.close()
     out = []
     for k, trial in enumerate(trials, 1):
-        df = fresh.get(trial.id)
-        if df is None:
-            df = cache.get_or_compute("risk", keys[trial.id], lambda: risk_table([trial], sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor))
+        df = tables[trial.id]
         curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
         _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)
     return pd.concat(out, ignore_index=True)
+
+
+def check_targets(trials, engine: str | None, cache: Cache) -> None:
+    """Before the long work: B of every trial must stand unperturbed (the risk
+    model's sigma = 0 run), one simulation per trial, cached like the results.
+    Raises UnstableSceneError naming every trial whose B falls and its blocks."""
+    from models.risk import UnstableSceneError, check_stable
+
+    depends = risk_key_inputs(engine)
+    problems = []
+    for t in trials:
+        key = input_key(trial=t.id, digest=t.digest, check="B stands unperturbed", **depends)
+        df = cache.get("stable", key)
+        if df is None:
+            try:
+                check_stable(t.target, engine)
+                df = pd.DataFrame([{"trial": t.id, "stable": True, "problem": ""}])
+            except UnstableSceneError as e:
+                df = pd.DataFrame([{"trial": t.id, "stable": False, "problem": str(e)}])
+            cache.put("stable", key, df)
+        if not bool(df["stable"].iloc[0]):
+            problems.append(str(df["problem"].iloc[0]))
+    if problems:
+        raise UnstableSceneError("; ".join(problems))
 
 
 def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
@@ -169,7 +210,8 @@ def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
     return "\n".join(lines)
 
 
-def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None, elapsed: float) -> Path:
+def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None, elapsed: float,
+                 software: dict | None = None) -> Path:
     wide = risk.pivot_table(index="trial", columns="sigma", values="risk").reindex(effort["trial"])
     wide.columns = [f"{s:g}" for s in wide.columns]
     lines = [
@@ -212,6 +254,9 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         if "pairs" in analysis:
             model_pairs = analysis["pairs"]
             lines += ["## Pair orderings by source", "", _markdown(model_pairs), ""]
+    if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers
+        lines += ["## Software", "", "Libraries: " + ", ".join(f"{k} {v}" for k, v in software["libraries"].items()) + ".",
+                  "", f"Risk engine settings: `{json.dumps(software['engine'], sort_keys=True, default=str)}`.", ""]
     path = out / "report.md"
     tmp = path.with_suffix(".md.tmp")
     tmp.write_text("\n".join(lines))
@@ -222,7 +267,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m lgp.reproduce", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="results", help="output directory (default: results/)")
-    p.add_argument("--trials", nargs="+", help="trial ids (default: all 24)")
+    p.add_argument("--trials", nargs="+", help="trial ids, or 'all' for every trial file (default: the paper's 24)")
     p.add_argument("--samples", type=int, help="M, random layouts of A per trial (default 30; --quick 3)")
     p.add_argument("--n-sims", type=int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
     p.add_argument("--sigmas", type=float, nargs="+", help="noise levels in units of d (default: 0.05..0.10 step 0.005)")
@@ -242,12 +287,37 @@ def main(argv=None) -> int:
     args.n_sims = args.n_sims or q.get("n_sims", N_SIMS)
     args.sigmas = tuple(args.sigmas or q.get("sigmas", SIGMA_GRID))
     args.n_boot = args.n_boot or q.get("n_boot", N_BOOT)
+    with sigterm_as_interrupt():  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
+        try:
+            return run(args)
+        except KeyboardInterrupt as e:
+            how = "terminated (SIGTERM)" if getattr(e, "signal", None) == signal.SIGTERM else "interrupted"
+            resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
+            print(f"{p.prog}: {how}; {resume}", file=sys.stderr)
+            return 128 + int(getattr(e, "signal", signal.SIGINT))
 
+
+def select_trials(ids: list[str] | None, directory=None) -> list:
+    """The trials of a run: the paper's 24 by default (other trial files in the
+    directory are named, not run), ``all`` for every trial file, or the ids given."""
+    if not ids:
+        extra = stimuli.extra_ids(directory)
+        if extra:
+            _log(f"the trial folder also holds {', '.join(extra)} (not among the paper's 24): "
+                 f"run them with --trials {' '.join(extra)} or --trials all")
+        return stimuli.load_paper(directory)
+    if [t.lower() for t in ids] == ["all"]:
+        return stimuli.load_all(directory)
+    return [stimuli.load_trial(t, directory) for t in ids]
+
+
+def run(args) -> int:
+    """The pipeline for parsed command-line `args` (see `main`)."""
     t0 = time.perf_counter()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Cache(out / "cache", enabled=not args.no_cache)
-    trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
+    trials = select_trials(args.trials)
     human = None
     if args.human_data:
         from analysis import load_human_data
@@ -261,29 +331,39 @@ def main(argv=None) -> int:
     try:
         executor = executor_for_scheduler(args.scheduler, args.jobs)
     except (SchedulerUnreachable, ImportError) as e:
-        p.exit(2, f"{p.prog}: error: {e}\n")
+        print(f"python -m lgp.reproduce: error: {e}", file=sys.stderr)
+        return 2
     with executor:
         if hasattr(executor, "start"):
             executor.start()
+        check_targets(trials, args.engine, cache)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
         effort = summarise_effort(effort_samples, trials)
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk)
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
-    complete = {t.id for t in trials} >= set(TRIAL_IDS)
     pairs, analysis = None, None
-    if complete:  # pair orderings, figures and fits are defined on the 24 trials
+    if {t.id for t in trials} >= set(TRIAL_IDS):
+        # Pair orderings, figures and fits are the paper's: on its 24 trials only;
+        # other trials of the run are in the effort and risk tables.
         from analysis import run_analysis
 
-        pairs = pair_orderings(effort, risk, sigma, trials)
+        paper = [t for t in trials if t.id in TRIAL_IDS]
+        extra = [t.id for t in trials if t.id not in TRIAL_IDS]
+        if extra:
+            _log(f"pair table, figures and fits use the paper's 24 trials; {', '.join(extra)} are in the effort and risk tables only")
+        e_samples, e_mean, r = (df[df["trial"].isin(TRIAL_IDS)] for df in (effort_samples, effort, risk))
+        pairs = pair_orderings(e_mean, r, sigma, paper)
         written.append(write_csv_atomic(pairs, out / "pairs.csv"))
-        analysis = run_analysis(human, effort_samples, risk, out / ("analysis" if human is not None else "figures"),
+        analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma)
     else:
-        _log("a subset of trials: no pair table, figures or fits (they need all 24)")
-    report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0)
+        _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
+    software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
+    report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0, software)
     written.append(report)
+    _log(f"cache: {cache.summary()}")
     print(f"Outputs in {out.resolve()}:")
     for path in written:
         print(f"  {path}")

@@ -14,6 +14,7 @@ from typing import Iterable
 
 import numpy as np
 
+from lgp.geometry import clip_convex, polygon_area, rectangle, rectangle_overlap, yaw_direction
 from lgp.paper import BLOCK_SIZE, COLOURS
 
 #: Two solids may interpenetrate by at most this much (m) and still count as
@@ -28,6 +29,16 @@ CONTACT_TOLERANCE = 1e-4
 MIN_SUPPORT_AREA = 1e-6
 #: Name of the table in support graphs.
 TABLE = "table"
+
+#: The workspace of a table-top task, which every solid (block or fixed box) of a
+#: scene must lie in: centre within |x|, |y| <= WORKSPACE_XY and WORKSPACE_Z[0] <=
+#: z <= WORKSPACE_Z[1] (m), every edge longer than SOLID_SIZE[0] and at most
+#: SOLID_SIZE[1] (m), yaw within one turn (|yaw| <= 2 pi). Not the paper's numbers:
+#: bounds well beyond the arm's reach and the 1-inch blocks, there to refuse absurd
+#: input (a size of 1e300 hangs a physics engine) before anything plans or simulates.
+WORKSPACE_XY = 2.0
+WORKSPACE_Z: tuple[float, float] = (0.0, 2.0)
+SOLID_SIZE: tuple[float, float] = (1e-3, 0.5)
 
 
 class StimulusError(ValueError):
@@ -69,7 +80,11 @@ class Block:
 
     def footprint(self) -> np.ndarray:
         """Corners (4, 2) of the block's outline seen from above, counter-clockwise."""
-        return _rectangle(self.p_WB[:2], self.size[:2], self.yaw)
+        return rectangle(self.p_WB[:2], self.size[:2], self.yaw)
+
+    def outline(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(centre, half extents, unit edge direction), each (2,), of the outline seen from above."""
+        return self.p_WB[:2], self.size[:2] / 2, yaw_direction(self.yaw)
 
     def moved_to(self, p_WB, yaw: float | None = None) -> "Block":
         return replace(self, p_WB=np.asarray(p_WB, float), yaw=self.yaw if yaw is None else yaw)
@@ -100,7 +115,11 @@ class FixedBox:
         return float(self.p_WO[2] + self.size[2] / 2)
 
     def footprint(self) -> np.ndarray:
-        return _rectangle(self.p_WO[:2], self.size[:2], 0.0)
+        return rectangle(self.p_WO[:2], self.size[:2], 0.0)
+
+    def outline(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(centre, half extents, unit edge direction), each (2,), of the outline seen from above."""
+        return self.p_WO[:2], self.size[:2] / 2, yaw_direction(0.0)
 
 
 @dataclass(frozen=True)
@@ -148,72 +167,26 @@ class Scene:
 # ----------------------------------------------------------------------------- geometry
 
 
-def _rectangle(center, size, yaw) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    R = np.array([[c, -s], [s, c]])
-    hx, hy = size[0] / 2, size[1] / 2
-    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
-    return local @ R.T + np.asarray(center)[:2]
-
-
-def _polygon_area(P: np.ndarray) -> float:
-    x, y = P[:, 0], P[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
-
-
-def _clip(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
-    """Sutherland-Hodgman clipping of convex polygon `subject` by convex `clip` (CCW)."""
-    out = list(subject)
-    n = len(clip)
-    for i in range(n):
-        a, b = clip[i], clip[(i + 1) % n]
-        edge = b - a
-        inp, out = out, []
-        if not inp:
-            break
-
-        def inside(p):
-            return edge[0] * (p[1] - a[1]) - edge[1] * (p[0] - a[0]) >= -1e-15
-
-        def cross(p, q):
-            d = q - p
-            den = edge[0] * d[1] - edge[1] * d[0]
-            t = (edge[1] * (p[0] - a[0]) - edge[0] * (p[1] - a[1])) / den
-            return p + t * d
-
-        for j in range(len(inp)):
-            p, q = inp[j], inp[(j + 1) % len(inp)]
-            if inside(q):
-                if not inside(p):
-                    out.append(cross(p, q))
-                out.append(q)
-            elif inside(p):
-                out.append(cross(p, q))
-    return np.array(out).reshape(-1, 2)
-
-
 def footprint_overlap_area(a, b) -> float:
     """Area (m^2) shared by the outlines seen from above of two blocks/boxes."""
-    P = _clip(a.footprint(), b.footprint())
-    return abs(_polygon_area(P)) if len(P) >= 3 else 0.0
+    P = clip_convex(a.footprint(), b.footprint())
+    return abs(polygon_area(P)) if len(P) >= 3 else 0.0
 
 
 def horizontal_penetration(a, b) -> float:
     """Depth (m) by which two outlines seen from above interpenetrate.
 
-    Separating-axis test on the two rectangles: the smallest overlap over the four
-    candidate axes; <= 0 means separated (its magnitude is the gap along that axis
-    only when the rectangles are aligned).
+    Separating-axis test on the two rectangles (lgp.geometry.rectangle_overlap):
+    the shortest push along one of the four edge axes that separates them; <= 0
+    means separated (its magnitude is the gap along that axis only when the
+    rectangles are aligned). (Until issue 9 this was the length shared by the two
+    projections, which is smaller only when one projection contains the other;
+    both then exceed the smallest block edge, so no verdict against a tolerance
+    below it changes.)
     """
-    A, B = a.footprint(), b.footprint()
-    depth = np.inf
-    for P in (A, B):
-        for i in range(2):
-            axis = P[i + 1] - P[i]
-            axis = axis / np.linalg.norm(axis)
-            pa, pb = A @ axis, B @ axis
-            depth = min(depth, min(pa.max(), pb.max()) - max(pa.min(), pb.min()))
-    return float(depth)
+    (c_a, half_a, u_a), (c_b, half_b, u_b) = a.outline(), b.outline()
+    depth, _ = rectangle_overlap(c_a[None], half_a[None], u_a[None], c_b[None], half_b[None], u_b[None])
+    return float(depth[0])
 
 
 def penetration(a, b) -> float:
@@ -298,18 +271,38 @@ def rests_on(upper: Block, lower, tol: float = CONTACT_TOLERANCE) -> bool:
 # ----------------------------------------------------------------------------- validation
 
 
+def check_solid(label: str, kind: str, name: str, p, size, yaw: float = 0.0) -> None:
+    """Raise StimulusError unless a solid's centre `p` (m), edges `size` (m) and `yaw`
+    (rad) are finite and inside the workspace (WORKSPACE_XY, WORKSPACE_Z, SOLID_SIZE).
+    `kind` is ``block`` or ``fixed``; the message names label, solid and rule."""
+    where = f"{label} {kind} {name}"
+    p, size = np.asarray(p, dtype=float), np.asarray(size, dtype=float)
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(size)) and np.isfinite(yaw)):
+        raise StimulusError(f"{where}: pose or size is not finite (position {p}, size {size}, yaw {yaw})")
+    lo, hi = SOLID_SIZE
+    if np.any(size <= lo) or np.any(size > hi):
+        raise StimulusError(f"{where}: size {size} m breaks the workspace rule: every edge longer than "
+                            f"{lo * 1000:g} mm and at most {hi:g} m")
+    if np.any(np.abs(p[:2]) > WORKSPACE_XY) or not WORKSPACE_Z[0] <= p[2] <= WORKSPACE_Z[1]:
+        raise StimulusError(f"{where}: centre {p} m lies outside the workspace |x|, |y| <= {WORKSPACE_XY:g} m, "
+                            f"{WORKSPACE_Z[0]:g} <= z <= {WORKSPACE_Z[1]:g} m")
+    if abs(yaw) > 2 * np.pi:
+        raise StimulusError(f"{where}: yaw {yaw} rad is more than one turn (|yaw| <= 2 pi)")
+
+
 def validate_scene(scene: Scene) -> None:
     """Check the rules every stimulus state obeys (see stimuli/README.md)."""
     label = scene.label
+    for f in scene.fixed:  # first: a NaN box would otherwise surface as an overlap
+        check_solid(label, "fixed", f.name, f.p_WO, f.size)
+        if f.bottom < -CONTACT_TOLERANCE:
+            raise StimulusError(f"{label} fixed {f.name}: lies under the table (bottom at z = {f.bottom * 1000:.1f} mm)")
     seen: set[str] = set()
     for b in scene.blocks:
         if b.name in seen:
             raise StimulusError(f"{label}: duplicate block name {b.name!r}")
         seen.add(b.name)
-        if not (np.all(np.isfinite(b.p_WB)) and np.isfinite(b.yaw) and np.all(np.isfinite(b.size))):
-            raise StimulusError(f"{label} block {b.name}: pose or size is not finite (p_WB={b.p_WB}, yaw={b.yaw})")
-        if np.any(b.size <= 0):
-            raise StimulusError(f"{label} block {b.name}: size must be positive, got {b.size}")
+        check_solid(label, "block", b.name, b.p_WB, b.size, b.yaw)
         if b.colour not in COLOURS:
             raise StimulusError(f"{label} block {b.name}: unknown colour {b.colour!r} (known: {', '.join(COLOURS)})")
         if b.bottom < -CONTACT_TOLERANCE:

@@ -5,8 +5,8 @@ the planner are seeded as `models.effort.physical_effort` seeds them
 (`models.effort.plan_of_sample`), so the effort printed here equals that row's.
 Prints the action list with per-action kinetic energy, and optionally writes the
 3-D replay (HTML, works offline) and a figure of block paths and speeds (PNG).
-From a script, use ``lgp.plan(...)`` (lgp/planner.py) and ``Plan.write_html`` /
-``Plan.write_png``; this module is the command line only.
+From a script, use ``lgp.plan(...)`` (lgp/planner.py) and ``lgp.view.write_html`` /
+``lgp.view.write_png``; this module is the command line only.
 """
 from __future__ import annotations
 
@@ -26,21 +26,24 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
 
     import stimuli
-    from models.effort import plan_of_sample
+    from models.effort import describe, kinetic_energy, plan_of_sample
 
     trial = stimuli.load_trial(args.trial)
     result = plan_of_sample(trial, args.seed, args.sample, formulation=args.formulation, solver=args.solver)
     komo = result.komo
     print(f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})")
-    print(result.describe())
+    print(describe(result))
     if komo is not None:
         print(f"KOMO {komo.formulation} / {komo.solver}: {komo.status}, cost {komo.cost:.4f}, {komo.n_variables} variables, "
               f"{komo.solve_time:.3f} s solving, planned in {result.planning_time:.3f} s")
-    print(f"effort {result.kinetic_energy():.12g} J*s")
-    if args.html:
-        print("replay:", result.write_html(args.html))
-    if args.png:
-        print("figure:", result.write_png(args.png))
+    print(f"effort {kinetic_energy(result):.12g} J*s")
+    if args.html or args.png:
+        from lgp.view import write_html, write_png
+
+        if args.html:
+            print("replay:", write_html(result, args.html))
+        if args.png:
+            print("figure:", write_png(result, args.png))
     return 0
 
 

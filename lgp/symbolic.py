@@ -192,13 +192,19 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
         current = state.scene
         above = supported_by(support_graph(current))
         clear = [a for a in to_move if not above[a]]
+        # Bounding spheres prune the exact overlap test: solids whose centres are
+        # farther apart than the sum of their half diagonals cannot interpenetrate.
+        p_W = current.positions
+        radius = np.array([np.linalg.norm(o.size) / 2 for o in current.blocks])
         ready = []  # (target height, A order, block assigned to a target that can be built now)
         for order, a in enumerate(to_move):
             goal = target_of[a]
             if not all(s in fixed_names or s in in_place for s in onto(a)):
                 continue
             goal_block = current.block(a).moved_to(goal.p_WB, goal.yaw)
-            if any(penetration(goal_block, o) > OVERLAP_TOLERANCE for o in current.blocks if o.name != a):
+            near = np.linalg.norm(p_W - goal_block.p_WB, axis=1) <= radius + np.linalg.norm(goal_block.size) / 2 + OVERLAP_TOLERANCE
+            if any(penetration(goal_block, current.blocks[i]) > OVERLAP_TOLERANCE
+                   for i in np.flatnonzero(near) if current.blocks[i].name != a):
                 continue
             ready.append((goal.p_WB[2], order, a))
         legal = [r for r in ready if r[2] in clear]

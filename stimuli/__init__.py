@@ -1,8 +1,10 @@
 """The 24 construction trials of the paper (Figure 1) as data files, and their loader.
 
 Each trial is a YAML file in ``stimuli/trials/`` (format: ``stimuli/README.md``).
-``load_trial("7H")`` returns a validated :class:`Trial`; ``load_all()`` the 24 trials
-in order 1E, 1H, ..., 12H plus any extra trial file a user drops in (sorted after).
+``load_trial("7H")`` returns a validated :class:`Trial`; ``load_paper()`` the paper's
+24 trials (lgp.paper.TRIAL_IDS) in order 1E, 1H, ..., 12H; ``load_all()`` those plus
+any extra trial file a user drops in (sorted after). Every loader takes a
+``directory`` (default ``stimuli/trials``) to read another set of trial files.
 """
 from __future__ import annotations
 
@@ -15,8 +17,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from lgp.paper import BLOCK_SIZE, BUILD_SITE
-from lgp.scene import Block, FixedBox, Scene, StimulusError, bounding_boxes, colour_shortfall, horizontal_penetration
+from lgp.paper import BLOCK_SIZE, BUILD_SITE, TRIAL_IDS
+from lgp.scene import (SOLID_SIZE, WORKSPACE_XY, Block, FixedBox, Scene, StimulusError, bounding_boxes, colour_shortfall,
+                       horizontal_penetration)
 
 TRIAL_DIR = Path(__file__).parent / "trials"
 TRIAL_ID = re.compile(r"^(\d+)([EH])$")
@@ -269,14 +272,12 @@ def _fixed(where: str, data: list) -> tuple[FixedBox, ...]:
         if "name" not in obstacle or not isinstance(obstacle.get("boxes"), list):
             raise StimulusError(f"{where}: an obstacle needs a name and a list of boxes")
         name = _text(f"{where} name", obstacle["name"])
-        for box in obstacle["boxes"]:
-            _check_keys(f"{where} {name}", box, {"p_WO", "size"})
+        for k, box in enumerate(obstacle["boxes"]):
+            at = f"{where} {name} box {k + 1}"
+            _check_keys(at, box, {"p_WO", "size"})
             if "p_WO" not in box or "size" not in box:
-                raise StimulusError(f"{where} {name}: a box needs p_WO and size")
-            size = _vector(f"{where} {name} size", box["size"], 3)
-            if np.any(size <= 0):
-                raise StimulusError(f"{where} {name} size: must be positive, got {size}")
-            boxes.append(FixedBox(name, _vector(f"{where} {name} p_WO", box["p_WO"], 3), size))
+                raise StimulusError(f"{at}: a box needs p_WO and size")
+            boxes.append(FixedBox(name, _vector(at + " p_WO", box["p_WO"], 3), _vector(at + " size", box["size"], 3)))
     return tuple(boxes)
 
 
@@ -292,8 +293,8 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
         raise StimulusError(f"{tid}: pair/level fields disagree with the id")
     fixed = _fixed(f"{tid} fixed", data.get("fixed"))
     build_site = tuple(_vector(f"{tid} build_site", data.get("build_site", list(BUILD_SITE)), 2))
-    if not np.all(np.isfinite(build_site)):
-        raise StimulusError(f"{tid} build_site: expected 2 finite numbers, got {build_site}")
+    if not (np.all(np.isfinite(build_site)) and np.all(np.abs(build_site) <= WORKSPACE_XY)):
+        raise StimulusError(f"{tid} build_site: {build_site} must lie inside the workspace |x|, |y| <= {WORKSPACE_XY:g} m")
 
     target_data = data.get("target") or {}
     _check_keys(f"{tid}-B", target_data, {"blocks"})
@@ -323,6 +324,14 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
         region = ScatterRegion(_range(f"{where} region x", r["x"]), _range(f"{where} region y", r["y"]),
                                _range(f"{where} region r_S", r["r_S"]) if "r_S" in r else None)
         kw = {k: _number(f"{where} {k}", s[k]) for k in ("min_gap", "clearance") if k in s}
+        for k, v in kw.items():
+            if not 0.0 <= v <= SOLID_SIZE[1]:
+                raise StimulusError(f"{tid}-A scattered {k}: {v} m must lie in [0, {SOLID_SIZE[1]:g}] m")
+        bounds = [*region.x, *region.y, *(region.r_S or ())]
+        if not (np.all(np.isfinite(bounds)) and np.all(np.abs(bounds[:4]) <= WORKSPACE_XY)
+                and region.x[0] <= region.x[1] and region.y[0] <= region.y[1]):
+            raise StimulusError(f"{tid}-A scattered region: x {region.x}, y {region.y} must be finite ranges "
+                                f"[min, max] inside the workspace |x|, |y| <= {WORKSPACE_XY:g} m")
     recolour = None
     if "recolour" in init:
         rc = init["recolour"]
@@ -414,18 +423,22 @@ def _sort_key(tid: str):
     return (int(m.group(1)), m.group(2)) if m else (10**6, tid)
 
 
-def trial_ids(directory: Path = TRIAL_DIR) -> list[str]:
+def trial_ids(directory: str | Path | None = None) -> list[str]:
+    """Ids of every trial file in `directory` (default ``stimuli/trials``), in order."""
+    directory = TRIAL_DIR if directory is None else Path(directory)
     return sorted((p.stem for p in directory.glob("*.yaml")), key=_sort_key)
 
 
 _cache: dict[tuple[str, str], Trial] = {}
 
 
-def load_trial(trial_id: str, directory: str | Path = TRIAL_DIR) -> Trial:
-    """The trial ``trial_id`` (e.g. ``"7H"``) from ``directory``, validated."""
-    path = Path(directory) / f"{trial_id}.yaml"
+def load_trial(trial_id: str, directory: str | Path | None = None) -> Trial:
+    """The trial ``trial_id`` (e.g. ``"7H"``) from `directory` (default
+    ``stimuli/trials``), validated."""
+    directory = TRIAL_DIR if directory is None else Path(directory)
+    path = directory / f"{trial_id}.yaml"
     if not path.exists():
-        raise StimulusError(f"no trial {trial_id!r}: {path} does not exist (known: {', '.join(trial_ids(Path(directory)))})")
+        raise StimulusError(f"no trial {trial_id!r}: {path} does not exist (known: {', '.join(trial_ids(directory))})")
     key = (str(path), hashlib.sha256(path.read_bytes()).hexdigest())
     if key not in _cache:
         trial = load_file(path)
@@ -435,6 +448,18 @@ def load_trial(trial_id: str, directory: str | Path = TRIAL_DIR) -> Trial:
     return _cache[key]
 
 
-def load_all(directory: str | Path = TRIAL_DIR) -> list[Trial]:
-    """Every trial in ``directory``: 1E, 1H, ..., 12H, then any others."""
-    return [load_trial(t, directory) for t in trial_ids(Path(directory))]
+def load_all(directory: str | Path | None = None) -> list[Trial]:
+    """Every trial in `directory`: 1E, 1H, ..., 12H, then any others (e.g. a
+    user's 13E). The paper's set alone is `load_paper`."""
+    return [load_trial(t, directory) for t in trial_ids(directory)]
+
+
+def load_paper(directory: str | Path | None = None) -> list[Trial]:
+    """The paper's 24 trials (lgp.paper.TRIAL_IDS, in the paper's order) from
+    `directory`, ignoring any other trial file there."""
+    return [load_trial(t, directory) for t in TRIAL_IDS]
+
+
+def extra_ids(directory: str | Path | None = None) -> list[str]:
+    """Ids of the trial files in `directory` that are not among the paper's 24."""
+    return [t for t in trial_ids(directory) if t not in TRIAL_IDS]

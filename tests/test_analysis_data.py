@@ -239,3 +239,144 @@ def test_revalidating_a_loaded_table_keeps_its_csv_lines(tmp_path):
     again = validate_human_data(table)
     assert again["line"].tolist() == table["line"].tolist()
     assert again.loc[again["trial"] == "1H", "line"].tolist()[0] == 4
+
+
+# ---- edge cases of real files (issue 16, item 5) -----------------------------------
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be", "utf-32", "utf-8-sig"])
+def test_a_file_with_a_byte_order_mark_is_read_in_its_encoding(tmp_path, encoding):
+    text = "\n".join(valid_lines()) + "\n"
+    data = text.encode(encoding)
+    if encoding == "utf-16-be":
+        data = b"\xfe\xff" + data  # Python writes no BOM for the explicit-endian codec
+    path = tmp_path / "responses.csv"
+    path.write_bytes(data)
+    assert load_human_data(path).equals(load_human_data(write(tmp_path, valid_lines(), "plain.csv")))
+
+
+def test_a_latin_1_file_names_the_file_line_and_expected_encoding(tmp_path):
+    lines = replace_field(valid_lines(), 7, "participant", "Zoë")
+    path = tmp_path / "latin1.csv"
+    path.write_bytes(("\n".join(lines) + "\n").encode("latin-1"))
+    with pytest.raises(HumanDataError, match=r"latin1\.csv: line 7: not UTF-8 text .*save the file as UTF-8") as err:
+        load_human_data(path)
+    assert err.value.line == 7
+
+
+def test_a_utf_16_file_without_byte_order_mark_is_refused_by_name(tmp_path):
+    path = tmp_path / "bare16.csv"
+    path.write_bytes(("\n".join(valid_lines()) + "\n").encode("utf-16-le"))
+    with pytest.raises(HumanDataError, match=r"bare16\.csv: .*not UTF-8 text"):
+        load_human_data(path)
+
+
+def test_a_header_only_file_is_refused_up_front(tmp_path):
+    with pytest.raises(HumanDataError, match=r"line 1 \(header\): no responses after the header"):
+        load_human_data(write(tmp_path, [HEADER]))
+
+
+@pytest.mark.parametrize("value", ["1_000", "1_0.5", "١٢", "０.５"])
+def test_python_only_number_syntax_is_not_a_csv_number(tmp_path, value):
+    lines = replace_field(valid_lines(), 9, "response", value)
+    with pytest.raises(HumanDataError, match=rf"line 9: non-numeric response '{value}'"):
+        load_human_data(write(tmp_path, lines))
+
+
+def test_responses_too_large_to_zscore_are_refused_naming_the_participant(tmp_path):
+    """1e308 is finite, but its square overflows: the SD is inf and every z-score 0
+    or NaN. Validation names the participant; so does zscore_responses on a table
+    that bypassed it."""
+    lines = replace_field(valid_lines(), 30, "response", "1e308")
+    with pytest.raises(HumanDataError, match=r"line 26: participant 'p2' .*too large to z-score") as err:
+        load_human_data(write(tmp_path, lines))
+    assert "p1" not in str(err.value)
+    table = load_human_data(write(tmp_path, valid_lines()))
+    table.loc[table["line"] == 30, "response"] = 1e308
+    with pytest.raises(HumanDataError, match=r"participant 'p2' in dataset 'difficulty': z-scores are not finite"):
+        zscore_responses(table)
+
+
+def _reference_validation(table: pd.DataFrame, allowed) -> list[str]:
+    """The row-by-row validation the vectorised one replaced (same rules, same
+    messages): the problems of the first failing check, or [] when valid."""
+    from analysis.data import _line_ranges, _parse_response, is_simulated_dataset
+
+    def clean(v):
+        return "" if v is None or (isinstance(v, float) and math.isnan(v)) else str(v).strip()
+
+    t = table.copy()
+    for column in ("dataset", "participant", "trial"):
+        t[column] = t[column].map(clean)
+    t["trial"] = t["trial"].str.upper()
+    problems, values = [], []
+    for line, d, p, tr, r in zip(t["line"], t["dataset"], t["participant"], t["trial"], t["response"]):
+        if d not in allowed:
+            hint = (" (simulated participants are not human data; pass allow_simulated=True "
+                    "only in tests)" if is_simulated_dataset(d) else "")
+            problems.append((line, f"unknown dataset {d!r}; expected one of {', '.join(sorted(allowed))}{hint}"))
+        if p == "":
+            problems.append((line, "empty participant id"))
+        if tr not in TRIAL_IDS:
+            problems.append((line, f"unknown trial id {tr!r}; expected 1E, 1H, ..., 12H"))
+        v = _parse_response(r)
+        if isinstance(v, str):
+            problems.append((line, v))
+        values.append(v)
+    if problems:
+        return sorted(problems, key=lambda q: q[0])
+    t["response"] = values
+    keys = ["dataset", "participant", "trial"]
+    for _, group in t[t.duplicated(keys, keep=False)].groupby(keys, sort=False):
+        first, *others = group["line"].tolist()
+        for line in others:
+            d, p, tr = group.iloc[0][keys]
+            problems.append((line, f"duplicate response of participant {p!r} in dataset {d!r} "
+                                   f"to trial {tr} (first given on line {first})"))
+    if problems:
+        return sorted(problems, key=lambda q: q[0])
+    for (d, p), group in t.groupby(["dataset", "participant"], sort=False):
+        absent = [tr for tr in TRIAL_IDS if tr not in set(group["trial"])]
+        if absent:
+            ls = group["line"].tolist()
+            problems.append((min(ls), f"participant {p!r} in dataset {d!r} (rows on lines {_line_ranges(ls)}) "
+                                      f"is missing trial(s) {', '.join(absent)}"))
+    return sorted(problems, key=lambda q: q[0])
+
+
+_CELLS = ["5", " 3.5 ", "1e3", "-.5", "5.", "+7", "abc", "", "inf", "-Infinity", "nan", "1_000", "1e999",
+          "0x10", "١", None, 2.5, float("nan"), 7]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_vectorised_validation_gives_the_row_by_row_verdicts(seed):
+    rng = np.random.default_rng(seed)
+    rows = []
+    for p in range(int(rng.integers(1, 4))):
+        for t in TRIAL_IDS:
+            rows.append({"dataset": "time", "participant": f"p{p}", "trial": t, "response": str(rng.normal())})
+    table = pd.DataFrame(rows, dtype=object)  # cells of any type, as a user's DataFrame may hold
+    for _ in range(int(rng.integers(0, 4))):  # a few faults of each kind, or none
+        k, kind = int(rng.integers(len(table))), int(rng.integers(6))
+        if kind == 0:
+            table.at[k, "dataset"] = str(rng.choice(["tme", "build", " difficulty ", "simulated-time", ""]))
+        elif kind == 1:
+            table.at[k, "participant"] = str(rng.choice(["", " p0", "p9"]))
+        elif kind == 2:
+            table.at[k, "trial"] = str(rng.choice(["13E", "1e", " 7h", "", "E1"]))
+        elif kind == 3:
+            table.at[k, "response"] = _CELLS[int(rng.integers(len(_CELLS)))]
+        elif kind == 4:
+            table = pd.concat([table, table.iloc[[k]]], ignore_index=True)
+        else:
+            table = table.drop(index=k).reset_index(drop=True)
+    table["line"] = np.arange(len(table)) + 2
+    expected = [f"human data: line {line}: {msg}" for line, msg in
+                _reference_validation(table, {"difficulty", "time", "build"})]
+    if expected:
+        with pytest.raises(HumanDataError) as err:
+            validate_human_data(table)
+        assert list(err.value.problems) == expected
+    else:
+        clean = validate_human_data(table)
+        assert np.array_equal(clean["response"].to_numpy(), table["response"].astype(float).to_numpy())

@@ -7,7 +7,8 @@ import pytest
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
-from lgp.komo import Komo, KomoError, kinetic_energy
+from lgp.komo import Komo, KomoError
+from models.effort import kinetic_energy, path_kinetic_energy
 from lgp.planner import APPROACH, default_arm, plan
 from lgp.scene import BLOCK_SIZE, Block, Scene
 from lgp.symbolic import Grasp, Place
@@ -55,7 +56,7 @@ def test_free_point_converges_to_the_cubic_with_kinetic_energy_integral_0_6_m_L2
         result = komo.solve()
         assert result.success, result.status
         p = komo.frame_poses(result.q, "point")[:, :3, 3]
-        errors.append(abs(kinetic_energy(p, komo.tau, mass=1.0) - 0.6))
+        errors.append(abs(path_kinetic_energy(p, komo.tau, mass=1.0) - 0.6))
         s = result.t / 1.0
         assert np.max(np.abs(p[:, 0] - (3 * s**2 - 2 * s**3))) < 3.0 / slices
     assert all(b < a for a, b in zip(errors, errors[1:])), errors
@@ -108,7 +109,7 @@ def test_reduced_program_reaches_the_full_programs_optimum(n, request):
         reduced, full = plan(A, B, 0, formulation="reduced"), plan(A, B, 0, formulation="full")
     assert reduced.komo.n_variables < full.komo.n_variables / 3
     assert reduced.komo.cost == pytest.approx(full.komo.cost, rel=5e-3)
-    assert reduced.kinetic_energy() == pytest.approx(full.kinetic_energy(), rel=5e-3)
+    assert kinetic_energy(reduced) == pytest.approx(kinetic_energy(full), rel=5e-3)
 
 
 # ----------------------------------------------------------------------------- kinematic modes

@@ -1,7 +1,13 @@
 """`python -m lgp.reproduce` runs the pipeline, caches what it computed, and a run
-interrupted half way resumes to the same numbers as an uninterrupted one."""
+interrupted half way, or one whose cache was damaged, ends with the same numbers as
+an undisturbed one."""
+import re
+import shutil
+
 import pandas as pd
 import pytest
+
+from lgp.cache import read_entry
 
 import models.effort
 import models.risk
@@ -10,32 +16,49 @@ from lgp import reproduce
 ARGS = ["--trials", "9E", "10E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.05", "0.1", "--jobs", "1", "--seed", "3"]
 
 
+def _cache_counts(err: str, kinds=("effort", "risk")) -> dict:
+    """The counts of the run's `cache: ...` summary line on stderr, {(kind, outcome): n},
+    for entries of `kinds` (default: the result tables, not the B-stands checks)."""
+    (line,) = [l for l in err.splitlines() if l.startswith("cache: ")]
+    return {(kind, outcome): int(n) for kind, body in re.findall(r"(\w+) ((?:\d+ \w+(?:, )?)+)", line[7:])
+            for n, outcome in re.findall(r"(\d+) (\w+)", body) if kind in kinds}
+
+
 def _tables(out):
     """The result tables, less wall-clock columns (they differ run to run)."""
     tables = {name: pd.read_csv(out / f"{name}.csv") for name in ("effort_samples", "effort", "risk")}
     return {name: df.drop(columns=[c for c in df if c.endswith("_time")]) for name, df in tables.items()}
 
 
-def test_reproduce_writes_tables_and_report_then_reuses_the_cache(tmp_path, monkeypatch):
+@pytest.mark.slow
+def test_reproduce_writes_tables_and_report_then_reuses_the_cache(tmp_path, capsys):
     out = tmp_path / "r"
     assert reproduce.main([*ARGS, "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert _cache_counts(err) == {("effort", "hit"): 0, ("effort", "miss"): 3, ("effort", "recomputed"): 0,
+                                  ("risk", "hit"): 0, ("risk", "miss"): 3, ("risk", "recomputed"): 0}
+    assert _cache_counts(err, ["stable"])["stable", "miss"] == 3  # B checked once per trial, before effort
     first = _tables(out)
     assert set(first["risk"]["trial"]) == {"9E", "10E", "6H"} and len(first["risk"]) == 6
     assert (first["effort"]["effort"] > 0).all()
-    assert "Physical effort" in (out / "report.md").read_text()
+    report = (out / "report.md").read_text()
+    assert "Physical effort" in report
+    from importlib.metadata import version
 
-    # A second run must not simulate or plan anything: make both fail if called.
-    def boom(*a, **k):
-        raise AssertionError("recomputed a cached result")
+    assert f"mujoco {version('mujoco')}" in report and '"timestep": 0.002' in report  # libraries and engine settings
 
-    monkeypatch.setattr(models.risk, "risk_table", boom)
-    monkeypatch.setattr(models.effort, "physical_effort", boom)
+    # A second run plans and simulates nothing: every lookup is a hit.
     assert reproduce.main([*ARGS, "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert _cache_counts(err) == {("effort", "hit"): 3, ("effort", "miss"): 0, ("effort", "recomputed"): 0,
+                                  ("risk", "hit"): 3, ("risk", "miss"): 0, ("risk", "recomputed"): 0}
+    assert _cache_counts(err, ["stable"])["stable", "hit"] == 3
     for name, df in _tables(out).items():
         pd.testing.assert_frame_equal(df, first[name])
 
 
-def test_interrupted_run_resumes_to_the_same_results(tmp_path, monkeypatch):
+@pytest.mark.slow
+def test_interrupted_run_resumes_to_the_same_results(tmp_path, monkeypatch, capsys):
     whole = tmp_path / "whole"
     reproduce.main([*ARGS, "--out", str(whole)])
 
@@ -50,11 +73,15 @@ def test_interrupted_run_resumes_to_the_same_results(tmp_path, monkeypatch):
         return real(*a, **k)
 
     monkeypatch.setattr(models.risk, "risk_table", dies_on_second_chunk)
-    with pytest.raises(KeyboardInterrupt):
-        reproduce.main([*ARGS, "--out", str(cut), "--risk-chunk", "2"])
+    capsys.readouterr()
+    assert reproduce.main([*ARGS, "--out", str(cut), "--risk-chunk", "2"]) == 130  # stopped as Ctrl-C stops it
+    assert "interrupted" in capsys.readouterr().err
     monkeypatch.setattr(models.risk, "risk_table", real)
     assert len(list((cut / "cache").glob("risk-*.csv"))) == 2  # the first chunk survived whole
+    capsys.readouterr()
     reproduce.main([*ARGS, "--out", str(cut), "--risk-chunk", "2"])
+    counts = _cache_counts(capsys.readouterr().err)
+    assert (counts["effort", "hit"], counts["risk", "hit"], counts["risk", "miss"]) == (3, 2, 1)
     for name, df in _tables(cut).items():
         pd.testing.assert_frame_equal(df, _tables(whole)[name])
 
@@ -80,6 +107,7 @@ def test_kappa_range_matches_brute_force_over_ratios():
             assert (ok[far] == expect[far]).all()
 
 
+@pytest.mark.slow
 def test_no_cache_simulates_each_trial_once(tmp_path, monkeypatch):
     real, calls = models.risk.risk_table, []
 
@@ -90,3 +118,162 @@ def test_no_cache_simulates_each_trial_once(tmp_path, monkeypatch):
     monkeypatch.setattr(models.risk, "risk_table", counted)
     reproduce.main([*ARGS, "--out", str(tmp_path / "r"), "--no-cache"])
     assert sorted(sum(calls, [])) == ["10E", "6H", "9E"]
+
+
+def _fake_physics(monkeypatch):
+    """Effort and risk tables without planning or simulating: this checks which
+    trials reach which stage, not model numbers (those have their own tests)."""
+    def effort(trials, samples, seed, executor, cache):
+        return pd.DataFrame([{"trial": t.id, "sample": s, "effort": 1.0 + t.pair / 10 + (t.level == "H") + s / 100}
+                             for t in trials for s in range(samples)])
+
+    def risk(trials, sigmas, n_sims, seed, engine, executor, cache, chunk=6):
+        return pd.DataFrame([{"trial": t.id, "sigma": s, "risk": min(1.0, s * (2 if t.level == "H" else 1)),
+                              "falls": 0, "n": n_sims, "engine": "none"} for t in trials for s in sigmas])
+
+    monkeypatch.setattr(reproduce, "effort_tables", effort)
+    monkeypatch.setattr(reproduce, "risk_tables", risk)
+
+
+def test_an_extra_trial_file_does_not_break_the_paper_run(tmp_path, monkeypatch, capsys):
+    """A valid 13E.yaml beside the paper's 24 (as stimuli/README.md invites): the
+    default run is the paper's 24 and names 13E; `--trials all` runs 13E too, in
+    the effort and risk tables, while pairs and figures stay on the paper's 24."""
+    import yaml
+
+    import stimuli
+
+    folder = tmp_path / "trials"
+    folder.mkdir()
+    for path in stimuli.TRIAL_DIR.glob("*.yaml"):
+        (folder / path.name).write_text(path.read_text())
+    data = yaml.safe_load((folder / "7H.yaml").read_text())
+    data.update(id="13E", pair=13, level="E")
+    (folder / "13E.yaml").write_text(yaml.safe_dump(data))
+    monkeypatch.setattr(stimuli, "TRIAL_DIR", folder)
+    _fake_physics(monkeypatch)
+    args = ["--samples", "2", "--n-sims", "4", "--sigmas", "0.05", "0.065", "--jobs", "1", "--n-boot", "10"]
+
+    assert reproduce.main([*args, "--out", str(tmp_path / "paper")]) == 0
+    assert "also holds 13E" in capsys.readouterr().err
+    effort = pd.read_csv(tmp_path / "paper" / "effort.csv")
+    assert list(effort["trial"]) == [f"{p}{l}" for p in range(1, 13) for l in "EH"]
+
+    assert reproduce.main([*args, "--trials", "all", "--out", str(tmp_path / "all")]) == 0
+    assert list(pd.read_csv(tmp_path / "all" / "effort.csv")["trial"])[-1] == "13E"
+    assert "13E" in set(pd.read_csv(tmp_path / "all" / "risk.csv")["trial"])
+    assert sorted(pd.read_csv(tmp_path / "all" / "pairs.csv")["pair"]) == list(range(1, 13))
+    assert "13E are in the effort and risk tables only" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- damaged cache entries (issue 16, item 6)
+
+
+def _truncate(b):
+    return b[: len(b) * 2 // 3]
+
+
+def _empty(b):
+    return b""
+
+
+def _garble(b):  # not UTF-8, in the middle of the CSV
+    return b[: len(b) // 2] + b"\xff\xfe\x00\x81" + b[len(b) // 2 + 4:]
+
+
+@pytest.fixture(scope="module")
+def undisturbed(tmp_path_factory):
+    """A whole run and its cache, and the same run's tables after a second, undisturbed run."""
+    out = tmp_path_factory.mktemp("undisturbed") / "r"
+    assert reproduce.main([*ARGS, "--out", str(out)]) == 0
+    entries = {}
+    for path in sorted([*(out / "cache").glob("effort-*.csv"), *(out / "cache").glob("risk-*.csv")]):
+        entries[path.name.split("-")[0], read_entry(path)["trial"].iloc[0]] = path.name
+    assert len(entries) == 6
+    return out, entries
+
+
+def _without_wall_clock(path):
+    df = pd.read_csv(path, skiprows=1 if path.parent.name == "cache" else 0)
+    return df.drop(columns=[c for c in df if c.endswith("_time") and c != "sim_time"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("damage, effort_trial, risk_trial", [(_truncate, "9E", "10E"), (_empty, "10E", "6H"), (_garble, "6H", "9E")])
+def test_damaged_cache_entries_are_recomputed_exactly_and_the_run_ends_the_same(undisturbed, tmp_path, capsys, damage, effort_trial, risk_trial):
+    whole, entries = undisturbed
+    out = tmp_path / "r"
+    shutil.copytree(whole, out)
+    damaged = {out / "cache" / entries["effort", effort_trial], out / "cache" / entries["risk", risk_trial]}
+    for path in damaged:
+        path.write_bytes(damage(path.read_bytes()))
+    capsys.readouterr()
+
+    assert reproduce.main([*ARGS, "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    reported = [l for l in err.splitlines() if "damaged entry" in l]
+    assert len(reported) == 2 and {p for p in damaged if any(str(p) in l for l in reported)} == damaged
+    assert _cache_counts(err) == {("effort", "hit"): 2, ("effort", "miss"): 0, ("effort", "recomputed"): 1,
+                                  ("risk", "hit"): 2, ("risk", "miss"): 0, ("risk", "recomputed"): 1}
+
+    # Every result file and every cache entry is byte-identical to the undisturbed
+    # run's, except the wall-clock column of the re-planned effort entry (solve_time).
+    for name in ("effort.csv", "risk.csv"):
+        assert (out / name).read_bytes() == (whole / name).read_bytes(), name
+    replanned = out / "cache" / entries["effort", effort_trial]
+    pairs = [(out / "cache" / name, whole / "cache" / name) for name in entries.values()]
+    for path, reference in pairs + [(out / "effort_samples.csv", whole / "effort_samples.csv")]:
+        if path in (replanned, out / "effort_samples.csv"):
+            pd.testing.assert_frame_equal(_without_wall_clock(path), _without_wall_clock(reference))
+        else:
+            assert path.read_bytes() == reference.read_bytes(), path.name
+    # the repaired entries are used by the next run
+    assert reproduce.main([*ARGS, "--out", str(out)]) == 0
+    assert _cache_counts(capsys.readouterr().err)["effort", "hit"] == 3
+
+
+def _fails_naming(capsys, call, error, text):
+    """`call()` fails with `error` mentioning `text`: raised, or (with a one-line CLI
+    wrapper) printed on stderr with a non-zero exit status."""
+    try:
+        status = call()
+    except error as e:
+        message = str(e)
+    else:
+        assert status != 0
+        message = capsys.readouterr().err
+    assert text in message, message
+
+
+def test_problems_are_found_before_the_effort_stage(tmp_path, monkeypatch, capsys):
+    """An unstable B and a header-only human-data file stop the run before any
+    effort is planned; B's check is one cached simulation per trial."""
+    import yaml
+
+    import stimuli
+    from analysis import HumanDataError
+    from models.risk import UnstableSceneError
+
+    folder = tmp_path / "trials"
+    folder.mkdir()
+    data = yaml.safe_load((stimuli.TRIAL_DIR / "6E.yaml").read_text())  # a 5-tower -> a row of 5
+    data.update(id="13E", pair=13, level="E")
+    data["target"]["blocks"] = [{"name": "b1", "p_WB": [0.35, 0.0, 0.0127]},
+                                {"name": "b2", "p_WB": [0.35 + 0.7 * 0.0254, 0.0, 0.0381]}]  # overhangs 70 %
+    (folder / "13E.yaml").write_text(yaml.safe_dump(data))
+    monkeypatch.setattr(stimuli, "TRIAL_DIR", folder)
+
+    def no_effort(*a, **k):
+        raise AssertionError("the effort stage started")
+
+    monkeypatch.setattr(reproduce, "effort_tables", no_effort)
+    args = ["--trials", "13E", "--samples", "1", "--n-sims", "2", "--jobs", "1", "--out", str(tmp_path / "r")]
+    _fails_naming(capsys, lambda: reproduce.main(args), UnstableSceneError, "13E-B: unstable before any noise")
+
+    monkeypatch.setattr(models.risk, "check_stable", no_effort)  # the verdict now comes from the cache
+    _fails_naming(capsys, lambda: reproduce.main(args), UnstableSceneError, "block b2 moved")
+
+    header_only = tmp_path / "header.csv"
+    header_only.write_text("dataset,participant,trial,response\n")
+    _fails_naming(capsys, lambda: reproduce.main(["--human-data", str(header_only), *args]),
+                  HumanDataError, "no responses after the header")

@@ -141,6 +141,17 @@ def test_same_normals_give_same_scene_and_sigma_scales_them():
     a = perturb_from_normals(scene, 0.07, z[0])
     b = perturb_from_normals(scene, 0.07, z[0])
     assert np.array_equal(a.positions, b.positions)
+    assert np.array_equal(perturb_from_normals(scene, 0.0, z[0]).positions, scene.positions)
+
+    # Blocks far apart on the table never touch: each moves sigma * d * z in x and y,
+    # and up by sigma * d * z (down is the table), so doubling sigma doubles every move.
+    free = line(4, gap=2 * D)
+    for zr in draw_normals(5, len(free), seed=11):
+        moves = {s: perturb_from_normals(free, s, zr).positions - free.positions for s in (0.07, 0.14)}
+        expected = 0.07 * D * zr
+        expected[:, 2] = np.maximum(expected[:, 2], 0.0)
+        np.testing.assert_allclose(moves[0.07], expected, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(moves[0.14], 2 * expected, rtol=0, atol=1e-15)
 
 
 def test_bad_normals_shape_is_refused():

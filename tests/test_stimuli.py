@@ -93,6 +93,8 @@ def test_a_user_can_add_a_25th_trial(tmp_path):
     (tmp_path / "13E.yaml").write_text(yaml.safe_dump(data))
     trials = stimuli.load_all(tmp_path)
     assert len(trials) == 25 and trials[-1].id == "13E"
+    assert [t.id for t in stimuli.load_paper(tmp_path)] == IDS  # the paper's set is a named set
+    assert stimuli.extra_ids(tmp_path) == ["13E"]
 
 
 # ----------------------------------------------------------------------------- bad input
@@ -156,3 +158,51 @@ def test_contact_sheet_draws_the_trials(tmp_path):
 
     out = contact_sheet([stimuli.load_trial("12E"), stimuli.load_trial("5H")], out=str(tmp_path / "s.png"))
     assert (tmp_path / "s.png").stat().st_size > 10_000 and out.endswith("s.png")
+
+
+# ----------------------------------------------------------------------------- the workspace
+
+
+def _bad_12e(mutate, match):
+    data = yaml.safe_load((stimuli.TRIAL_DIR / "12E.yaml").read_text())
+    mutate(data)
+    with pytest.raises(StimulusError, match=match):
+        stimuli.parse_trial(data, Path("12E.yaml"))
+
+
+@pytest.mark.parametrize("value", [1e300, -3.0, 2.5])
+def test_a_block_outside_the_table_top_workspace_is_refused(value):
+    _bad(lambda t: t["target"]["blocks"][2]["p_WB"].__setitem__(0, value),
+         r"4E-B block b3: centre .* outside the workspace \|x\|, \|y\| <= 2 m")
+
+
+@pytest.mark.parametrize("size", [1e300, 0.6, 1e-4, -0.0254, 0.0])
+def test_absurd_block_sizes_are_refused(size):
+    _bad(lambda t: t["target"]["blocks"][0].__setitem__("size", [size, 0.0254, 0.0254]),
+         r"4E-B block b1: size .* breaks the workspace rule: every edge longer than 1 mm and at most 0.5 m")
+
+
+def test_a_yaw_of_many_turns_is_refused():
+    _bad(lambda t: t["target"]["blocks"][0].__setitem__("yaw", 1e300), r"4E-B block b1: yaw .* more than one turn")
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("size", [-0.05, 0.256, 0.005], r"12E-B fixed bucket: size .* breaks the workspace rule"),
+    ("size", [1e300, 0.256, 0.005], r"12E-B fixed bucket: size .* breaks the workspace rule"),
+    ("size", [float("nan"), 0.256, 0.005], r"12E-B fixed bucket: pose or size is not finite"),
+    ("p_WO", [0.5, 1e300, 0.0025], r"12E-B fixed bucket: centre .* outside the workspace"),
+    ("p_WO", [0.5, 0.0, -0.01], r"12E-B fixed bucket: (centre .* outside the workspace|lies under the table)"),
+])
+def test_fixed_boxes_are_held_to_the_same_rules_as_blocks(field, value, match):
+    """A negative or NaN bucket wall used to load (NaN as a misleading overlap)."""
+    _bad_12e(lambda t: t["fixed"][0]["boxes"][0].__setitem__(field, value), match)
+
+
+def test_a_fixed_box_without_a_size_names_the_box():
+    _bad_12e(lambda t: t["fixed"][0]["boxes"][1].pop("size"), r"12E fixed bucket box 2: a box needs p_WO and size")
+
+
+def test_an_absurd_scatter_region_is_refused_before_drawing():
+    _bad(lambda t: t["initial"]["scattered"].__setitem__("region", {"x": [0.2, 1e300], "y": [-0.2, 0.2]}),
+         r"4E-A scattered region: .* inside the workspace")
+    _bad(lambda t: t["initial"]["scattered"].__setitem__("clearance", 1e300), r"4E-A scattered clearance")

@@ -30,7 +30,7 @@ def _load(tmp_path, text, name="1E.yaml"):
     ("p_WB: [0.35, 0.0, 0.0127]", "p_WB: [0.35, 0.0]", "1E-B block b1 p_WB: expected 3 numbers"),
     ("min_gap: 0.01", "min_gap: wide", "1E-A scattered min_gap: expected a number, got 'wide'"),
     ("x: [0.2, 0.55]", "x: 0.2", "1E-A scattered region x: expected \\[min, max\\], got 0.2"),
-    ("x: [0.2, 0.55]", "x: [0.55, 0.2]", "each range must be \\[min, max\\] with min <= max"),
+    ("x: [0.2, 0.55]", "x: [0.55, 0.2]", "must be finite ranges \\[min, max\\]"),
     ("build_site: [0.35, 0.0]", "build_site: [here, 0.0]", "1E build_site: expected a number, got 'here'"),
 ])
 def test_every_bad_field_raises_a_named_stimulus_error(tmp_path, old, new, message):

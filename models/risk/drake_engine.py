@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from lgp.geometry import quaternion_from_yaw
 from lgp.scene import Scene
 from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds, layout_key
 
@@ -176,8 +177,7 @@ class DrakeEngine(Engine):
         L = self._layouts[key]
         self._L = L
         q = np.zeros(L.nq)
-        yaw = np.array([b.yaw for b in scene.blocks])
-        quat = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=1)
+        quat = quaternion_from_yaw([b.yaw for b in scene.blocks])
         for k in range(len(scene)):
             s = L.q_start[k]
             q[s : s + 4] = quat[k]

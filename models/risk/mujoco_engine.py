@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lgp.geometry import quaternion_from_yaw
 from lgp.scene import Scene
 from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds, layout_key
 
@@ -46,6 +47,23 @@ def mjcf(scene: Scene, sleep: bool = True) -> str:
     )
 
 
+#: MuJoCo's warnings in this process (most recent last, at most 100): kept here
+#: instead of MuJoCo's default, which appends them to MUJOCO_LOG.TXT in the
+#: current directory, i.e. the user's.
+WARNINGS: list[str] = []
+
+
+def _keep_warning(message: str) -> None:
+    if len(WARNINGS) >= 100:
+        del WARNINGS[0]
+    WARNINGS.append(message)
+
+
+def quiet_log(mj) -> None:
+    """Route MuJoCo's warnings to `WARNINGS` (no MUJOCO_LOG.TXT in the cwd)."""
+    mj.set_mju_user_warning(_keep_warning)
+
+
 def _v(x) -> str:
     return " ".join(repr(float(c)) for c in x)
 
@@ -57,6 +75,7 @@ class MujocoEngine(Engine):
         import mujoco
 
         self._mj = mujoco
+        quiet_log(mujoco)
         self.sleep = sleep
         self._models: dict[str, tuple] = {}
 
@@ -79,8 +98,7 @@ class MujocoEngine(Engine):
         n = len(scene)
         qpos = d.qpos.reshape(n, 7)
         qpos[:, :3] = scene.positions
-        yaw = np.array([b.yaw for b in scene.blocks])
-        qpos[:, 3:] = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=1)
+        qpos[:, 3:] = quaternion_from_yaw([b.yaw for b in scene.blocks])
         mj.mj_forward(m, d)
         self._sizes = np.array([b.size for b in scene.blocks])
         self._n = n

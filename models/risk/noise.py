@@ -33,7 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from lgp.scene import CONTACT_TOLERANCE, Scene, horizontal_penetration
+from lgp.geometry import rectangle_overlap
+from lgp.scene import CONTACT_TOLERANCE, Scene
 
 #: Numerical slack (m) below which an overlap counts as none.
 _EPS = 1e-12
@@ -135,22 +136,9 @@ def perturbed_positions(scene: Scene, sigma: float, z: np.ndarray) -> np.ndarray
 def _depth(c_xy, outlines, i, j):
     """Overlap depth of the outlines of solids i and j (arrays of indices) along their
     shallowest separating axis, and that axis (pointing from i to j); depth <= 0
-    means the outlines are apart (separating-axis theorem on two rectangles)."""
-    half, u, v = outlines
-    d = c_xy[j] - c_xy[i]
-    axes = np.stack([u[i], v[i], u[j], v[j]], axis=1)  # (P, 4, 2)
-    r_i = half[i, 0, None] * np.abs(np.einsum("pk,pak->pa", u[i], axes)) + half[i, 1, None] * np.abs(
-        np.einsum("pk,pak->pa", v[i], axes)
-    )
-    r_j = half[j, 0, None] * np.abs(np.einsum("pk,pak->pa", u[j], axes)) + half[j, 1, None] * np.abs(
-        np.einsum("pk,pak->pa", v[j], axes)
-    )
-    proj = np.einsum("pk,pak->pa", d, axes)
-    depth = r_i + r_j - np.abs(proj)
-    k = np.argmin(depth, axis=1)
-    rows = np.arange(len(i))
-    sign = np.where(proj[rows, k] >= 0, 1.0, -1.0)
-    return depth[rows, k], axes[rows, k] * sign[:, None]
+    means the outlines are apart (lgp.geometry.rectangle_overlap)."""
+    half, u, _ = outlines
+    return rectangle_overlap(c_xy[i], half[i], u[i], c_xy[j], half[j], u[j])
 
 
 def _reach(outlines, i, j, normal):

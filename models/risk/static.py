@@ -12,27 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from lgp.geometry import clip_convex
 from lgp.scene import TABLE, Scene, support_graph, supported_by
-
-
-def _clip_convex(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
-    """Intersection of two convex polygons (counter-clockwise corners)."""
-    out = [np.asarray(p, float) for p in subject]
-    for a, b in zip(clip, np.roll(clip, -1, axis=0)):
-        edge = b - a
-        side = lambda p: edge[0] * (p[1] - a[1]) - edge[1] * (p[0] - a[0])  # noqa: E731
-        inp, out = out, []
-        for p, q in zip(inp, inp[1:] + inp[:1]):
-            sp, sq = side(p), side(q)
-            if sq >= 0:
-                if sp < 0:
-                    out.append(p + (q - p) * sp / (sp - sq))
-                out.append(q)
-            elif sp >= 0:
-                out.append(p + (q - p) * sp / (sp - sq))
-        if not out:
-            break
-    return np.array(out).reshape(-1, 2)
 
 
 def _cross(o, a, b) -> float:
@@ -93,9 +74,9 @@ def static_margins(scene: Scene) -> dict[str, float]:
             if s == TABLE:
                 patches.append(b.footprint())
             elif s in blocks:
-                patches.append(_clip_convex(b.footprint(), blocks[s].footprint()))
+                patches.append(clip_convex(b.footprint(), blocks[s].footprint()))
             else:
-                patches += [_clip_convex(b.footprint(), f.footprint()) for f in fixed[s]]
+                patches += [clip_convex(b.footprint(), f.footprint()) for f in fixed[s]]
         pts = np.vstack([p for p in patches if len(p)]) if patches else np.zeros((0, 2))
         margins[b.name] = _signed_distance_inside(com, _hull(pts)) if len(pts) else -np.inf
     return margins

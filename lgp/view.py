@@ -1,4 +1,7 @@
-"""Looking at a solved plan: a self-contained 3-D replay and a figure.
+"""Looking at a solved plan (lgp.planner.Plan): a self-contained 3-D replay and a figure.
+
+    from lgp.view import write_html, write_png
+    write_html(plan, "7H.html"); write_png(plan, "7H.png")
 
 `write_html` records the arm and blocks into a Drake Meshcat animation
 (StartRecording / PublishRecording) and saves `Meshcat.StaticHtml()`: one HTML file
@@ -9,7 +12,6 @@ and the speed of every moved block over time with matplotlib.
 from __future__ import annotations
 
 from pathlib import Path
-
 
 from lgp.paper import DISPLAY_RGB as COLOURS
 
@@ -65,6 +67,8 @@ def write_png(plan, path) -> str:
     """Write a figure of block paths (top view x-y, side view x-z) and speeds to `path`."""
     import matplotlib
 
+    from models.effort import kinetic_energy
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -90,7 +94,7 @@ def write_png(plan, path) -> str:
     side.set(xlabel="x (m)", ylabel="z (m)", title="side view")
     side.set_aspect("equal")
     speed.set(xlabel="time (s)", ylabel="block speed (m/s)",
-              title=f"speeds; effort {plan.kinetic_energy():.3f} J s, {len(plan.actions)} actions")
+              title=f"speeds; effort {kinetic_energy(plan):.3f} J s, {len(plan.actions)} actions")
     if len(moved) <= 12:
         speed.legend(fontsize=7, ncol=2)
     label = f"{plan.initial.label} -> {plan.target.label}"

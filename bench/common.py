@@ -1,0 +1,26 @@
+"""What every benchmark script shares: the machine's description and writing one
+'## name' section of docs/benchmarks.md (other sections are kept)."""
+from __future__ import annotations
+
+import os
+import platform
+import re
+from pathlib import Path
+
+
+def machine() -> str:
+    """Cores, architecture and load averages now (1, 5, 15 min)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+    return f"{os.cpu_count()} cores ({cores} usable), {platform.machine()}, load average {load} (1/5/15 min)"
+
+
+def write_section(out: Path, name: str, text: str) -> None:
+    """Replace the '## name' section of `out` (up to the next '## ' heading) or append it."""
+    old = out.read_text() if out.exists() else "# Benchmarks\n"
+    pattern = re.compile(rf"^## {re.escape(name)}\b.*?(?=^## |\Z)", re.S | re.M)
+    if pattern.search(old):
+        new = pattern.sub(lambda _: text.rstrip("\n") + "\n\n", old, count=1)
+    else:
+        new = old.rstrip("\n") + "\n\n" + text.rstrip("\n") + "\n"
+    out.write_text(new.rstrip("\n") + "\n")

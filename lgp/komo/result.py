@@ -1,0 +1,75 @@
+"""What a solved KOMO problem gives: the trajectory, object poses along it, and checks."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lgp.komo.constraints import violation
+from lgp.komo.declaration import Declaration, Objective
+
+
+@dataclass
+class KomoResult:
+    """A solved KOMO problem: the trajectory (with time 0 first) and how it was found."""
+
+    t: np.ndarray  # (n,) seconds, n = N + 1 (time 0 = the last prefix slice)
+    q: np.ndarray  # (n, nq)
+    cost: float  # control cost (+ sos terms) of the full trajectory
+    success: bool
+    status: str
+    solver: str
+    formulation: str
+    solve_time: float  # wall-clock seconds: building, solving, promotions
+    n_variables: int
+    keyframes: tuple[int, ...]  # decision slices of the reduced program (all for "full")
+    max_violation: float  # largest violation of a declared eq/ineq constraint
+    worst_objective: Objective | None  # the objective with that violation
+    X_WB: dict[str, np.ndarray] = field(default_factory=dict)  # object poses (n, 4, 4)
+
+    def p_WB(self, name: str) -> np.ndarray:
+        """Position of object `name` at every slice, (n, 3)."""
+        return self.X_WB[name][:, :3, 3]
+
+
+def frame_poses(komo: Declaration, q: np.ndarray, frame: str) -> np.ndarray:
+    """X_WF (n, 4, 4) of a plant frame along a trajectory q (n, nq)."""
+    F = komo.frame(frame)
+    plant, context = komo.plant, komo.context
+    out = np.empty((len(q), 4, 4))
+    for i, qi in enumerate(q):
+        plant.SetPositions(context, qi)
+        out[i] = plant.CalcRelativeTransform(context, plant.world_frame(), F).GetAsMatrix4()
+    return out
+
+
+def object_poses(komo: Declaration, q: np.ndarray) -> dict[str, np.ndarray]:
+    """X_WB (n, 4, 4) of every object along q (n = N + 1 rows, time 0 first)."""
+    poses = {}
+    cache: dict[str, np.ndarray] = {}
+    for name, X0 in komo.objects.items():
+        X = np.empty((len(q), 4, 4))
+        current = X0.GetAsMatrix4()
+        for i in range(len(q)):
+            holder = komo.holder(name, i - 1) if i > 0 else None
+            if holder is not None:
+                gripper, X_GB = holder
+                if gripper not in cache:
+                    cache[gripper] = frame_poses(komo, q, gripper)
+                current = cache[gripper][i] @ X_GB.GetAsMatrix4()
+            X[i] = current
+        poses[name] = X
+    return poses
+
+
+def worst_violation(komo: Declaration, X: np.ndarray, nonlinear) -> tuple[float, Objective | None]:
+    """(largest violation, its objective) over the nonlinear objectives and the joint limits (None)."""
+    worst, worst_o = 0.0, None
+    for o, s in nonlinear:
+        v = violation(komo, o, s, X[s])
+        if v > worst:
+            worst, worst_o = v, o
+    limits = float(np.max(np.maximum(np.maximum(komo.q_lower - X, X - komo.q_upper), 0.0)))
+    if limits > worst:
+        worst, worst_o = limits, None
+    return worst, worst_o

@@ -1,0 +1,313 @@
+"""Risk through the build (beyond the paper; its Discussion names it as future work:
+the model "assesses stability only once at the end, without evaluating it in the
+intermediate stages throughout the execution of a plan").
+
+A plan is the assignment and symbolic plan of one layout of A, drawn exactly as
+the effort row (trial, sample) draws it (`models.effort.sample_rng`, then
+`trial.sample_initial`, then `assign_blocks` and `symbolic_plan`, as
+`lgp.planner.plan` does); no KOMO is needed. Its **stages** are the states after
+each Place. Stage k is simulated with the noise rule and engine of
+`physical_risk`, and its risk is the fraction of `n_sims` noisy runs that fall.
+
+Which blocks a stage simulates and perturbs (docs/results.md, "Risk through the
+build"): the **structure** -- every block at its B pose (placed so far, or left
+in place because it already was) -- plus every block not yet moved that is part
+of a stack (rests on or carries another block: a disassembly's remaining tower,
+a relocated tower's remainder). All of them are perturbed, as the paper perturbs
+every block of B: the noise stands for imprecise positions, not for the last
+move only. A block lying alone on the table or on the bucket floor is left out:
+nothing can topple it (its risk is 0, tests/test_build_risk.py), and the 15
+blocks left in pair 12's bucket would only cost time. So the last stage of a
+plan that builds B is B itself, simulated run for run with the same normals as
+`physical_risk(trial.target)`: its risk is the paper's R exactly.
+
+Common random numbers: block j of B uses, in run r, the normals z_B[r, j] of
+``draw_normals(n_sims, len(B), seed)`` -- the ones `physical_risk` uses -- at
+every stage and every sigma; a not-yet-moved stack block i of A uses
+z_A[r, i] of ``draw_normals(n_sims, len(A), default_rng([seed, 1]))``. Layouts
+that give the same stage scene give the same numbers, so each distinct stage
+scene is simulated once (towers: the same k blocks whatever the layout).
+
+Aggregates (per plan, then the mean over the plan's `samples` layouts, as effort
+is averaged), with r_k the risk of stage k = 1..K:
+
+    final    = r_K                              (the paper's R when stage K is B)
+    max      = max_k r_k
+    expected = sum_k r_k                        (expected number of collapses)
+    any      = 1 - prod_k (1 - r_k)             (P(at least one collapse), stages independent)
+    care     = sum_k w_k r_k                    (expected fraction of the plan's work undone)
+
+w_k is the share of the plan's effort already spent on blocks in the structure
+at stage k, so E * care is the effort (J s) a collapse is expected to undo. The
+per-block effort share is a documented proxy, not KOMO: a block carried a
+distance L = |p_B - p_A| + 2 APPROACH in one phase of fixed duration costs
+energy proportional to L^2 (the least kinetic-energy integral of a rest-to-rest
+move over a fixed time is proportional to the squared distance), so
+w_k = sum over placed blocks of L^2 / sum over all moved blocks of L^2. It is
+checked against KOMO's per-block kinetic energies in tests/test_build_risk.py
+(a slow test) and docs/results.md.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+import pandas as pd
+
+from lgp.executor import borrowed, default_jobs
+from lgp.paper import N_SIMS, SAMPLES
+from lgp.scene import Scene, support_graph, supported_by
+from models.risk.core import _engine_name, _task_worker, check_stable, UnstableSceneError
+from models.risk.noise import draw_normals
+
+#: The stage table, one row per (trial, sample, sigma, stage).
+STAGE_COLUMNS = ["trial", "sample", "sigma", "stage", "action_index", "blocks_in_structure",
+                 "blocks_simulated", "risk", "falls", "n_sims", "work_share", "engine"]
+#: The aggregates of a plan's stage risks (module docstring), in table order.
+MEASURES: tuple[str, ...] = ("final", "max", "expected", "any", "care")
+AGGREGATE_COLUMNS = ["trial", "sigma", *MEASURES, "stages", "samples", "engine"]
+
+
+class BuildStageError(ValueError):
+    """A stage of a plan cannot be simulated (e.g. it falls with no noise); names
+    the trial, the sample, the stage and the rule broken."""
+
+
+@dataclass(frozen=True)
+class Stage:
+    """The state after the k-th Place of one plan, as simulated.
+
+    `structure` are the B names of blocks at their B pose, in B's order; `stack`
+    the A names of not-yet-moved blocks in a stack; `scene` the simulated scene
+    (structure blocks first, B's poses and names, then the stack blocks; the
+    world's fixed boxes); `key` identifies the scene and its normals.
+    """
+
+    trial: str
+    sample: int
+    stage: int
+    action_index: int
+    structure: tuple[str, ...]
+    stack: tuple[str, ...]
+    scene: Scene
+    work_share: float
+    key: str
+
+
+def plan_stages(trial, seed: int = 0, sample: int = 0):
+    """The stages of the plan of effort row (trial, sample): list of Stage.
+
+    Draws the layout exactly as `models.effort.plan_of_sample` does; only the
+    assignment and the symbolic plan are computed (no KOMO).
+    """
+    from lgp.assignment import assign_blocks
+    from lgp.symbolic import Place, symbolic_plan
+    from models.effort import sample_rng
+
+    rng = sample_rng(seed, sample)
+    initial = trial.sample_initial(rng)
+    target = trial.target
+    plan = symbolic_plan(initial, target, assign_blocks(initial, target))
+    if not plan.actions:
+        raise BuildStageError(f"trial {trial.id} sample {sample}: the plan has no action, so no stage")
+    owner = {b: a for a, b in plan.assignment.items()}  # B name -> A name
+    moved = set(plan.moved)
+    stays = {a for a in plan.assignment if a not in moved}
+    a_index = {name: i for i, name in enumerate(initial.names)}
+    weights = _carry_weights(initial, target, plan)
+    total = sum(weights.values())
+    placed: set[str] = set()
+    grasped: set[str] = set()
+    stages = []
+    for k, (action, state) in enumerate(zip(plan.actions, plan.states()), start=1):
+        grasped.add(action.block)
+        if not isinstance(action, Place):
+            continue
+        placed.add(action.block)
+        scene = state.scene
+        structure = tuple(b for b in target.names if owner.get(b) in placed | stays)
+        graph = support_graph(scene)
+        above = supported_by(graph)
+        blocks = set(scene.names)
+        stack = tuple(a for a in scene.names if a not in grasped and a not in stays
+                      and (any(s in blocks for s in graph[a]) or any(s in blocks for s in above[a])))
+        sim = Scene([target.block(b) for b in structure] + [scene.block(a) for a in stack], scene.fixed,
+                    f"{trial.id} sample {sample} stage {len(stages) + 1}")
+        key = _stage_key(sim, [("B", target.names.index(b)) for b in structure] + [("A", a_index[a]) for a in stack])
+        share = sum(weights[a] for a in placed) / total if total > 0 else 0.0
+        stages.append(Stage(trial.id, sample, len(stages) + 1, k, structure, stack, sim, share, key))
+    return stages
+
+
+def _carry_weights(initial: Scene, target: Scene, plan) -> dict[str, float]:
+    """Effort proxy per moved block: L^2, L = |p_B - p_A| + 2 APPROACH (module docstring)."""
+    from lgp.planner import APPROACH
+
+    out = {}
+    for a in plan.moved:
+        d = np.linalg.norm(target.block(plan.assignment[a]).p_WB - initial.block(a).p_WB)
+        out[a] = float((d + 2 * APPROACH) ** 2)
+    return out
+
+
+def _stage_key(scene: Scene, sources) -> str:
+    h = hashlib.sha1(repr(sources).encode())
+    for b in scene.blocks:
+        h.update(np.round(b.p_WB, 9).tobytes() + np.round(b.size, 9).tobytes() + np.float64(round(b.yaw, 9)).tobytes())
+    for f in scene.fixed:
+        h.update(f.p_WO.tobytes() + f.size.tobytes())
+    return h.hexdigest()
+
+
+def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed: int = 0,
+               engine: str | None = None, jobs: int | None = 1, executor=None,
+               progress: Callable[[int, int], None] | None = None) -> pd.DataFrame:
+    """Risk of every stage of the plans of `samples` layouts of `trial`.
+
+    `trial` is a stimuli.Trial or its id; `sigma` one noise level or several
+    (fractions of d; common random numbers across them and across stages).
+    Returns the tidy stage table (columns STAGE_COLUMNS): one row per (sample,
+    sigma, stage), `stage` 1..K, `action_index` the 1-based index of the Place in
+    the plan, `blocks_in_structure` the blocks at their B pose, `blocks_simulated`
+    those plus the stack blocks not yet moved, `work_share` the effort-proxy
+    share w_k. Raises BuildStageError naming trial, sample and stage when a stage
+    falls without noise.
+    """
+    if isinstance(trial, str):
+        import stimuli
+
+        trial = stimuli.load_trial(trial)
+    sigmas = [float(s) for s in np.atleast_1d(sigma)]
+    if n_sims < 1:
+        raise ValueError(f"trial {trial.id}: need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
+    if samples < 1:
+        raise ValueError(f"trial {trial.id}: need samples >= 1 layouts, got {samples}")
+    for s in sigmas:
+        if not s >= 0:
+            raise ValueError(f"trial {trial.id}: sigma must be >= 0 (a fraction of the block size), got {s}")
+    name = _engine_name(engine)
+    drawn = range(samples) if trial.initial.is_random else [0]
+    plans = {s: plan_stages(trial, seed, s) for s in drawn}
+    unique: dict[str, Stage] = {}
+    for stages in plans.values():
+        for st in stages:
+            unique.setdefault(st.key, st)
+    target = trial.target
+    z_B = draw_normals(n_sims, len(target), seed)
+    # Stack blocks are blocks A fixes (scattered blocks lie alone), so their
+    # index among A's fixed blocks is the same in every layout.
+    fixed_A = [b.name for b in trial.initial.blocks]
+    z_A = draw_normals(n_sims, max(len(fixed_A), 1), np.random.default_rng([seed, 1]))
+    a_index = {}
+    for stages in plans.values():
+        for st in stages:
+            for a in st.stack:
+                if a not in fixed_A:
+                    raise BuildStageError(f"trial {trial.id} sample {st.sample} stage {st.stage}: block {a} "
+                                          "is in a stack but is not one of A's fixed blocks")
+                a_index[a] = fixed_A.index(a)
+    keys = list(unique)
+    for key in keys:
+        st = unique[key]
+        try:
+            check_stable(st.scene, name)
+        except UnstableSceneError as e:
+            raise BuildStageError(f"trial {trial.id} sample {st.sample} stage {st.stage} "
+                                  f"(after action {st.action_index}): {e}") from None
+    jobs = (executor.jobs if executor is not None else default_jobs()) if jobs is None else max(1, int(jobs))
+    total = len(keys) * len(sigmas) * n_sims
+    chunk = max(1, min(n_sims, -(-total // (8 * jobs)))) if total else 1
+    tasks, args = [], []
+    for key in keys:
+        st = unique[key]
+        j = [target.names.index(b) for b in st.structure]
+        z = z_B[:, j]
+        if st.stack:
+            z = np.concatenate([z, z_A[:, [a_index[a] for a in st.stack]]], axis=1)
+        for s in sigmas:
+            for a in range(0, n_sims, chunk):
+                tasks.append((key, s))
+                args.append((st.scene, s, z[a:min(a + chunk, n_sims)], a, name))
+    done = 0
+
+    def arrived(k, res):
+        nonlocal done
+        done += len(res)
+        if progress:
+            progress(done, total)
+
+    with borrowed(executor, 1 if len(args) <= 1 else min(jobs, len(args))) as ex:
+        results = ex.map(_task_worker, args, arrived)
+    falls: dict[tuple[str, float], int] = {}
+    for (key, s), res in zip(tasks, results):
+        falls[key, s] = falls.get((key, s), 0) + sum(bool(r["fell"]) for r in res)
+    rows = []
+    for sample in range(samples):
+        stages = plans[sample if trial.initial.is_random else 0]
+        for s in sigmas:
+            for st in stages:
+                f = falls[st.key, s]
+                rows.append((trial.id, sample, s, st.stage, st.action_index, len(st.structure),
+                             len(st.structure) + len(st.stack), f / n_sims, f, n_sims, st.work_share, name))
+    return pd.DataFrame(rows, columns=STAGE_COLUMNS)
+
+
+def aggregate_plan(risks: Sequence[float], shares: Sequence[float]) -> dict[str, float]:
+    """The five aggregates of one plan's stage risks r_1..r_K (module docstring)."""
+    r = np.asarray(risks, dtype=float)
+    w = np.asarray(shares, dtype=float)
+    if r.size == 0:
+        raise ValueError("a plan with no stage has no build risk")
+    if r.shape != w.shape:
+        raise ValueError(f"{r.size} stage risks but {w.size} work shares")
+    if np.any((r < 0) | (r > 1)) or not np.all(np.isfinite(r)):
+        raise ValueError(f"stage risks must be probabilities in [0, 1], got {r.tolist()}")
+    return {"final": float(r[-1]), "max": float(r.max()), "expected": float(r.sum()),
+            "any": float(1 - np.prod(1 - r)), "care": float(np.dot(w, r))}
+
+
+def build_risk_aggregates(stages: pd.DataFrame) -> pd.DataFrame:
+    """Per (trial, sigma): each aggregate of `aggregate_plan` averaged over the
+    plan's samples (layouts), with the number of stages (mean over samples) and
+    samples. Columns AGGREGATE_COLUMNS."""
+    rows = []
+    for (trial, sigma, engine), g in stages.groupby(["trial", "sigma", "engine"], sort=False):
+        per = [aggregate_plan(p.sort_values("stage")["risk"], p.sort_values("stage")["work_share"])
+               for _, p in g.groupby("sample", sort=True)]
+        mean = {m: float(np.mean([a[m] for a in per])) for m in MEASURES}
+        rows.append({"trial": trial, "sigma": sigma, **mean,
+                     "stages": float(g.groupby("sample").size().mean()), "samples": len(per), "engine": engine})
+    return pd.DataFrame(rows, columns=AGGREGATE_COLUMNS)
+
+
+def measure_table(aggregates: pd.DataFrame) -> pd.DataFrame:
+    """The aggregates in long form (trial, sigma, measure, risk), the input of
+    ``analysis`` with ``risk_measure``."""
+    return aggregates.melt(id_vars=["trial", "sigma"], value_vars=list(MEASURES), var_name="measure",
+                           value_name="risk")[["trial", "sigma", "measure", "risk"]]
+
+
+def stage_curve(stages: pd.DataFrame, sigma: float | None = None) -> pd.DataFrame:
+    """Mean risk per stage over samples (and its spread), for printing and figures:
+    columns trial, sigma, stage, blocks_in_structure (mean), risk (mean), risk_min,
+    risk_max, samples."""
+    g = stages if sigma is None else stages[np.isclose(stages["sigma"], sigma)]
+    out = (g.groupby(["trial", "sigma", "stage"], sort=False)
+           .agg(blocks_in_structure=("blocks_in_structure", "mean"), risk=("risk", "mean"),
+                risk_min=("risk", "min"), risk_max=("risk", "max"), samples=("sample", "nunique"))
+           .reset_index())
+    return out
+
+
+def build_risk_table(trials: Iterable, sigmas, n_sims: int = N_SIMS, samples: int = SAMPLES, seed: int = 0,
+                     engine: str | None = None, jobs: int | None = 1, executor=None) -> pd.DataFrame:
+    """`build_risk` of several trials, concatenated in input order."""
+    return pd.concat([build_risk(t, sigmas, n_sims, samples, seed, engine, jobs, executor) for t in trials],
+                     ignore_index=True)
+
+
+__all__ = ["MEASURES", "STAGE_COLUMNS", "AGGREGATE_COLUMNS", "BuildStageError", "Stage", "plan_stages",
+           "build_risk", "build_risk_table", "aggregate_plan", "build_risk_aggregates", "measure_table",
+           "stage_curve"]
