@@ -18,7 +18,7 @@ from lgp.cache import PACKAGES, ROOT, module_imports
 
 #: (layer, module-name patterns, layers it may import besides its own; None = all lower)
 LAYERS = [
-    ("ground", ["lgp.paper", "lgp.scene", "lgp.geometry", "lgp.executor"], None),
+    ("ground", ["lgp.paper", "lgp.scene", "lgp.geometry", "lgp.executor", "lgp.progress"], None),
     ("stimuli and logic", ["stimuli", "lgp.assignment", "lgp.symbolic"], None),
     ("arm", ["lgp.arm"], None),
     ("KOMO", ["lgp.komo", "lgp.komo.*"], None),
@@ -29,7 +29,7 @@ LAYERS = [
     ("analysis", ["analysis", "analysis.*"], ["ground"]),
     # CLIs, caches and report or page writers
     ("application", ["lgp.reproduce", "lgp.show", "lgp.cache", "lgp.view", "lgp.komo.view", "lgp.report",
-                     "stimuli.sheet", "*.__main__"], None),
+                     "stimuli.sheet", "stimuli.generate", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]
 RANK = {name: k for k, (name, _, _) in enumerate(LAYERS)}

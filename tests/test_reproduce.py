@@ -133,6 +133,7 @@ def _fake_physics(monkeypatch):
 
     monkeypatch.setattr(reproduce, "effort_tables", effort)
     monkeypatch.setattr(reproduce, "risk_tables", risk)
+    monkeypatch.setattr(reproduce, "write_replays", lambda *a, **k: None)  # nor 3-D replays (they plan)
 
 
 def test_an_extra_trial_file_does_not_break_the_paper_run(tmp_path, monkeypatch, capsys):
