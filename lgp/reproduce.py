@@ -164,8 +164,9 @@ def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
     order = {t.id: i for i, t in enumerate(trials)}
     g = samples.groupby("trial")["effort"]
     df = pd.DataFrame({"effort": g.mean(), "effort_sd": g.std(ddof=1), "samples": g.size()}).reset_index()
-    df["pair"] = df["trial"].str[:-1].astype(int)
-    df["level"] = df["trial"].str[-1]
+    pairs = {t.id: t.pair for t in trials}
+    df["pair"] = df["trial"].map(pairs).astype("Int64")  # empty for a trial of no pair (a user's or generated set)
+    df["level"] = df["trial"].map({t.id: t.level for t in trials})
     return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]
 
 
@@ -195,6 +196,29 @@ def pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trial
     e = pair_table(effort.set_index("trial")["effort"]).rename(columns={"cost_E": "effort_E", "cost_H": "effort_H", "E_lt_H": "effort_E_lt_H"})
     r = pair_table(risk_at_sigma(risk, sigma)).rename(columns={"cost_E": "risk_E", "cost_H": "risk_H", "E_lt_H": "risk_E_lt_H"})
     table = e.merge(r, on="pair")
+    table.insert(1, "dimension", table["pair"].map(dims))
+    table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
+    table.insert(6, "sigma", sigma)
+    table["full_E_lt_H_for_b2_over_b1"] = [kappa_range(*row) for row in table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy()]
+    return table
+
+
+def declared_pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trials) -> pd.DataFrame | None:
+    """pair_orderings for a stimulus set other than the paper's: the pairs whose
+    E and H trials (ids <pair>E, <pair>H) are both in the run; None when there are none."""
+    ids = {t.id for t in trials}
+    declared = sorted({t.pair for t in trials if t.pair is not None and {f"{t.pair}E", f"{t.pair}H"} <= ids})
+    if not declared:
+        return None
+    E = effort.set_index("trial")["effort"].astype(float)
+    at = risk[np.isclose(risk["sigma"].astype(float), sigma, rtol=0, atol=1e-9)]
+    R = at.set_index("trial")["risk"].astype(float)
+    table = pd.DataFrame({"pair": declared})
+    for name, cost in (("effort", E), ("risk", R)):
+        table[f"{name}_E"] = [cost[f"{p}E"] for p in declared]
+        table[f"{name}_H"] = [cost[f"{p}H"] for p in declared]
+        table[f"{name}_E_lt_H"] = table[f"{name}_E"] < table[f"{name}_H"]
+    dims = {t.pair: t.dimension for t in trials}
     table.insert(1, "dimension", table["pair"].map(dims))
     table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
     table.insert(6, "sigma", sigma)
@@ -268,6 +292,8 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m lgp.reproduce", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="results", help="output directory (default: results/)")
+    p.add_argument("--stimuli", metavar="DIR", help="run on the trial files of DIR (default: stimuli/trials, the paper's); "
+                   "all of them unless --trials names some; pair table only for pairs whose E and H files are both there")
     p.add_argument("--trials", nargs="+", help="trial ids, or 'all' for every trial file (default: the paper's 24)")
     p.add_argument("--samples", type=int, help="M, random layouts of A per trial (default 30; --quick 3)")
     p.add_argument("--n-sims", type=int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
@@ -292,6 +318,9 @@ def main(argv=None) -> int:
     with sigterm_as_interrupt():  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
         try:
             return run(args)
+        except stimuli.StimulusError as e:  # a bad trial file or stimulus directory: one line, no traceback
+            print(f"{p.prog}: error: {e}", file=sys.stderr)
+            return 2
         except KeyboardInterrupt as e:
             how = "terminated (SIGTERM)" if getattr(e, "signal", None) == signal.SIGTERM else "interrupted"
             resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
@@ -302,6 +331,10 @@ def main(argv=None) -> int:
 def select_trials(ids: list[str] | None, directory=None) -> list:
     """The trials of a run: the paper's 24 by default (other trial files in the
     directory are named, not run), ``all`` for every trial file, or the ids given."""
+    if not ids and directory is not None:  # a user's stimulus set (--stimuli DIR): every trial file in it
+        if not Path(directory).is_dir() or not stimuli.trial_ids(directory):
+            raise stimuli.StimulusError(f"--stimuli {directory}: no trial files (*.yaml) there")
+        return stimuli.load_all(directory)
     if not ids:
         extra = stimuli.extra_ids(directory)
         if extra:
@@ -320,7 +353,7 @@ def run(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Cache(out / "cache", enabled=not args.no_cache)
-    trials = select_trials(args.trials)
+    trials = select_trials(args.trials, args.stimuli)
     human = None
     if args.human_data:
         from analysis import load_human_data
@@ -366,7 +399,12 @@ def run(args) -> int:
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma)
     else:
-        _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
+        pairs = declared_pair_orderings(effort, risk, sigma, trials)
+        if pairs is not None:
+            written.append(write_csv_atomic(pairs, out / "pairs.csv"))
+        _log("not all of the paper's 24 trials: no figures or fits (they need all 24); "
+             + (f"pair table for the {len(pairs)} pair(s) whose E and H trials are both in the run" if pairs is not None
+                else "no pair table (no trial files declare both trials of a pair)"))
     clock.lap("analysis")
     software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0, software)

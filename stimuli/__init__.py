@@ -23,6 +23,8 @@ from lgp.scene import (SOLID_SIZE, WORKSPACE_XY, Block, FixedBox, Scene, Stimulu
 
 TRIAL_DIR = Path(__file__).parent / "trials"
 TRIAL_ID = re.compile(r"^(\d+)([EH])$")
+#: Id of a trial that belongs to no pair (a user's or generated stimulus, e.g. g0001).
+FREE_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")
 
 #: Attempts to place one scattered block before the whole layout is redrawn, and
 #: redraws before the region is declared too small.
@@ -177,8 +179,8 @@ class Trial:
     """One construction task: start state A, target state B, and where facts come from."""
 
     id: str
-    pair: int
-    level: str
+    pair: int | None  # None: the trial belongs to no easy/hard pair
+    level: str | None
     dimension: str
     description: str
     initial: StartState
@@ -287,10 +289,17 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     _check_keys(where, data, _TRIAL_KEYS)
     tid = str(data.get("id", ""))
     m = TRIAL_ID.match(tid)
-    if not m:
-        raise StimulusError(f"{path}: trial id {tid!r} is not of the form <pair><E|H>, e.g. 7H")
-    if _integer(f"{tid} pair", data.get("pair", -1)) != int(m.group(1)) or data.get("level") != m.group(2):
-        raise StimulusError(f"{tid}: pair/level fields disagree with the id")
+    if m:
+        if _integer(f"{tid} pair", data.get("pair", -1)) != int(m.group(1)) or data.get("level") != m.group(2):
+            raise StimulusError(f"{tid}: pair/level fields disagree with the id")
+        pair, level = int(m.group(1)), m.group(2)
+    elif FREE_ID.match(tid):
+        if "pair" in data or "level" in data:
+            raise StimulusError(f"{tid}: pair and level need an id of the form <pair><E|H> (e.g. 7H); {tid!r} is a trial of no pair")
+        pair, level = None, None
+    else:
+        raise StimulusError(f"{path}: trial id {tid!r} is neither of the form <pair><E|H> (e.g. 7H) nor a name of "
+                            "letters, digits, _ and - starting with a letter (e.g. g0001)")
     fixed = _fixed(f"{tid} fixed", data.get("fixed"))
     build_site = tuple(_vector(f"{tid} build_site", data.get("build_site", list(BUILD_SITE)), 2))
     if not (np.all(np.isfinite(build_site)) and np.all(np.abs(build_site) <= WORKSPACE_XY)):
@@ -352,7 +361,7 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     for colour, need in Counter(b.colour for b in target.blocks).items():
         if need > have.get(colour, 0):
             raise StimulusError(f"{tid}-B: needs {need} {colour} blocks but {tid}-A has {have.get(colour, 0)}")
-    trial = Trial(tid, int(m.group(1)), m.group(2), str(data.get("dimension", "")), str(data.get("description", "")), start, target, data.get("provenance") or {}, path)
+    trial = Trial(tid, pair, level, str(data.get("dimension", "")), str(data.get("description", "")), start, target, data.get("provenance") or {}, path)
     # One draw proves the region can hold the scattered blocks and A is valid.
     sample = trial.sample_initial(np.random.default_rng(0))
     if colour_shortfall(sample, target):

@@ -23,7 +23,7 @@ from lgp.executor import DaskExecutor, SchedulerUnreachable, SerialExecutor  # n
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
 ROOT = Path(__file__).resolve().parents[1]
-RUN = ["--trials", "1E", "4H", "10E", "--samples", "2", "--n-sims", "4", "--sigmas", "0.05", "0.08"]
+RUN = ["--trials", "1E", "4H", "10E", "--samples", "2", "--n-sims", "4", "--sigmas", "0.05", "0.08", "--no-replays"]
 
 
 def _reproduce(out, *extra):
@@ -85,8 +85,8 @@ def test_pipeline_tables_survive_a_killed_worker_and_the_client_writes_the_cache
             risk_tables(trials, (0.05, 0.08), 4, 0, None, SerialExecutor(), Cache(tmp_path / "calm")))
 
     written = []
-    real = lgp.cache.write_csv_atomic
-    monkeypatch.setattr(lgp.cache, "write_csv_atomic", lambda df, path: written.append(Path(path)) or real(df, path))
+    real = lgp.cache.write_bytes_atomic  # every cache entry is written through it
+    monkeypatch.setattr(lgp.cache, "write_bytes_atomic", lambda data, path: written.append(Path(path)) or real(data, path))
 
     class Killer(DaskExecutor):
         """Kills one worker process as soon as the first result of each map arrives."""
