@@ -25,7 +25,7 @@ import pandas as pd
 
 import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import SchedulerUnreachable, executor_for_scheduler, sigterm_as_interrupt
+from lgp.executor import SchedulerUnreachable, executor_for_scheduler, stop_signals
 from lgp.progress import Progress
 from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.page import Stopwatch, write_index, write_replays
@@ -309,23 +309,40 @@ def main(argv=None) -> int:
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
+    p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/build_stage.py)")
+    p.add_argument("--build-sigmas", type=float, nargs="+", help="noise levels of --build-risk (default 0.065 0.1)")
+    p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
+                   help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
+    p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
+    p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
+                   help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
     args = p.parse_args(argv)
+    if args.risk_measure and not (args.build_risk and args.human_data):
+        p.error("--risk-measure needs --build-risk and --human-data")
+    if args.per_participant_sigma and not args.human_data:
+        p.error("--per-participant-sigma needs --human-data FILE")
+    args.command = "python -m lgp.reproduce " + " ".join(argv if argv is not None else sys.argv[1:])
     q = QUICK if args.quick else {}
     args.samples = args.samples or q.get("samples", SAMPLES)
     args.n_sims = args.n_sims or q.get("n_sims", N_SIMS)
     args.sigmas = tuple(args.sigmas or q.get("sigmas", SIGMA_GRID))
     args.n_boot = args.n_boot or q.get("n_boot", N_BOOT)
-    with sigterm_as_interrupt():  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
+    with stop_signals() as stop:  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
         try:
             return run(args)
         except stimuli.StimulusError as e:  # a bad trial file or stimulus directory: one line, no traceback
+            if stop.received is not None:
+                raise
             print(f"{p.prog}: error: {e}", file=sys.stderr)
             return 2
-        except KeyboardInterrupt as e:
-            how = "terminated (SIGTERM)" if getattr(e, "signal", None) == signal.SIGTERM else "interrupted"
+        except BaseException as e:
+            if stop.received is None and not isinstance(e, KeyboardInterrupt):
+                raise
+            sig = stop.received or getattr(e, "signal", signal.SIGINT)
+            how = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
             resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
             print(f"{p.prog}: {how}; {resume}", file=sys.stderr)
-            return 128 + int(getattr(e, "signal", signal.SIGINT))
+            return 128 + int(sig)
 
 
 def select_trials(ids: list[str] | None, directory=None) -> list:
@@ -378,11 +395,22 @@ def run(args) -> int:
         effort = summarise_effort(effort_samples, trials)
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk)
         clock.lap("risk")
+        if args.build_risk:
+            from lgp import build_stage
+
+            stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
+                                                   args.samples, args.seed, args.engine, executor, cache)
+            clock.lap("build risk")
         replays = None if args.no_replays else write_replays(trials, args.seed, out / "replays", cache, executor, _log)
         clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
+    sections, build = [], None
+    if args.build_risk:
+        paths, section, build = build_stage.build_risk_outputs(stages, out, args.command)
+        written += paths
+        sections.append(section)
     pairs, analysis = None, None
     if {t.id for t in trials} >= set(TRIAL_IDS):
         # Pair orderings, figures and fits are the paper's: on its 24 trials only;
@@ -397,7 +425,16 @@ def run(args) -> int:
         pairs = pair_orderings(e_mean, r, sigma, paper)
         written.append(write_csv_atomic(pairs, out / "pairs.csv"))
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
-                                seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma)
+                                seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
+                                build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
+                                risk_measure=args.risk_measure)
+        if args.per_participant_sigma:
+            from lgp import build_stage
+
+            paths, section = build_stage.participant_sigma_outputs(human, e_samples, r, out,
+                                                                   args.participant_betas, args.command)
+            written += paths
+            sections.append(section)
     else:
         pairs = declared_pair_orderings(effort, risk, sigma, trials)
         if pairs is not None:
@@ -408,6 +445,10 @@ def run(args) -> int:
     clock.lap("analysis")
     software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0, software)
+    if sections:
+        from lgp.build_stage import append_report
+
+        append_report(report, sections)
     written.append(report)
     written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
     _log(f"cache: {cache.summary()}")
