@@ -158,8 +158,9 @@ class StartState:
                     near = [o for a in (ci - 1, ci, ci + 1) for b in (cj - 1, cj, cj + 1) for o in grid.get((a, b), ())]
                     if any(horizontal_penetration(cand_gap, o) > 0 for o in near):
                         continue
-                    lo, hi = bounding_boxes([cand_clear])
-                    hits = np.nonzero(np.all((obs_lo[:, :2] <= hi[0, :2]) & (lo[0, :2] <= obs_hi[:, :2]), axis=1))[0]
+                    reach = (d / 2 + self.clearance) * (abs(np.cos(yaw)) + abs(np.sin(yaw))) + 1e-12  # half-width of its outline box
+                    hits = np.nonzero((obs_lo[:, 0] <= p[0] + reach) & (p[0] - reach <= obs_hi[:, 0])
+                                      & (obs_lo[:, 1] <= p[1] + reach) & (p[1] - reach <= obs_hi[:, 1]))[0]
                     if any(horizontal_penetration(cand_clear, obstacles[j]) > 0 for j in hits):
                         continue
                     block = Block(name, p, yaw, colour)

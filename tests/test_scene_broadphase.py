@@ -109,8 +109,9 @@ def test_a_500_block_trial_loads_and_validates_in_under_a_second(tmp_path):
     assert n == 500
     path = tmp_path / "1E.yaml"
     path.write_text(text)
-    t0 = time.perf_counter()
+    # CPU time of this process: the machine is shared, and other jobs' load is not ours
+    t0 = time.process_time()
     trial = stimuli.load_file(path)
-    elapsed = time.perf_counter() - t0
+    elapsed = time.process_time() - t0
     assert len(trial.target) == 500 and len(trial.initial.scattered) == 500
-    assert elapsed < 1.0, f"{elapsed:.2f} s"
+    assert elapsed < 1.0, f"{elapsed:.2f} s of CPU"
