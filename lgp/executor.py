@@ -221,6 +221,10 @@ class SchedulerUnreachable(ConnectionError):
     """A Dask scheduler address that does not answer within the timeout."""
 
 
+class DaskMissing(ImportError):
+    """The Dask backend was asked for but dask.distributed is not installed."""
+
+
 #: Seconds to wait for a Dask scheduler to answer before giving up.
 CONNECT_TIMEOUT = 10.0
 
@@ -243,7 +247,7 @@ class DaskExecutor:
         try:
             from distributed import Client, LocalCluster
         except ImportError:  # pragma: no cover - depends on the install
-            raise ImportError('the Dask backend needs the optional extra: pip install -e ".[dask]"') from None
+            raise DaskMissing('the Dask backend (--scheduler) needs the optional extra: pip install -e ".[dask]"') from None
         self.address = address
         self._cluster = None
         if client is not None:

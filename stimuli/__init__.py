@@ -17,14 +17,14 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from lgp.paper import BLOCK_SIZE, BUILD_SITE, TRIAL_IDS
+from lgp.paper import BLOCK_SIZE, BUILD_SITE, TRIAL_IDS, canonical_trial_id
 from lgp.scene import (SOLID_SIZE, WORKSPACE_XY, Block, FixedBox, Scene, StimulusError, bounding_boxes, colour_shortfall,
                        horizontal_penetration)
 
 TRIAL_DIR = Path(__file__).parent / "trials"
 TRIAL_ID = re.compile(r"^(\d+)([EH])$")
-#: Id of a trial that belongs to no pair (a user's or generated stimulus, e.g. g0001).
-FREE_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_-]{0,63}$")
+#: Id of a trial that belongs to no pair (a user's or generated stimulus, e.g. G0001).
+FREE_ID = re.compile(r"^[A-Z][A-Z0-9_-]{0,63}$")
 
 #: Attempts to place one scattered block before the whole layout is redrawn, and
 #: redraws before the region is declared too small.
@@ -300,7 +300,7 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
         pair, level = None, None
     else:
         raise StimulusError(f"{path}: trial id {tid!r} is neither of the form <pair><E|H> (e.g. 7H) nor a name of "
-                            "letters, digits, _ and - starting with a letter (e.g. g0001)")
+                            "capital letters, digits, _ and - starting with a letter (e.g. G0001; ids are upper case)")
     fixed = _fixed(f"{tid} fixed", data.get("fixed"))
     build_site = tuple(_vector(f"{tid} build_site", data.get("build_site", list(BUILD_SITE)), 2))
     if not (np.all(np.isfinite(build_site)) and np.all(np.abs(build_site) <= WORKSPACE_XY)):
@@ -443,9 +443,10 @@ _cache: dict[tuple[str, str], Trial] = {}
 
 
 def load_trial(trial_id: str, directory: str | Path | None = None) -> Trial:
-    """The trial ``trial_id`` (e.g. ``"7H"``) from `directory` (default
+    """The trial ``trial_id`` (e.g. ``"7H"``; case-insensitive, ``"7h"`` too) from `directory` (default
     ``stimuli/trials``), validated."""
     directory = TRIAL_DIR if directory is None else Path(directory)
+    trial_id = canonical_trial_id(trial_id)
     path = directory / f"{trial_id}.yaml"
     if not path.exists():
         raise StimulusError(f"no trial {trial_id!r}: {path} does not exist (known: {', '.join(trial_ids(directory))})")

@@ -2,7 +2,7 @@
 
     python -m stimuli.generate --out DIR --count N --seed S
 
-writes N trial files (format: stimuli/README.md) named ``g0001.yaml`` ... : every
+writes N trial files (format: stimuli/README.md) named ``G0001.yaml`` ... : every
 block of A scattered on the table, B one of the structures below, built at the
 build site S. Trial i draws its kind and size from ``default_rng([S, i])``, so the
 same seed gives the same files, and the first N of a larger set are the same
@@ -98,7 +98,7 @@ def trial_data(index: int, seed: int, kind: str | None = None) -> dict:
     kind = kind or KINDS[int(rng.integers(len(KINDS)))]
     cells, text = structure(kind, rng)
     sx, sy = BUILD_SITE
-    tid = f"g{index + 1:04d}"
+    tid = f"G{index + 1:04d}"
     return {
         "id": tid,
         "dimension": f"generated: {kind}",
@@ -136,7 +136,7 @@ def generate(directory: str | Path, count: int, seed: int = 0, engine: str | Non
         for attempt in range(_ATTEMPTS):
             # a redraw uses its own stream: trial i's first draw does not depend on the attempts of others
             data = trial_data(i, seed if attempt == 0 else seed + 1_000_003 * attempt)
-            data["id"] = f"g{i + 1:04d}"
+            data["id"] = f"G{i + 1:04d}"
             path = write_trial(data, directory)
             try:
                 trial = stimuli.load_file(path)

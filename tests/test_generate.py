@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_generated_trials_load_and_their_targets_stand_by_the_static_criterion(tmp_path):
     paths = generate(tmp_path, 10, seed=3)
-    assert [p.name for p in paths] == [f"g{i:04d}.yaml" for i in range(1, 11)]
+    assert [p.name for p in paths] == [f"G{i:04d}.yaml" for i in range(1, 11)]
     for path in paths:
         trial = stimuli.load_file(path)
         assert trial.pair is None and trial.level is None
@@ -65,7 +65,7 @@ def test_reproduce_runs_a_generated_set_and_pairs_only_what_files_declare(tmp_pa
                    "--sigmas", "0.05", "--no-replays", "--jobs", "1")
     assert r.returncode == 0, r.stderr[-2000:]
     effort = pd.read_csv(tmp_path / "out" / "effort.csv", dtype={"trial": str})
-    assert list(effort["trial"]) == ["1E", "1H", "g0001", "g0002"]
+    assert list(effort["trial"]) == ["1E", "1H", "G0001", "G0002"]
     assert effort["pair"].isna().tolist() == [False, False, True, True]
     assert len(pd.read_csv(tmp_path / "out" / "risk.csv")) == 4
     pairs = pd.read_csv(tmp_path / "out" / "pairs.csv")
@@ -75,7 +75,7 @@ def test_reproduce_runs_a_generated_set_and_pairs_only_what_files_declare(tmp_pa
 
 def test_a_stimulus_directory_without_trial_files_is_one_line(tmp_path):
     r = _reproduce("--stimuli", str(tmp_path), "--out", str(tmp_path / "out"))
-    assert r.returncode == 2
+    assert r.returncode == 1
     assert r.stderr.strip().splitlines()[-1] == f"python -m lgp.reproduce: error: --stimuli {tmp_path}: no trial files (*.yaml) there"
 
 
