@@ -99,6 +99,7 @@ def plot_stage_curves(stages: pd.DataFrame, out_dir: str | Path, stem: str = "bu
     solid at the first sigma, dashed at the others. PNG and PDF paths."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     from models.risk.build import stage_curve
 
@@ -115,9 +116,10 @@ def plot_stage_curves(stages: pd.DataFrame, out_dir: str | Path, stem: str = "bu
                     ax.plot(c["stage"], c["risk"], "o-" if k == 0 else "s--", ms=3, color=colour, lw=1.2,
                             label=f"{pair}{level}, sigma {sigma:g} d")
         ax.set_title(f"pair {pair}", fontsize=9)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("stage (after the k-th Place)", fontsize=8)
         ax.tick_params(labelsize=7)
-        ax.legend(fontsize=6, frameon=False)
+        ax.legend(fontsize=6, frameon=False, loc="upper left")
     for ax in axes[::4]:
         ax.set_ylabel("risk (mean over layouts)", fontsize=8)
     fig.suptitle("Risk through the build: each stage's fraction of noisy runs that fall", fontsize=11)
