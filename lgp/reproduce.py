@@ -4,6 +4,8 @@
     python -m lgp.reproduce --quick                 # a small version, about a minute
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
+    python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/sensitivity.py)
+    python -m lgp.reproduce --fall-rule 3d --fall-threshold 0.1   # the risk model with another fall rule
 
 Every expensive result (effort of one trial, risk curve of one trial) is cached
 under ``<out>/cache`` by a hash of the trial file, the parameters and the code that
@@ -28,6 +30,7 @@ from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_ID
 from lgp.executor import executor_for, stop_signals
 from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.page import Stopwatch, write_index, write_replays
+from lgp import sensitivity
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
 
@@ -45,15 +48,16 @@ def effort_key_inputs() -> dict:
             "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
 
 
-def risk_key_inputs(engine: str | None) -> dict:
+def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> dict:
     """What a risk table depends on besides the trial and the parameters: the source
     of every project module risk_table can run (the engine module is loaded by name,
-    so it is named here), the engine's settings, and the libraries."""
+    so it is named here), the engine's settings, the fall rule, and the libraries."""
     from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
 
     name = DEFAULT_ENGINE if engine is None else engine
     return {"code": modules_digest("models.risk", ENGINES[name].target.split(":")[0], "stimuli"),
-            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(),
+            "fall_rule": fall_rule, "fall_threshold": float(fall_threshold)}
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd.DataFrame:
@@ -99,7 +103,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
     return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
-def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6) -> pd.DataFrame:
+def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6,
+                fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> pd.DataFrame:
     """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
 
     Uncached trials are simulated a few at a time on the run's one executor, so
@@ -107,14 +112,15 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     """
     from models.risk import risk_table
 
-    depends = risk_key_inputs(engine)
+    depends = risk_key_inputs(engine, fall_rule, fall_threshold)
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
     tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
-        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor)
+        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
+                           fall_rule=fall_rule, fall_threshold=fall_threshold)
         for t in group:
             tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
@@ -127,20 +133,20 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     return pd.concat(out, ignore_index=True)
 
 
-def check_targets(trials, engine: str | None, cache: Cache) -> None:
+def check_targets(trials, engine: str | None, cache: Cache, fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> None:
     """Before the long work: B of every trial must stand unperturbed (the risk
     model's sigma = 0 run), one simulation per trial, cached like the results.
     Raises UnstableSceneError naming every trial whose B falls and its blocks."""
     from models.risk import UnstableSceneError, check_stable
 
-    depends = risk_key_inputs(engine)
+    depends = risk_key_inputs(engine, fall_rule, fall_threshold)
     problems = []
     for t in trials:
         key = input_key(trial=t.id, digest=t.digest, check="B stands unperturbed", **depends)
         df = cache.get("stable", key)
         if df is None:
             try:
-                check_stable(t.target, engine)
+                check_stable(t.target, engine, fall_rule=fall_rule, fall_threshold=fall_threshold)
                 df = pd.DataFrame([{"trial": t.id, "stable": True, "problem": ""}])
             except UnstableSceneError as e:
                 df = pd.DataFrame([{"trial": t.id, "stable": False, "problem": str(e)}])
@@ -210,7 +216,8 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         "# Reproduction report",
         "",
         f"Settings: trials {len(effort)}, M = {args.samples} layouts, N = {args.n_sims} runs per sigma, "
-        f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), engine {args.engine or 'default'}, seed {args.seed}"
+        f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), engine {args.engine or 'default'}, "
+        f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}"
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
         f"Wall time {elapsed:.0f} s.",
         "",
@@ -263,7 +270,10 @@ def main(argv=None) -> int:
     p.add_argument("--samples", type=int, help="M, random layouts of A per trial (default 30; --quick 3)")
     p.add_argument("--n-sims", type=int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
     p.add_argument("--sigmas", type=float, nargs="+", help="noise levels in units of d (default: 0.05..0.10 step 0.005)")
-    p.add_argument("--engine", choices=["mujoco", "drake"], help="physics engine for risk (default: the models.risk default)")
+    p.add_argument("--engine", help="physics engine for risk: mujoco, drake, physx (optional extra) (default: mujoco)")
+    p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
+    p.add_argument("--fall-rule", default="horizontal", help="a run falls by horizontal (default) or 3d displacement")
+    p.add_argument("--fall-threshold", type=float, default=0.25, help="fall threshold in units of d (default %(default)s)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--n-boot", type=int, help="bootstrap resamples (default 1000; --quick 200)")
@@ -279,7 +289,17 @@ def main(argv=None) -> int:
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
     p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
                    help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
+    sensitivity.add_arguments(p)
     args = p.parse_args(argv)
+    try:  # bad engine, profile, rule or threshold: one line, before any work
+        from models.risk import check_fall_rule, engine_name
+
+        if args.engine is not None or args.profile is not None:
+            args.engine = engine_name(args.engine or "mujoco", args.profile)
+        check_fall_rule(args.fall_rule, args.fall_threshold)
+        sensitivity.check_arguments(args)
+    except ValueError as e:
+        p.exit(2, f"{p.prog}: error: {e}\n")
     if args.risk_measure and not (args.build_risk and args.human_data):
         p.error("--risk-measure needs --build-risk and --human-data")
     if args.per_participant_sigma and not args.human_data:
@@ -337,12 +357,17 @@ def run(args) -> int:
     with executor_for(args.jobs) as executor:
         if hasattr(executor, "start"):
             executor.start()
-        check_targets(trials, args.engine, cache)  # an unstable B fails now, not after the effort stage
+        check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
-        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk)
+        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
+                           fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
         clock.lap("risk")
+        sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log)) \
+            if args.sensitivity else []
+        if args.sensitivity:
+            clock.lap("sensitivity")
         if args.build_risk:
             from lgp import build_stage
 
@@ -355,6 +380,9 @@ def run(args) -> int:
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
     sections, build = [], None
+    for s in sensitive:  # --sensitivity (lgp/sensitivity.py)
+        written += s.files
+        sections.append("\n".join(s.lines))
     if args.build_risk:
         paths, section, build = build_stage.build_risk_outputs(stages, out, args.command)
         written += paths
