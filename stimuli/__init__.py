@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from lgp.paper import BLOCK_SIZE, BUILD_SITE, TRIAL_IDS
+from lgp.paper import BLOCK_SIZE, BUILD_SITE, TRIAL_IDS, canonical_trial_id
 from lgp.scene import (SOLID_SIZE, WORKSPACE_XY, Block, FixedBox, Scene, StimulusError, colour_shortfall,
                        horizontal_penetration)
 
@@ -291,9 +291,10 @@ _cache: dict[tuple[str, str], Trial] = {}
 
 
 def load_trial(trial_id: str, directory: str | Path | None = None) -> Trial:
-    """The trial ``trial_id`` (e.g. ``"7H"``) from `directory` (default
+    """The trial ``trial_id`` (e.g. ``"7H"``; case-insensitive, ``"7h"`` too) from `directory` (default
     ``stimuli/trials``), validated."""
     directory = TRIAL_DIR if directory is None else Path(directory)
+    trial_id = canonical_trial_id(trial_id)
     path = directory / f"{trial_id}.yaml"
     if not path.exists():
         raise StimulusError(f"no trial {trial_id!r}: {path} does not exist (known: {', '.join(trial_ids(directory))})")
