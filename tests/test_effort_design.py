@@ -107,15 +107,22 @@ def worst_carry_intrusion(p, fixed) -> tuple[float, float, str]:
     return below, inside, where
 
 
+#: Trials the clearance design (approach_height = 0) is not checked on: long plans
+#: (3E, 3H, 7E: one KOMO solve with ~300 keyframes takes minutes) and the bucket
+#: (12E, 12H: planned, but at 10x the legs design's effort; docs/effort.md).
+CLEARANCE_LEFT_OUT = ("3E", "3H", "7E", "12E", "12H")
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("height, tolerance", [(APPROACH, 1e-3), (0.0, 1e-4)])
 def test_no_carried_block_goes_below_the_table_or_into_another_block(height, tolerance):
-    # Both designs, all 24 trials, layout 0: the legs design stays within the 1 mm
-    # of tests/test_planner.py; the clearance design within OVERLAP_TOLERANCE.
+    # Both designs, layout 0 of every trial (the clearance design: all but
+    # CLEARANCE_LEFT_OUT): the legs design stays within the 1 mm of
+    # tests/test_planner.py; the clearance design within OVERLAP_TOLERANCE.
     from lgp.paper import TRIAL_IDS
 
     bad = []
-    for tid in TRIAL_IDS:
+    for tid in (TRIAL_IDS if height > 0 else [t for t in TRIAL_IDS if t not in CLEARANCE_LEFT_OUT]):
         trial = stimuli.load_trial(tid)
         p = plan_of_sample(trial, 0, 0, approach_height=height)
         below, inside, where = worst_carry_intrusion(p, p.initial.fixed)
