@@ -82,9 +82,9 @@ def trial_id(text: str) -> str:
     """A trial id, case-insensitive, returned in its canonical spelling: the paper's
     1E ... 12H, or another <pair><E|H> (a trial file the loader then looks for)."""
     tid = canonical_trial_id(text)
-    if tid not in TRIAL_IDS and not re.fullmatch(r"\d+[EH]", tid):
+    if tid not in TRIAL_IDS and not re.fullmatch(r"\d+[EH]", tid) and not re.fullmatch(r"[A-Z][A-Z0-9_-]{0,63}", tid):
         raise argparse.ArgumentTypeError(f"unknown trial id {text!r}; expected <pair><E|H> such as 1E, 1H, ..., 12H "
-                                         "(case-insensitive)")
+                                         "or the name of a trial of no pair such as G0001 (case-insensitive)")
     return tid
 
 

@@ -28,7 +28,8 @@ import pandas as pd
 import stimuli
 from lgp import cli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import default_jobs, executor_for, stop_signals
+from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
+from lgp.progress import Progress
 from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 from lgp.page import Stopwatch, write_index, write_replays
@@ -88,8 +89,10 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
     started = {t.id: None for t in todo}
     t0 = time.perf_counter()
+    bar = Progress("effort", len(units), "plans")
 
     def arrived(k, row):
+        bar.advance()
         trial = owner[k]
         rows[trial.id].append(row)
         pending[trial.id] -= 1
@@ -103,7 +106,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
         if t.id in tables and t.id not in rows:
             _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
                  f" over {len(tables[t.id])} layouts  (cached)")
-    executor.map(effort_of_unit, units, arrived)
+    with bar:
+        executor.map(effort_of_unit, units, arrived)
     return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
@@ -120,14 +124,19 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
     tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
+    bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs")
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
+        base = bar.done
         table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
-                           fall_rule=fall_rule, fall_threshold=fall_threshold)
+                           fall_rule=fall_rule, fall_threshold=fall_threshold,
+                           progress=lambda done, total: bar.advance(base + done - bar.done))
         for t in group:
             tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
+    if todo:
+        bar.close()
     out = []
     for k, trial in enumerate(trials, 1):
         df = tables[trial.id]
@@ -165,8 +174,8 @@ def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
     order = {t.id: i for i, t in enumerate(trials)}
     g = samples.groupby("trial")["effort"]
     df = pd.DataFrame({"effort": g.mean(), "effort_sd": g.std(ddof=1), "samples": g.size()}).reset_index()
-    df["pair"] = df["trial"].str[:-1].astype(int)
-    df["level"] = df["trial"].str[-1]
+    df["pair"] = df["trial"].map({t.id: t.pair for t in trials}).astype("Int64")  # empty for a trial of no pair
+    df["level"] = df["trial"].map({t.id: t.level for t in trials})
     return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]
 
 
@@ -202,6 +211,34 @@ def pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trial
     table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
     table.insert(table.columns.get_loc("risk_E"), "sigma", sigma)
     # Tied in effort and in risk (analysis.pairs.TIE_REL): Eq. 1 ties them for every b.
+    table["full_E_lt_H_for_b2_over_b1"] = [
+        "none (tie)" if (eo == "tie" and ro == "tie") else kappa_range(*row)
+        for row, eo, ro in zip(table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy(),
+                               table["effort_order"], table["risk_order"])]
+    return table
+
+
+def declared_pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trials) -> pd.DataFrame | None:
+    """pair_orderings (same columns, same tie rule) for a stimulus set other than
+    the paper's: the pairs whose E and H trials (ids <pair>E, <pair>H) are both in
+    the run; None when there are none."""
+    from analysis.pairs import pair_order
+
+    ids = {t.id for t in trials}
+    declared = sorted({t.pair for t in trials if t.pair is not None and {f"{t.pair}E", f"{t.pair}H"} <= ids})
+    if not declared:
+        return None
+    at = risk[np.isclose(risk["sigma"].astype(float), sigma, rtol=0, atol=1e-9)]
+    costs = {"effort": effort.set_index("trial")["effort"].astype(float), "risk": at.set_index("trial")["risk"].astype(float)}
+    table = pd.DataFrame({"pair": declared})
+    for name, cost in costs.items():
+        table[f"{name}_E"] = [cost[f"{p}E"] for p in declared]
+        table[f"{name}_H"] = [cost[f"{p}H"] for p in declared]
+        table[f"{name}_order"] = [pair_order(e, h) for e, h in zip(table[f"{name}_E"], table[f"{name}_H"])]
+        table[f"{name}_E_lt_H"] = table[f"{name}_order"] == "E<H"
+    table.insert(1, "dimension", table["pair"].map({t.pair: t.dimension for t in trials}))
+    table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
+    table.insert(table.columns.get_loc("risk_E"), "sigma", sigma)
     table["full_E_lt_H_for_b2_over_b1"] = [
         "none (tie)" if (eo == "tie" and ro == "tie") else kappa_range(*row)
         for row, eo, ro in zip(table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy(),
@@ -321,6 +358,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="results", type=cli.output_dir,
                    help="output directory (default: results/); an earlier run's outputs in it are removed, its cache kept")
+    p.add_argument("--stimuli", metavar="DIR", type=cli.input_dir,
+                   help="run on the trial files of DIR (default: stimuli/trials, the paper's): all of them unless --trials "
+                   "names some; pair table only for pairs whose E and H files are both there")
     p.add_argument("--trials", nargs="+", type=cli.trial_id_or_all,
                    help="trial ids (case-insensitive), or 'all' for every trial file (default: the paper's 24)")
     p.add_argument("--samples", type=cli.positive_int, help="M, random layouts of A per trial (default 30; --quick 3)")
@@ -330,7 +370,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
     p.add_argument("--fall-rule", default="horizontal", help="a run falls by horizontal (default) or 3d displacement")
     p.add_argument("--fall-threshold", type=float, default=0.25, help="fall threshold in units of d (default %(default)s)")
-    p.add_argument("--jobs", type=cli.positive_int, default=default_jobs(), help="processes, >= 1 (default: all cores, %(default)s here)")
+    p.add_argument("--jobs", type=cli.positive_int, default=default_jobs(),
+                   help="processes, or LocalCluster workers with --scheduler local-dask, >= 1 (default: all cores, %(default)s here)")
+    p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
+                   "(a LocalCluster of --jobs workers); default: a local process pool. Needs the [dask] extra (docs/scaling.md)")
     p.add_argument("--seed", type=cli.seed, default=0)
     p.add_argument("--n-boot", type=cli.positive_int, help="bootstrap resamples (default 1000; --quick 200)")
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
@@ -391,6 +434,10 @@ def main(argv=None) -> int:
 def select_trials(ids: list[str] | None, directory=None) -> list:
     """The trials of a run: the paper's 24 by default (other trial files in the
     directory are named, not run), ``all`` for every trial file, or the ids given."""
+    if not ids and directory is not None:  # a user's stimulus set (--stimuli DIR): every trial file in it
+        if not stimuli.trial_ids(directory):
+            raise stimuli.StimulusError(f"--stimuli {directory}: no trial files (*.yaml) there")
+        return stimuli.load_all(directory)
     if not ids:
         extra = stimuli.extra_ids(directory)
         if extra:
@@ -407,7 +454,7 @@ def run(args, argv=None) -> int:
     t0 = time.perf_counter()
     clock = Stopwatch()  # wall time per stage, for the results page
     # Validate every input before anything is written or computed.
-    trials = select_trials(args.trials)
+    trials = select_trials(args.trials, args.stimuli)
     human = None
     if args.human_data:
         from analysis import load_human_data
@@ -421,11 +468,13 @@ def run(args, argv=None) -> int:
     if removed:
         _log(f"removed the outputs of an earlier run from {out}: {', '.join(removed)} (the cache is kept)")
     cache = TimedCache(out / "cache", enabled=not args.no_cache)
-    _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}; cache {cache.root}")
+    _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}"
+         f"{', scheduler ' + args.scheduler if args.scheduler else ''}; cache {cache.root}")
 
     # One executor for the whole run: its workers start now, before this process
     # imports Drake or MuJoCo, and stay warm across trials and stages.
-    with executor_for(args.jobs) as executor, cache.stage():
+    # SchedulerUnreachable / DaskMissing: one line from lgp.cli, exit 1
+    with executor_for_scheduler(args.scheduler, args.jobs) as executor, cache.stage():
         if hasattr(executor, "start"):
             executor.start()
         with cli.deferred_interrupt():  # Drake loads here; a Ctrl-C meanwhile waits until it has
@@ -490,7 +539,12 @@ def run(args, argv=None) -> int:
             written += paths
             sections.append(section)
     else:
-        _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
+        pairs = declared_pair_orderings(effort, risk, sigma, trials)
+        if pairs is not None:
+            written.append(write_csv_atomic(pairs, out / "pairs.csv"))
+        _log("not all of the paper's 24 trials: no figures or fits (they need all 24); "
+             + (f"pair table for the {len(pairs)} pair(s) whose E and H trials are both in the run" if pairs is not None
+                else "no pair table (no trial files declare both trials of a pair)"))
     clock.lap("analysis")
     software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
     compute = cache.compute_time()
