@@ -268,7 +268,8 @@ def engine_description(engine: str | None, settings: dict | None = None) -> str:
     version = settings.pop("version", None)
     text = ", ".join(f"{k} {v}" for k, v in settings.items())
     return f"{name}" + (f" {version}" if version else "") + (f" ({text})" if text else "") + \
-        ("" if engine else " [the default engine]")
+        ("" if engine else " [the default engine]") + \
+        (" [UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md]" if settings.get("faithful") is False else "")
 
 
 def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
