@@ -121,6 +121,7 @@ def noisy_scenes():
     return out
 
 
+@pytest.mark.slow
 def test_engines_agree_on_the_same_noisy_scenes():
     scenes = noisy_scenes()
     a = np.array([falls(s, "mujoco") for s in scenes])
