@@ -1,5 +1,5 @@
 """The paper's pipeline end to end: stimuli -> physical effort -> physical risk ->
-(analysis, when human data are given) -> tidy CSVs, figures and report.md.
+(analysis, when human data are given) -> tidy CSVs, figures, report.md and the results page index.html (lgp/page.py).
 
     python -m lgp.reproduce --quick                 # a small version, about a minute
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
@@ -26,8 +26,9 @@ import pandas as pd
 import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import executor_for
-from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
+from lgp.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.executor import sigterm_as_interrupt
+from lgp.page import Stopwatch, write_index, write_replays
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
 
@@ -52,8 +53,10 @@ def risk_key_inputs(engine: str | None) -> dict:
     from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
 
     name = DEFAULT_ENGINE if engine is None else engine
-    return {"code": modules_digest("models.risk", ENGINES[name].split(":")[0], "stimuli"),
-            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
+    spec = ENGINES[name]
+    extra = (spec.requires,) if spec.requires else ()  # e.g. sapien for PhysX
+    return {"code": modules_digest("models.risk", spec.target.split(":")[0], "stimuli"),
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra)}
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd.DataFrame:
@@ -125,6 +128,30 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
         _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)
     return pd.concat(out, ignore_index=True)
+
+
+def check_targets(trials, engine: str | None, cache: Cache) -> None:
+    """Before the long work: B of every trial must stand unperturbed (the risk
+    model's sigma = 0 run), one simulation per trial, cached like the results.
+    Raises UnstableSceneError naming every trial whose B falls and its blocks."""
+    from models.risk import UnstableSceneError, check_stable
+
+    depends = risk_key_inputs(engine)
+    problems = []
+    for t in trials:
+        key = input_key(trial=t.id, digest=t.digest, check="B stands unperturbed", **depends)
+        df = cache.get("stable", key)
+        if df is None:
+            try:
+                check_stable(t.target, engine)
+                df = pd.DataFrame([{"trial": t.id, "stable": True, "problem": ""}])
+            except UnstableSceneError as e:
+                df = pd.DataFrame([{"trial": t.id, "stable": False, "problem": str(e)}])
+            cache.put("stable", key, df)
+        if not bool(df["stable"].iloc[0]):
+            problems.append(str(df["problem"].iloc[0]))
+    if problems:
+        raise UnstableSceneError("; ".join(problems))
 
 
 def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
@@ -246,6 +273,7 @@ def main(argv=None) -> int:
     p.add_argument("--human-data", help="CSV of human responses (docs/human-data.md)")
     p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
+    p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
     args = p.parse_args(argv)
     q = QUICK if args.quick else {}
@@ -280,6 +308,7 @@ def select_trials(ids: list[str] | None, directory=None) -> list:
 def run(args) -> int:
     """The pipeline for parsed command-line `args` (see `main`)."""
     t0 = time.perf_counter()
+    clock = Stopwatch()  # wall time per stage, for the results page
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Cache(out / "cache", enabled=not args.no_cache)
@@ -296,9 +325,14 @@ def run(args) -> int:
     with executor_for(args.jobs) as executor:
         if hasattr(executor, "start"):
             executor.start()
+        check_targets(trials, args.engine, cache)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
+        clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk)
+        clock.lap("risk")
+        replays = None if args.no_replays else write_replays(trials, args.seed, out / "replays", cache, executor, _log)
+        clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
@@ -319,9 +353,11 @@ def run(args) -> int:
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma)
     else:
         _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
+    clock.lap("analysis")
     software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0, software)
     written.append(report)
+    written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
     _log(f"cache: {cache.summary()}")
     print(f"Outputs in {out.resolve()}:")
     for path in written:

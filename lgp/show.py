@@ -37,13 +37,14 @@ def main(argv=None) -> int:
         print(f"KOMO {komo.formulation} / {komo.solver}: {komo.status}, cost {komo.cost:.4f}, {komo.n_variables} variables, "
               f"{komo.solve_time:.3f} s solving, planned in {result.planning_time:.3f} s")
     print(f"effort {kinetic_energy(result):.12g} J*s")
+    title = f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})"
     if args.html or args.png:
         from lgp.view import write_html, write_png
 
         if args.html:
-            print("replay:", write_html(result, args.html))
+            print("replay:", write_html(result, args.html, title))
         if args.png:
-            print("figure:", write_png(result, args.png))
+            print("figure:", write_png(result, args.png, title))
     return 0
 
 

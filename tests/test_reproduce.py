@@ -16,11 +16,12 @@ from lgp import reproduce
 ARGS = ["--trials", "9E", "10E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.05", "0.1", "--jobs", "1", "--seed", "3"]
 
 
-def _cache_counts(err: str) -> dict:
-    """The counts of the run's `cache: ...` summary line on stderr, {(kind, outcome): n}."""
+def _cache_counts(err: str, kinds=("effort", "risk")) -> dict:
+    """The counts of the run's `cache: ...` summary line on stderr, {(kind, outcome): n},
+    for entries of `kinds` (default: the result tables, not the B-stands checks)."""
     (line,) = [l for l in err.splitlines() if l.startswith("cache: ")]
     return {(kind, outcome): int(n) for kind, body in re.findall(r"(\w+) ((?:\d+ \w+(?:, )?)+)", line[7:])
-            for n, outcome in re.findall(r"(\d+) (\w+)", body)}
+            for n, outcome in re.findall(r"(\d+) (\w+)", body) if kind in kinds}
 
 
 def _tables(out):
@@ -33,8 +34,10 @@ def _tables(out):
 def test_reproduce_writes_tables_and_report_then_reuses_the_cache(tmp_path, capsys):
     out = tmp_path / "r"
     assert reproduce.main([*ARGS, "--out", str(out)]) == 0
-    assert _cache_counts(capsys.readouterr().err) == {("effort", "hit"): 0, ("effort", "miss"): 3, ("effort", "recomputed"): 0,
-                                                      ("risk", "hit"): 0, ("risk", "miss"): 3, ("risk", "recomputed"): 0}
+    err = capsys.readouterr().err
+    assert _cache_counts(err) == {("effort", "hit"): 0, ("effort", "miss"): 3, ("effort", "recomputed"): 0,
+                                  ("risk", "hit"): 0, ("risk", "miss"): 3, ("risk", "recomputed"): 0}
+    assert _cache_counts(err, ["stable"])["stable", "miss"] == 3  # B checked once per trial, before effort
     first = _tables(out)
     assert set(first["risk"]["trial"]) == {"9E", "10E", "6H"} and len(first["risk"]) == 6
     assert (first["effort"]["effort"] > 0).all()
@@ -46,8 +49,10 @@ def test_reproduce_writes_tables_and_report_then_reuses_the_cache(tmp_path, caps
 
     # A second run plans and simulates nothing: every lookup is a hit.
     assert reproduce.main([*ARGS, "--out", str(out)]) == 0
-    assert _cache_counts(capsys.readouterr().err) == {("effort", "hit"): 3, ("effort", "miss"): 0, ("effort", "recomputed"): 0,
-                                                      ("risk", "hit"): 3, ("risk", "miss"): 0, ("risk", "recomputed"): 0}
+    err = capsys.readouterr().err
+    assert _cache_counts(err) == {("effort", "hit"): 3, ("effort", "miss"): 0, ("effort", "recomputed"): 0,
+                                  ("risk", "hit"): 3, ("risk", "miss"): 0, ("risk", "recomputed"): 0}
+    assert _cache_counts(err, ["stable"])["stable", "hit"] == 3
     for name, df in _tables(out).items():
         pd.testing.assert_frame_equal(df, first[name])
 
@@ -128,6 +133,7 @@ def _fake_physics(monkeypatch):
 
     monkeypatch.setattr(reproduce, "effort_tables", effort)
     monkeypatch.setattr(reproduce, "risk_tables", risk)
+    monkeypatch.setattr(reproduce, "write_replays", lambda *a, **k: None)  # nor 3-D replays (they plan)
 
 
 def test_an_extra_trial_file_does_not_break_the_paper_run(tmp_path, monkeypatch, capsys):
@@ -182,7 +188,7 @@ def undisturbed(tmp_path_factory):
     out = tmp_path_factory.mktemp("undisturbed") / "r"
     assert reproduce.main([*ARGS, "--out", str(out)]) == 0
     entries = {}
-    for path in sorted((out / "cache").glob("*.csv")):
+    for path in sorted([*(out / "cache").glob("effort-*.csv"), *(out / "cache").glob("risk-*.csv")]):
         entries[path.name.split("-")[0], read_entry(path)["trial"].iloc[0]] = path.name
     assert len(entries) == 6
     return out, entries
@@ -225,3 +231,50 @@ def test_damaged_cache_entries_are_recomputed_exactly_and_the_run_ends_the_same(
     # the repaired entries are used by the next run
     assert reproduce.main([*ARGS, "--out", str(out)]) == 0
     assert _cache_counts(capsys.readouterr().err)["effort", "hit"] == 3
+
+
+def _fails_naming(capsys, call, error, text):
+    """`call()` fails with `error` mentioning `text`: raised, or (with a one-line CLI
+    wrapper) printed on stderr with a non-zero exit status."""
+    try:
+        status = call()
+    except error as e:
+        message = str(e)
+    else:
+        assert status != 0
+        message = capsys.readouterr().err
+    assert text in message, message
+
+
+def test_problems_are_found_before_the_effort_stage(tmp_path, monkeypatch, capsys):
+    """An unstable B and a header-only human-data file stop the run before any
+    effort is planned; B's check is one cached simulation per trial."""
+    import yaml
+
+    import stimuli
+    from analysis import HumanDataError
+    from models.risk import UnstableSceneError
+
+    folder = tmp_path / "trials"
+    folder.mkdir()
+    data = yaml.safe_load((stimuli.TRIAL_DIR / "6E.yaml").read_text())  # a 5-tower -> a row of 5
+    data.update(id="13E", pair=13, level="E")
+    data["target"]["blocks"] = [{"name": "b1", "p_WB": [0.35, 0.0, 0.0127]},
+                                {"name": "b2", "p_WB": [0.35 + 0.7 * 0.0254, 0.0, 0.0381]}]  # overhangs 70 %
+    (folder / "13E.yaml").write_text(yaml.safe_dump(data))
+    monkeypatch.setattr(stimuli, "TRIAL_DIR", folder)
+
+    def no_effort(*a, **k):
+        raise AssertionError("the effort stage started")
+
+    monkeypatch.setattr(reproduce, "effort_tables", no_effort)
+    args = ["--trials", "13E", "--samples", "1", "--n-sims", "2", "--jobs", "1", "--out", str(tmp_path / "r")]
+    _fails_naming(capsys, lambda: reproduce.main(args), UnstableSceneError, "13E-B: unstable before any noise")
+
+    monkeypatch.setattr(models.risk, "check_stable", no_effort)  # the verdict now comes from the cache
+    _fails_naming(capsys, lambda: reproduce.main(args), UnstableSceneError, "block b2 moved")
+
+    header_only = tmp_path / "header.csv"
+    header_only.write_text("dataset,participant,trial,response\n")
+    _fails_naming(capsys, lambda: reproduce.main(["--human-data", str(header_only), *args]),
+                  HumanDataError, "no responses after the header")

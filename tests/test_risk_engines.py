@@ -5,14 +5,38 @@ import numpy as np
 import pytest
 
 from lgp.scene import BLOCK_SIZE
-from models.risk import ENGINES, UnstableSceneError, check_stable, get_engine
+from models.risk import ENGINES, UnstableSceneError, available_engines, check_stable, get_engine
 from models.risk.core import fall_threshold
 from models.risk.noise import draw_normals, perturb_from_normals
 from models.risk.static import static_margins, static_stable
 from models.risk.structures import bridge, grid, harmonic, line, pyramid, staircase, tower, two_block
 
 D = BLOCK_SIZE
-ENGINE_NAMES = sorted(ENGINES)
+INSTALLED = available_engines()
+#: The suite runs on every installed engine. Faithful engines must pass all of it;
+#: the unfaithful profile physx:game-defaults runs it too, and each of its failures
+#: is asserted as an expected failure (strict: a pass is reported as an error),
+#: with the numbers measured on this suite (docs/risk.md, "PhysX").
+GAME = "physx:game-defaults"
+GAME_FAILURES = {
+    "agree": "agrees with MuJoCo on 37 of 40 noisy scenes (92.5% < 95%; MuJoCo 12 falls, game-defaults 13)",
+    "early": "early termination changes 1 of 40 verdicts (13 falls early-stopped vs 14 in full 4-s runs)",
+}
+
+
+def engines(names=None, failure=None):
+    """pytest params: the installed engines among `names` (default: all); an
+    unfaithful engine is an expected failure when `failure` (a key of
+    GAME_FAILURES) names its measured failure of the test."""
+    out = []
+    for name in names or list(ENGINES):
+        if name not in INSTALLED:
+            continue
+        marks = ()
+        if not ENGINES[name].faithful and failure is not None:
+            marks = pytest.mark.xfail(strict=True, reason=f"{name} (unfaithful): {GAME_FAILURES[failure]}")
+        out.append(pytest.param(name, marks=marks, id=name))
+    return out
 
 
 def falls(scene, engine, early_stop=True) -> bool:
@@ -23,35 +47,35 @@ def falls(scene, engine, early_stop=True) -> bool:
 # ----------------------------------------------------------------------------- analytic answers
 
 
-@pytest.mark.parametrize("engine", ENGINE_NAMES)
+@pytest.mark.parametrize("engine", engines())
 @pytest.mark.parametrize("offset", [0.3, 0.45])
 def test_block_overhanging_less_than_half_its_width_stands(engine, offset):
     check_stable(two_block(offset), engine)
     check_stable(two_block(offset, axis=1), engine)
 
 
-@pytest.mark.parametrize("engine", ENGINE_NAMES)
+@pytest.mark.parametrize("engine", engines())
 @pytest.mark.parametrize("offset", [0.55, 0.7])
 def test_block_overhanging_more_than_half_its_width_falls(engine, offset):
     with pytest.raises(UnstableSceneError, match=r"two-block offset .* block b1 moved"):
         check_stable(two_block(offset), engine)
 
 
-@pytest.mark.parametrize("engine", ENGINE_NAMES)
+@pytest.mark.parametrize("engine", engines())
 def test_harmonic_overhang_stands_inside_and_falls_outside_the_critical_stack(engine):
     check_stable(harmonic(5, 0.9), engine)
     with pytest.raises(UnstableSceneError):
         check_stable(harmonic(5, 1.1), engine)
 
 
-@pytest.mark.parametrize("engine", ENGINE_NAMES)
+@pytest.mark.parametrize("engine", engines())
 @pytest.mark.parametrize("scene", [tower(10), line(10), bridge(), pyramid(), staircase(4)], ids=lambda s: s.label)
 def test_unperturbed_structures_stand(engine, scene):
     rollout = check_stable(scene, engine)
     assert rollout.horizontal_displacement().max() < 0.05 * D
 
 
-@pytest.mark.parametrize("engine", ENGINE_NAMES)
+@pytest.mark.parametrize("engine", engines())
 def test_blocks_dropped_onto_their_supports_stay_put(engine):
     """3-D noise lifts blocks; a block landing from a few mm must not slide off
     (a rigid half-space table in Drake fails this: docs/risk.md)."""
@@ -98,7 +122,7 @@ def random_stacks(count, seed, ambiguity=0.04 * D):
     return stand + fall
 
 
-@pytest.mark.parametrize("engine,count", [("mujoco", 40), ("drake", 10)])
+@pytest.mark.parametrize("engine,count", [p for p in [("mujoco", 40), ("drake", 10), ("physx", 40), (GAME, 40)] if p[0] in INSTALLED])
 def test_engine_agrees_with_static_criterion_on_random_stacks(engine, count):
     stacks = random_stacks(count, seed=2)
     verdicts = [(s.label, falls(s, engine), not static_stable(s)) for s in stacks]
@@ -121,18 +145,23 @@ def noisy_scenes():
     return out
 
 
-@pytest.mark.slow
-def test_engines_agree_on_the_same_noisy_scenes():
+@pytest.mark.slow  # every noisy scene in two engines
+@pytest.mark.parametrize("other", engines(["drake", "physx", GAME], failure="agree"))
+def test_engines_agree_on_the_same_noisy_scenes(other):
     scenes = noisy_scenes()
     a = np.array([falls(s, "mujoco") for s in scenes])
-    b = np.array([falls(s, "drake") for s in scenes])
+    b = np.array([falls(s, other) for s in scenes])
     assert 0 < a.sum() < len(a), "the check needs both falls and stands"
     agreement = np.mean(a == b)
-    assert agreement >= 0.95, f"engines agree on {agreement:.0%} of {len(a)} noisy scenes (mujoco {a.sum()} falls, drake {b.sum()})"
+    assert agreement >= 0.95, f"engines agree on {agreement:.0%} of {len(a)} noisy scenes (mujoco {a.sum()} falls, {other} {b.sum()})"
 
 
-@pytest.mark.parametrize("engine,count", [("mujoco", 40), ("drake", 3)])
-def test_early_termination_gives_the_verdict_of_the_full_four_seconds(engine, count):
+EARLY_STOP_SCENES = {"mujoco": 40, "drake": 3, "physx": 40, GAME: 40}
+
+
+@pytest.mark.parametrize("engine", engines(list(EARLY_STOP_SCENES), failure="early"))
+def test_early_termination_gives_the_verdict_of_the_full_four_seconds(engine):
+    count = EARLY_STOP_SCENES[engine]
     scenes = noisy_scenes()[::max(1, len(noisy_scenes()) // count)][:count]
     early = [falls(s, engine) for s in scenes]
     full = [falls(s, engine, early_stop=False) for s in scenes]
@@ -148,7 +177,7 @@ def test_mujoco_sleeping_does_not_change_verdicts():
         assert (r.horizontal_displacement().max() > fall_threshold(s)) == falls(s, "mujoco"), s.label
 
 
-@pytest.mark.parametrize("engine", ENGINE_NAMES)
+@pytest.mark.parametrize("engine", engines())
 def test_a_run_does_not_depend_on_the_runs_before_it(engine):
     """Models are reused across runs: reset must leave no trace of the last run."""
     scene = noisy_scenes()[3]

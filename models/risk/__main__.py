@@ -1,10 +1,11 @@
 """Risk table of the 24 trials over the paper's sigma grid.
 
     python -m models.risk --table docs/risk_table.csv [--runs runs.csv]
-        [--n-sims 100] [--seed 0] [--engine mujoco] [--jobs N] [--sigmas 0.05 0.065 ...]
+        [--n-sims 100] [--seed 0] [--engine mujoco|drake|physx] [--profile faithful|game-defaults]
+        [--fall-rule horizontal|3d] [--fall-threshold 0.25] [--jobs N] [--sigmas 0.05 0.065 ...]
 
-Writes the tidy (trial, sigma, risk, falls, n, engine) table as CSV, optionally
-the per-run table, and prints risk per trial and sigma.
+Writes the tidy (trial, sigma, risk, falls, n, engine, fall_rule, fall_threshold)
+table as CSV, optionally the per-run table, and prints risk per trial and sigma.
 
     python -m models.risk --build-risk 7H [6E ...] [--sigmas 0.065 0.1] [--samples 30]
         [--n-sims 100] [--out stages.csv]
@@ -20,17 +21,21 @@ import sys
 import time
 
 from lgp.paper import N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID
-from models.risk.core import DEFAULT_ENGINE, risk_table, summarise
-from models.risk.engine import ENGINES
+from models.risk.core import DEFAULT_ENGINE, _engine_name, check_fall_rule, risk_table, summarise
+from models.risk.engine import DEFAULT_FALL_RULE, ENGINES, FALL_RULES, FALL_THRESHOLD, PROFILES
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m models.risk", description=__doc__.splitlines()[0])
-    p.add_argument("--table", help="CSV to write: trial, sigma, risk, falls, n, engine")
+    p.add_argument("--table", help="CSV to write: trial, sigma, risk, falls, n, engine, fall_rule, fall_threshold")
     p.add_argument("--runs", help="also write the per-run CSV here")
     p.add_argument("--n-sims", type=int, default=N_SIMS, help="simulations per trial and sigma (default %(default)s)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--engine", choices=sorted(ENGINES), default=DEFAULT_ENGINE)
+    p.add_argument("--engine", default=DEFAULT_ENGINE, help=f"physics engine: {', '.join(ENGINES)} (default %(default)s)")
+    p.add_argument("--profile", help="engine profile: " + "; ".join(f"{e}: {', '.join(v)}" for e, v in PROFILES.items())
+                   + " (default: faithful; game-defaults is unfaithful, docs/risk.md)")
+    p.add_argument("--fall-rule", default=DEFAULT_FALL_RULE, help=f"{' or '.join(FALL_RULES)} displacement (default %(default)s)")
+    p.add_argument("--fall-threshold", type=float, default=FALL_THRESHOLD, help="fall threshold in units of d (default %(default)s)")
     p.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
     p.add_argument("--sigmas", type=float, nargs="+", default=list(SIGMA_GRID), help="noise SDs, fractions of d")
     p.add_argument("--trials", nargs="+", help="trial ids (default: all 24)")
@@ -38,6 +43,11 @@ def main(argv=None) -> int:
     p.add_argument("--samples", type=int, default=SAMPLES, help="layouts of A per trial for --build-risk (default %(default)s)")
     p.add_argument("--out", help="with --build-risk: write the stage table (CSV) here")
     args = p.parse_args(argv)
+    try:
+        args.engine = _engine_name(args.engine, args.profile)
+        check_fall_rule(args.fall_rule, args.fall_threshold)
+    except ValueError as e:
+        p.exit(2, f"{p.prog}: error: {e}\n")
     if args.build_risk:
         try:
             return _build_risk(args)
@@ -48,7 +58,10 @@ def main(argv=None) -> int:
 
     import stimuli
 
-    trials = stimuli.load_all() if not args.trials else [stimuli.load_trial(t) for t in args.trials]
+    try:
+        trials = stimuli.load_all() if not args.trials else [stimuli.load_trial(t) for t in args.trials]
+    except ValueError as e:  # StimulusError: unknown trial
+        p.exit(2, f"{p.prog}: error: {e}\n")
     t0 = time.perf_counter()
     last = [0.0]
 
@@ -58,7 +71,8 @@ def main(argv=None) -> int:
             last[0] = now
             print(f"  {done}/{total} runs, {now - t0:.0f} s", file=sys.stderr, flush=True)
 
-    runs = risk_table(trials, args.sigmas, args.n_sims, args.seed, args.engine, args.jobs, progress, runs=True)
+    runs = risk_table(trials, args.sigmas, args.n_sims, args.seed, args.engine, args.jobs, progress, runs=True,
+                      fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
     table = summarise(runs)
     order = {t.id: k for k, t in enumerate(trials)}
     table = table.sort_values(["trial", "sigma"], key=lambda c: c.map(order) if c.name == "trial" else c).reset_index(drop=True)
@@ -67,7 +81,8 @@ def main(argv=None) -> int:
         runs.to_csv(args.runs, index=False)
     wide = table.pivot(index="trial", columns="sigma", values="risk").reindex([t.id for t in trials])
     print(wide.to_string(float_format=lambda x: f"{x:.2f}"))
-    print(f"{len(runs)} runs with {args.engine} in {time.perf_counter() - t0:.1f} s -> {args.table}", file=sys.stderr)
+    print(f"{len(runs)} runs with {args.engine}, {args.fall_rule} fall rule at {args.fall_threshold:g} d, "
+          f"in {time.perf_counter() - t0:.1f} s -> {args.table}", file=sys.stderr)
     return 0
 
 

@@ -4,8 +4,15 @@ of N noisy copies of B that fall when simulated for 4 s.
 Run r of a scene perturbs B with the standard normals z[r] (drawn once from the
 seed, shape (n_blocks, 3)) scaled by sigma, so every sigma value sees the same
 random numbers (common random numbers) and a risk curve over sigma is smooth. A
-scene's numbers depend only on (scene, sigma, n_sims, seed, engine), never on the other
-scenes of a table, on the order of runs, or on the number of worker processes.
+scene's numbers depend only on (scene, sigma, n_sims, seed, engine, fall rule),
+never on the other scenes of a table, on the order of runs, or on the number of
+worker processes.
+
+The fall rule (docs/risk.md, "Fall rule"): a run falls when some block's centre
+ends more than `fall_threshold` * d from where it started, measured in the
+horizontal plane (`fall_rule="horizontal"`, the default) or in 3-D (`"3d"`, the
+paper's wording). A block lifted by the noise drops back onto its support: that
+drop counts under "3d" when it exceeds the threshold, never under "horizontal".
 """
 from __future__ import annotations
 
@@ -19,15 +26,26 @@ from lgp.executor import borrowed, default_jobs
 from lgp.geometry import digest
 from lgp.paper import N_SIMS, SIGMA_GRID
 from lgp.scene import Scene
-from models.risk.engine import ENGINES, FALL_THRESHOLD, Rollout, _smallest_width, get_engine
+from models.risk.engine import (
+    DEFAULT_FALL_RULE,
+    ENGINES,
+    FALL_RULES,
+    FALL_THRESHOLD,
+    Rollout,
+    _smallest_width,
+    engine_name,
+    fall_certain,
+    get_engine,
+)
 from models.risk.noise import draw_normals, perturb_from_normals
 
 #: The engine used when none is named: the one that passes the faithfulness suite
 #: with the better throughput (docs/risk.md).
 DEFAULT_ENGINE = "mujoco"
 
-RUN_COLUMNS = ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine"]
-RISK_COLUMNS = ["trial", "sigma", "risk", "falls", "n", "engine"]
+RUN_COLUMNS = ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine",
+               "fall_rule", "fall_threshold"]
+RISK_COLUMNS = ["trial", "sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold"]
 
 
 class UnstableSceneError(ValueError):
@@ -37,29 +55,59 @@ class UnstableSceneError(ValueError):
 # ----------------------------------------------------------------------------- single runs
 
 
-def _engine_name(engine: str | None) -> str:
-    name = DEFAULT_ENGINE if engine is None else engine
-    if name not in ENGINES:
-        raise ValueError(f"unknown physics engine {engine!r}; known engines: {', '.join(sorted(ENGINES))}")
-    return name
+def _engine_name(engine: str | None, profile: str | None = None) -> str:
+    """The registry name of an engine (None: DEFAULT_ENGINE) with its profile."""
+    return engine_name(DEFAULT_ENGINE if engine is None else engine, profile)
 
 
-def fall_threshold(scene: Scene) -> float:
-    """Distance (m) a block centre must move horizontally for a run to count as a fall."""
-    return FALL_THRESHOLD * _smallest_width(scene)
+def check_fall_rule(fall_rule: str, fall_threshold: float) -> tuple[str, float]:
+    """(rule, threshold) checked: ValueError for an unknown rule or a threshold <= 0."""
+    if fall_rule not in FALL_RULES:
+        raise ValueError(f"unknown fall rule {fall_rule!r}; known rules: {', '.join(FALL_RULES)}")
+    try:
+        threshold = float(fall_threshold)
+    except (TypeError, ValueError):
+        raise ValueError(f"fall threshold must be a number (units of the block size d), got {fall_threshold!r}") from None
+    if not threshold > 0 or not np.isfinite(threshold):
+        raise ValueError(f"fall threshold must be > 0 (units of the block size d), got {fall_threshold!r}")
+    return fall_rule, threshold
 
 
-def _row(rollout: Rollout, threshold: float) -> dict:
+def fall_threshold(scene: Scene, fall_threshold: float = FALL_THRESHOLD) -> float:
+    """Distance (m) a block centre must move for a run to count as a fall
+    (`fall_threshold` in units of the block size d)."""
+    return fall_threshold * _smallest_width(scene)
+
+
+def displacement(rollout: Rollout, fall_rule: str = DEFAULT_FALL_RULE) -> np.ndarray:
+    """Per-block distance (m) between final and start centre, measured by the rule."""
+    return rollout.horizontal_displacement() if fall_rule == "horizontal" else rollout.displacement_3d()
+
+
+def _row(rollout: Rollout, threshold: float, fall_rule: str) -> dict:
     h = rollout.horizontal_displacement()
+    moved = displacement(rollout, fall_rule)
     return {
-        "fell": bool(h.max() > threshold) if len(h) else False,
+        "fell": bool(moved.max() > threshold) if len(h) else False,
         "max_displacement": float(h.max()) if len(h) else 0.0,
         "max_displacement_3d": float(rollout.displacement_3d().max()) if len(h) else 0.0,
         "sim_time": float(rollout.sim_time),
     }
 
 
-_STABLE: dict[tuple[str, str], Rollout] = {}
+def apply_fall_rule(runs: pd.DataFrame, fall_rule: str, fall_threshold: float, d: float) -> pd.DataFrame:
+    """The per-run table with `fell` decided again by another rule from its
+    displacement columns (`d`: the block size, m). Exact when the runs were
+    simulated with a threshold whose early-stop distance (engine.fall_certain)
+    equals the new one's, e.g. any two thresholds <= 0.5 d."""
+    fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
+    if "fall_threshold" in runs and (runs["fall_threshold"].map(fall_certain) != fall_certain(fall_threshold)).any():
+        raise ValueError(f"runs simulated with early stops for another fall threshold cannot be re-judged at {fall_threshold:g} d")
+    column = "max_displacement" if fall_rule == "horizontal" else "max_displacement_3d"
+    return runs.assign(fell=runs[column] > fall_threshold * d, fall_rule=fall_rule, fall_threshold=fall_threshold)
+
+
+_STABLE: dict[tuple, Rollout] = {}
 
 
 def _scene_key(scene: Scene) -> str:
@@ -68,34 +116,39 @@ def _scene_key(scene: Scene) -> str:
                   *(part for f in scene.fixed for part in (f.p_WO, f.size)))
 
 
-def check_stable(scene: Scene, engine: str | None = None) -> Rollout:
-    """Simulate the unperturbed scene once (cached per scene and engine) and raise
-    UnstableSceneError, naming the scene and the blocks that moved, if it falls."""
-    name = _engine_name(engine)
-    key = (_scene_key(scene), name)
+def check_stable(scene: Scene, engine: str | None = None, *, profile: str | None = None,
+                 fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD) -> Rollout:
+    """Simulate the unperturbed scene once (cached per scene, engine and early-stop
+    distance) and raise UnstableSceneError, naming the scene and the blocks that
+    moved, if it falls by the fall rule."""
+    name = _engine_name(engine, profile)
+    fall_rule, thr = check_fall_rule(fall_rule, fall_threshold)
+    key = (_scene_key(scene), name, fall_certain(thr))
     if key not in _STABLE:
         scene.validate()
-        _STABLE[key] = get_engine(name).simulate(scene)
+        _STABLE[key] = get_engine(name).simulate(scene, fall_threshold=thr)
     rollout = _STABLE[key]
-    threshold = fall_threshold(scene)
-    moved = rollout.horizontal_displacement()
+    threshold = thr * _smallest_width(scene)
+    moved = displacement(rollout, fall_rule)
     if len(moved) and moved.max() > threshold:
         names = [f"{scene.blocks[i].name} moved {moved[i] * 1000:.1f} mm" for i in np.argsort(-moved) if moved[i] > threshold]
         raise UnstableSceneError(
             f"{scene.label}: unstable before any noise (sigma = 0): block {', block '.join(names)} in {rollout.sim_time:.2f} s "
-            f"of {name} simulation (a fall is a move of more than {threshold * 1000:.1f} mm)"
+            f"of {name} simulation (a fall is a {fall_rule} move of more than {threshold * 1000:.1f} mm)"
         )
     return rollout
 
 
-def _simulate_runs(scene: Scene, sigma: float, z: np.ndarray, runs: Sequence[int], engine: str) -> list[dict]:
+def _simulate_runs(scene: Scene, sigma: float, z: np.ndarray, runs: Sequence[int], engine: str,
+                   fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD) -> list[dict]:
     """Perturb and simulate runs `runs` of the scene (z: their normals, len(runs) x n x 3)."""
     eng = get_engine(engine)
-    threshold = fall_threshold(scene)
+    threshold = fall_threshold * _smallest_width(scene)
     rows = []
     for r, z_r in zip(runs, z):
-        rollout = eng.simulate(perturb_from_normals(scene, sigma, z_r))
-        rows.append({"sigma": sigma, "run": int(r), **_row(rollout, threshold), "engine": engine})
+        rollout = eng.simulate(perturb_from_normals(scene, sigma, z_r), fall_threshold=fall_threshold)
+        rows.append({"sigma": sigma, "run": int(r), **_row(rollout, threshold, fall_rule), "engine": engine,
+                     "fall_rule": fall_rule, "fall_threshold": fall_threshold})
     return rows
 
 
@@ -111,8 +164,9 @@ class _Task:
 
 
 def _task_worker(args):
-    scene, sigma, z, start, engine = args
-    return _simulate_runs(scene, sigma, z, range(start, start + len(z)), engine)
+    """args: (scene, sigma, z, start, engine[, fall_rule, fall_threshold])."""
+    scene, sigma, z, start, engine, *rule = args
+    return _simulate_runs(scene, sigma, z, range(start, start + len(z)), engine, *rule)
 
 
 def run_grid(
@@ -125,6 +179,10 @@ def run_grid(
     progress: Callable[[int, int], None] | None = None,
     trial_ids: Sequence[str] | None = None,
     executor=None,
+    *,
+    profile: str | None = None,
+    fall_rule: str = DEFAULT_FALL_RULE,
+    fall_threshold: float = FALL_THRESHOLD,
 ) -> pd.DataFrame:
     """Every (scene, sigma, run): a tidy table with columns RUN_COLUMNS, in the
     order of `scenes`, then `sigmas`, then runs.
@@ -134,7 +192,8 @@ def run_grid(
     numbers identical to a serial run. `progress(done, total)` is called as runs
     finish.
     """
-    name = _engine_name(engine)
+    name = _engine_name(engine, profile)
+    fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
     sigmas = [float(s) for s in sigmas]
     if n_sims < 1:
         raise ValueError(f"need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
@@ -143,7 +202,7 @@ def run_grid(
             raise ValueError(f"sigma must be >= 0 (a fraction of the block size), got {s}")
     ids = list(trial_ids) if trial_ids is not None else [s.label for s in scenes]
     for scene in scenes:
-        check_stable(scene, name)
+        check_stable(scene, name, fall_rule=fall_rule, fall_threshold=fall_threshold)
     normals = [draw_normals(n_sims, len(scene), seed) for scene in scenes]
     jobs = (executor.jobs if executor is not None else default_jobs()) if jobs is None else max(1, int(jobs))
     total = len(scenes) * len(sigmas) * n_sims
@@ -152,7 +211,7 @@ def run_grid(
     tasks = [
         _Task(i, s, a, min(a + chunk, n_sims)) for i in range(len(scenes)) for s in sigmas for a in range(0, n_sims, chunk)
     ]
-    args = [(scenes[t.scene_index], t.sigma, normals[t.scene_index][t.start : t.stop], t.start, name) for t in tasks]
+    args = [(scenes[t.scene_index], t.sigma, normals[t.scene_index][t.start : t.stop], t.start, name, fall_rule, fall_threshold) for t in tasks]
     done = 0
 
     def arrived(k, res):
@@ -172,7 +231,7 @@ def run_grid(
 
 def summarise(runs: pd.DataFrame) -> pd.DataFrame:
     """Per (trial, sigma): risk = fraction of runs that fell, with falls, n and engine."""
-    g = runs.groupby(["trial", "sigma", "engine"], sort=False)["fell"]
+    g = runs.groupby(["trial", "sigma", "engine", "fall_rule", "fall_threshold"], sort=False)["fell"]
     out = g.agg(falls="sum", n="size").reset_index()
     out["falls"] = out["falls"].astype(int)
     out["risk"] = out["falls"] / out["n"]
@@ -190,16 +249,26 @@ def physical_risk(
     engine: str | None = None,
     return_table: bool = False,
     jobs: int | None = 1,
+    *,
+    profile: str | None = None,
+    fall_rule: str = DEFAULT_FALL_RULE,
+    fall_threshold: float = FALL_THRESHOLD,
 ):
     """Physical risk of `scene` (a Finish state B): the fraction of `n_sims` perturbed
     copies (noise SD `sigma` * d per axis) that fall within 4 s of simulation.
 
-    With `return_table`, also the per-run table (columns run, sigma, fell,
-    max_displacement, max_displacement_3d [m], sim_time [s], engine).
-    Raises UnstableSceneError when the unperturbed scene falls, ValueError for an
-    unknown engine.
+    `engine`: "mujoco" (default), "drake", "physx" (optional extra); `profile`:
+    the engine's profile ("faithful", or for physx "game-defaults", unfaithful;
+    the same as engine="physx:game-defaults"). A run falls when a block centre
+    moves more than `fall_threshold` * d, measured by `fall_rule`
+    ("horizontal" or "3d"). With `return_table`, also the per-run table (columns
+    run, sigma, fell, max_displacement, max_displacement_3d [m], sim_time [s],
+    engine, fall_rule, fall_threshold). Raises UnstableSceneError when the
+    unperturbed scene falls, ValueError for an unknown engine, profile or rule, a
+    threshold <= 0, or a missing optional engine (saying how to install it).
     """
-    runs = run_grid([scene], [sigma], n_sims, seed, engine, jobs)
+    runs = run_grid([scene], [sigma], n_sims, seed, engine, jobs, profile=profile, fall_rule=fall_rule,
+                    fall_threshold=fall_threshold)
     risk = float(runs["fell"].mean())
     if return_table:
         return risk, runs.drop(columns="trial")
@@ -214,10 +283,16 @@ def risk_curve(
     engine: str | None = None,
     jobs: int | None = None,
     return_table: bool = False,
+    *,
+    profile: str | None = None,
+    fall_rule: str = DEFAULT_FALL_RULE,
+    fall_threshold: float = FALL_THRESHOLD,
 ) -> pd.DataFrame:
     """Risk of one scene at each sigma (same random numbers for every sigma):
-    columns sigma, risk, falls, n, engine (and the per-run table with `return_table`)."""
-    runs = run_grid([scene], sigmas, n_sims, seed, engine, jobs)
+    columns sigma, risk, falls, n, engine, fall_rule, fall_threshold (and the
+    per-run table with `return_table`)."""
+    runs = run_grid([scene], sigmas, n_sims, seed, engine, jobs, profile=profile, fall_rule=fall_rule,
+                    fall_threshold=fall_threshold)
     curve = summarise(runs).drop(columns="trial")
     return (curve, runs.drop(columns="trial")) if return_table else curve
 
@@ -232,19 +307,26 @@ def risk_table(
     progress: Callable[[int, int], None] | None = None,
     runs: bool = False,
     executor=None,
+    *,
+    profile: str | None = None,
+    fall_rule: str = DEFAULT_FALL_RULE,
+    fall_threshold: float = FALL_THRESHOLD,
 ) -> pd.DataFrame:
     """Risk of many scenes over a grid of sigma values, as a tidy table.
 
     `trials_or_scenes`: trials (objects with `.id` and `.target`, e.g.
     `stimuli.load_all()`), Scenes (named by their label) or a {trial id: Scene}
-    mapping. Returns columns trial, sigma, risk, falls, n, engine, one row per
-    (trial, sigma) in input order; with `runs=True` the per-run table instead
-    (trial, sigma, run, fell, max_displacement, max_displacement_3d, sim_time,
-    engine). Each trial's numbers equal `physical_risk(scene, sigma, n_sims, seed)`.
+    mapping. Returns columns trial, sigma, risk, falls, n, engine, fall_rule,
+    fall_threshold, one row per (trial, sigma) in input order; with `runs=True`
+    the per-run table instead (trial, sigma, run, fell, max_displacement,
+    max_displacement_3d, sim_time, engine, fall_rule, fall_threshold). `engine`,
+    `profile`, `fall_rule`, `fall_threshold`: as in `physical_risk`. Each trial's
+    numbers equal `physical_risk(scene, sigma, n_sims, seed, ...)`.
     """
     ids, scenes = _as_scenes(trials_or_scenes)
     sigmas = list(sigmas)
-    table = run_grid(scenes, sigmas, n_sims, seed, engine, jobs, progress, trial_ids=ids, executor=executor)
+    table = run_grid(scenes, sigmas, n_sims, seed, engine, jobs, progress, trial_ids=ids, executor=executor,
+                     profile=profile, fall_rule=fall_rule, fall_threshold=fall_threshold)
     if runs:
         return _in_order(table, ids, ["sigma", "run"])
     return _in_order(summarise(table), ids, ["sigma"])

@@ -19,12 +19,18 @@ from lgp.scene import Scene
 #: Wood (kg/m^3) and wood-on-wood friction, for blocks, table and fixed boxes.
 DENSITY = 600.0
 FRICTION = 0.6
-#: A run falls when some block's centre ends farther than this (fraction of the
-#: block size d) from where it started, measured in the horizontal plane.
+#: A run falls when some block's centre ends farther than FALL_THRESHOLD (fraction
+#: of the block size d) from where it started, measured by the fall rule: in the
+#: horizontal plane ("horizontal", the default) or in 3-D ("3d", the paper's
+#: wording: "the difference between the final and initial positions").
 FALL_THRESHOLD = 0.25
+FALL_RULES = ("horizontal", "3d")
+DEFAULT_FALL_RULE = "horizontal"
 #: Early termination is checked every CHECK_INTERVAL s of simulated time: the run
-#: stops as a fall once a block has moved FALL_CERTAIN * d horizontally (a rocking
-#: tower can carry its top block past FALL_THRESHOLD * d and back), and as a stand
+#: stops as a fall once a block has moved FALL_CERTAIN * d horizontally, or twice
+#: the fall threshold if that is larger (a rocking tower can carry its top block
+#: past the threshold and back; horizontal distance never exceeds 3-D distance,
+#: so the stop is a fall under either rule), and as a stand
 #: once every point of every block has moved slower than REST_SPEED for
 #: REST_WINDOW s in a row without speeding up by more than REST_SLACK over that
 #: window (a structure that starts to topple from rest speeds up slowly at first),
@@ -69,13 +75,16 @@ class Engine:
         """Engine settings worth recording next to results."""
         return {}
 
-    def simulate(self, scene: Scene, duration: float = DURATION, early_stop: bool = True) -> Rollout:
-        """Run `scene` from rest for `duration` s (less with early termination)."""
+    def simulate(self, scene: Scene, duration: float = DURATION, early_stop: bool = True,
+                 fall_threshold: float = FALL_THRESHOLD) -> Rollout:
+        """Run `scene` from rest for `duration` s (less with early termination;
+        `fall_threshold`, in units of d, sets how far a block must have moved for
+        the run to stop as a certain fall)."""
         self._load(scene)
         p_start, _ = self._state()
         if not len(scene):
             return Rollout(p_start, p_start, 0.0, False)
-        certain = FALL_CERTAIN * _smallest_width(scene)
+        certain = fall_certain(fall_threshold) * _smallest_width(scene)
         t, rest_since, rest_speed = 0.0, 0.0, np.inf
         n_checks = int(round(duration / CHECK_INTERVAL))
         for k in range(1, n_checks + 1):
@@ -114,6 +123,11 @@ class Engine:
         return False
 
 
+def fall_certain(fall_threshold: float = FALL_THRESHOLD) -> float:
+    """Horizontal move (units of d) after which a run stops as a fall."""
+    return max(FALL_CERTAIN, 2.0 * fall_threshold)
+
+
 def _smallest_width(scene: Scene) -> float:
     """The block size d the fall threshold is a fraction of (the smallest horizontal
     block edge, = BLOCK_SIZE for the cubes of the stimuli)."""
@@ -135,22 +149,85 @@ def block_speeds(v_WB: np.ndarray, w_WB: np.ndarray, sizes: np.ndarray) -> np.nd
     return np.linalg.norm(v_WB, axis=1) + np.linalg.norm(w_WB, axis=1) * np.linalg.norm(sizes, axis=1) / 2
 
 
-#: Known engines: name -> "module:Class" (imported on first use, so MuJoCo runs do
-#: not pay for importing pydrake).
+@dataclass(frozen=True)
+class EngineSpec:
+    """Where an engine lives ("module:Class", imported on first use, so MuJoCo runs
+    do not pay for importing pydrake), the constructor's arguments, the package it
+    needs (with how to install it), and whether it passes the faithfulness suite."""
+
+    target: str
+    kwargs: tuple = ()
+    requires: str | None = None
+    install: str | None = None
+    faithful: bool = True
+
+
+_PHYSX_INSTALL = 'pip install -e ".[physx]" (PhysX through the sapien package)'
+#: Known engines by name. An engine's profile is part of its name: "physx" is the
+#: faithful PhysX profile, "physx:game-defaults" the unfaithful one
+#: (models/risk/physx_engine.py).
 ENGINES = {
-    "mujoco": "models.risk.mujoco_engine:MujocoEngine",
-    "drake": "models.risk.drake_engine:DrakeEngine",
+    "mujoco": EngineSpec("models.risk.mujoco_engine:MujocoEngine"),
+    "drake": EngineSpec("models.risk.drake_engine:DrakeEngine"),
+    "physx": EngineSpec("models.risk.physx_engine:PhysxEngine", (("profile", "faithful"),), "sapien", _PHYSX_INSTALL),
+    "physx:game-defaults": EngineSpec("models.risk.physx_engine:PhysxEngine", (("profile", "game-defaults"),),
+                                      "sapien", _PHYSX_INSTALL, faithful=False),
 }
+#: Profiles of engines that have several: engine -> {profile: engine name}.
+PROFILES = {"physx": {"faithful": "physx", "game-defaults": "physx:game-defaults"}}
 _INSTANCES: dict[str, Engine] = {}
+
+
+class EngineUnavailableError(ValueError):
+    """A known engine whose optional package is not installed."""
+
+
+def engine_name(engine: str, profile: str | None = None) -> str:
+    """The registry name of `engine` with `profile` (None: the engine's faithful
+    one), checked: ValueError for an unknown engine or profile,
+    EngineUnavailableError (saying how to install it) for a missing package."""
+    name = engine
+    if profile is not None:
+        base = engine.split(":")[0]
+        if base not in PROFILES and profile != "faithful":
+            raise ValueError(f"engine {engine!r} has one profile, faithful (other profiles are for: {', '.join(PROFILES)})")
+        if base not in PROFILES:
+            profile = None
+        elif profile not in PROFILES[base]:
+            raise ValueError(f"unknown {base} profile {profile!r}; known profiles: {', '.join(PROFILES[base])}")
+    if profile is not None:
+        name = PROFILES[base][profile]
+        if engine != base and engine != name:
+            raise ValueError(f"engine {engine!r} contradicts profile {profile!r}")
+    if name not in ENGINES:
+        raise ValueError(f"unknown physics engine {engine!r}; known engines: {', '.join(ENGINES)}")
+    spec = ENGINES[name]
+    if spec.requires is not None:
+        import importlib.util
+
+        if importlib.util.find_spec(spec.requires) is None:
+            raise EngineUnavailableError(f"engine {name!r} needs the {spec.requires} package, not installed: {spec.install}")
+    return name
+
+
+def available_engines() -> list[str]:
+    """Names of the engines whose packages are installed."""
+    out = []
+    for name in ENGINES:
+        try:
+            out.append(engine_name(name))
+        except EngineUnavailableError:
+            pass
+    return out
 
 
 def get_engine(name: str) -> Engine:
     """The process-wide instance of the engine called `name`."""
-    if name not in ENGINES:
-        raise ValueError(f"unknown physics engine {name!r}; known engines: {', '.join(sorted(ENGINES))}")
+    name = engine_name(name)
     if name not in _INSTANCES:
         import importlib
 
-        module, cls = ENGINES[name].split(":")
-        _INSTANCES[name] = getattr(importlib.import_module(module), cls)()
+        spec = ENGINES[name]
+        module, cls = spec.target.split(":")
+        _INSTANCES[name] = getattr(importlib.import_module(module), cls)(**dict(spec.kwargs))
     return _INSTANCES[name]

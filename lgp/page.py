@@ -1,0 +1,627 @@
+"""The results page: ``<out>/index.html``, one self-contained page of a reproduce run.
+
+Written by every ``python -m lgp.reproduce`` run. It needs no network: the style
+and the few lines of JavaScript (sortable tables) are inline, the small charts
+(effort histogram, risk curve) are inline SVG, and the pictures are relative files
+beside it (``page/7H.png``, ``figures/*.png``, ``replays/7H.html``), so the whole
+``results/`` folder can be copied to a laptop and opened with a double click.
+
+Sections: the run (command line, parameters, library versions, engine, wall time
+per stage, cache hits); the 12 easy/hard pairs with the paper's claim beside ours;
+every figure of the run with a caption; one card per trial (``id="trial-7H"``);
+and, with human data, the fits, sigma profile, bootstrap and participants.
+"""
+from __future__ import annotations
+
+import datetime
+import html
+import importlib.metadata
+import logging
+import os
+import platform
+import shlex
+import shutil
+from collections import Counter
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from lgp.cache import Cache, files_digest, input_key, library_versions as _library_versions, modules_digest
+
+#: |(H - E) / E| below this is a solver-level tie of effort (docs/results.md, pair 6).
+EFFORT_TIE = 1e-4
+
+#: Pairs the paper's fitted full model ordered E < H ("correct rank order ... in all
+#: of the pairs. The only exception is the pair 11E and 11H, where humans did not show
+#: any difference"; Results, Figure 3).
+PAPER_ORDERED = {pair: pair != 11 for pair in range(1, 13)}
+
+LIBRARIES = ("drake", "mujoco", "numpy", "scipy", "pandas", "matplotlib", "pyyaml")
+
+CAPTIONS = {
+    "effort_risk_pairs": "Physical effort (J s, mean over layouts) and physical risk (fraction of noisy runs "
+                         "that fall) of every trial, easy and hard of each pair joined.",
+    "fig3_trial_means": "Figure 3 of the paper: mean z-scored judgments per trial (large points, 95% bootstrap "
+                        "intervals) and the fitted full model (small points), per dataset.",
+    "fig4_model_correlations": "Figure 4 of the paper: correlation of the full model, effort alone and risk alone "
+                               "with each dataset, 95% intervals from the bootstrap over participants.",
+    "sigma_profile": "RMSE of the fitted full model (Eq. 1) over the noise level sigma, per dataset; "
+                     "the chosen sigma marked.",
+}
+
+
+def _e(x) -> str:
+    return html.escape(str(x))
+
+
+def _fmt(v) -> str:
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (float, np.floating)):
+        if not np.isfinite(v):
+            return str(v)
+        return f"{v:.4g}"
+    return str(v)
+
+
+def table_html(df: pd.DataFrame, cls: str = "sortable", row_attrs=None, max_rows: int | None = None) -> str:
+    """A DataFrame as an HTML table whose header cells sort it (see _SCRIPT)."""
+    if max_rows is not None and len(df) > max_rows:
+        df = df.head(max_rows)
+    head = "".join(f"<th>{_e(c)}</th>" for c in df.columns)
+    rows = []
+    for i, (_, row) in enumerate(df.iterrows()):
+        attrs = row_attrs(i, row) if row_attrs else ""
+        cells = "".join(f'<td data-v="{_e(v)}">{_e(_fmt(v))}</td>' for v in row)
+        rows.append(f"<tr{attrs}>{cells}</tr>")
+    return f'<table class="{cls}"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+
+
+# ----------------------------------------------------------------------------- small inline charts
+
+
+def histogram_svg(values, width: int = 150, height: int = 44, bins: int = 10) -> str:
+    """A tiny histogram of `values` as inline SVG (axis: min and max printed below)."""
+    v = np.asarray(values, dtype=float)
+    lo, hi = float(v.min()), float(v.max())
+    if hi - lo < 1e-12 * max(1.0, abs(hi)):
+        counts, edges = np.array([len(v)]), np.array([lo, hi])
+    else:
+        counts, edges = np.histogram(v, bins=bins, range=(lo, hi))
+    plot_h = height - 12
+    bw = width / len(counts)
+    top = counts.max()
+    bars = "".join(
+        f'<rect x="{k * bw + 0.5:.1f}" y="{plot_h - plot_h * c / top:.1f}" width="{bw - 1:.1f}" height="{plot_h * c / top:.1f}"><title>{c} layouts in [{edges[k]:.4g}, {edges[k + 1]:.4g}] J s</title></rect>'
+        for k, c in enumerate(counts))
+    return (f'<svg class="hist" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img" '
+            f'aria-label="histogram of effort over {len(v)} layouts">{bars}'
+            f'<text x="0" y="{height - 1}">{lo:.3g}</text><text x="{width}" y="{height - 1}" text-anchor="end">{hi:.3g}</text></svg>')
+
+
+def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height: int = 70) -> str:
+    """Risk over sigma as inline SVG: y from 0 to 1, x over the run's sigma grid."""
+    s = np.asarray(sigmas, dtype=float)
+    r = np.asarray(risks, dtype=float)
+    left, bottom, top = 22, 14, 4
+    pw, ph = width - left - 4, height - bottom - top
+    s0, s1 = float(s.min()), float(s.max())
+    span = s1 - s0 if s1 > s0 else 1.0
+
+    def X(x):
+        return left + pw * ((x - s0) / span if s1 > s0 else 0.5)
+
+    def Y(y):
+        return top + ph * (1 - y)
+
+    pts = " ".join(f"{X(a):.1f},{Y(b):.1f}" for a, b in zip(s, r))
+    dots = "".join(f'<circle cx="{X(a):.1f}" cy="{Y(b):.1f}" r="2"><title>sigma {a:g} d: risk {b:.2f}</title></circle>' for a, b in zip(s, r))
+    marker = ""
+    if mark is not None and s0 <= mark <= s1:
+        marker = f'<line class="mark" x1="{X(mark):.1f}" x2="{X(mark):.1f}" y1="{top}" y2="{top + ph}"/>'
+    return (f'<svg class="risk" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img" aria-label="risk over sigma">'
+            f'<rect class="frame" x="{left}" y="{top}" width="{pw}" height="{ph}"/>{marker}'
+            f'<polyline points="{pts}"/>{dots}'
+            f'<text x="{left - 2}" y="{top + 7}" text-anchor="end">1</text><text x="{left - 2}" y="{top + ph}" text-anchor="end">0</text>'
+            f'<text x="{left}" y="{height - 2}">{s0:g}</text><text x="{left + pw}" y="{height - 2}" text-anchor="end">{s1:g} d</text></svg>')
+
+
+# ----------------------------------------------------------------------------- trial pictures
+
+
+def trial_picture(trial, seed: int, path: Path) -> Path:
+    """A (the layout of sample 0 of `seed`, as the replay shows it) and B, side by side."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from models.effort import sample_rng
+    from stimuli.sheet import draw_scene
+
+    A = trial.sample_initial(sample_rng(seed, 0))
+    fig = plt.figure(figsize=(4.4, 2.2))
+    for j, (scene, state) in enumerate(((A, "A: start (sample 0)"), (trial.target, "B: finish"))):
+        ax = fig.add_subplot(1, 2, j + 1, projection="3d")
+        draw_scene(ax, scene, state)
+    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.92, wspace=0.0)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path
+
+
+def _files(cache: Cache) -> Counter:
+    """(kind, "hit" | "miss") counts of the page's files (pictures, replays) kept beside
+    `cache`'s own table counts, which are about computed results only."""
+    if not hasattr(cache, "page_files"):
+        cache.page_files = Counter()
+    return cache.page_files
+
+
+def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None) -> dict[str, Path]:
+    """Picture of every trial under `out_dir`, copied from `cache` when drawn before."""
+    version = modules_digest("stimuli.sheet", "stimuli", "models.effort")
+    paths = {}
+    for trial in trials:
+        path = Path(out_dir) / f"{trial.id}.png"
+        cached = None
+        if cache is not None and cache.enabled:
+            cached = cache.root / f"picture-{input_key(trial=trial.id, digest=trial.digest, seed=seed, code=version)}.png"
+            if cached.exists():
+                path.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(cached, path)
+                _files(cache)["picture", "hit"] += 1
+                paths[trial.id] = path
+                continue
+        trial_picture(trial, seed, path)
+        if cached is not None:
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(path, cached)
+            _files(cache)["picture", "miss"] += 1
+        paths[trial.id] = path
+    return paths
+
+
+# ----------------------------------------------------------------------------- 3-D replays
+
+#: The viewer's JavaScript library, shared by the replays of a run (3 MB; each replay
+#: is then a few hundred kB of recording instead of 3 MB).
+REPLAY_LIBRARY = "meshcat.min.js"
+_LIB_TAG = '<script type="text/javascript">'
+
+
+def split_library(page: str) -> tuple[str, str | None]:
+    """(page with the inlined Meshcat library replaced by a relative <script src>, library)."""
+    start = page.find(_LIB_TAG)
+    end = page.find("</script>", start)
+    if start < 0 or end < 0 or "MeshCat" not in page[start:start + 2000]:
+        return page, None  # not the layout this expects: keep the page whole
+    return page[:start] + f'<script src="{REPLAY_LIBRARY}"></script>' + page[end + len("</script>"):], page[start + len(_LIB_TAG):end]
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _replay_job(item) -> float:
+    """Plan sample 0 of a trial and write its replay; returns the wall time (s)."""
+    import time
+
+    from lgp.view import replay_html
+    from models.effort import plan_of_sample
+
+    trial, seed, path = item
+    logging.getLogger("drake").setLevel(logging.WARNING)  # not a line per replay about Meshcat's port
+    t0 = time.perf_counter()
+    plan = plan_of_sample(trial, seed, 0)
+    title = f"{trial.id}: {trial.description} (sample 0 of seed {seed})"
+    page, library = split_library(replay_html(plan, title))
+    path = Path(path)
+    if library is not None and not (path.parent / REPLAY_LIBRARY).exists():
+        _write_atomic(path.parent / REPLAY_LIBRARY, library)
+    _write_atomic(path, page)
+    return time.perf_counter() - t0
+
+
+def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, executor=None, log=None) -> dict[str, Path]:
+    """``<out_dir>/<trial>.html`` for every trial: the replay of layout sample 0 of `seed`.
+
+    One plan per trial (the one behind row (trial, 0) of effort_samples.csv); a replay
+    made before with the same trial, seed and code is copied from `cache`.
+    """
+    from lgp.executor import SerialExecutor
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    drake = library_versions()["drake"]
+    version = input_key(code=modules_digest("lgp.page", "lgp.view", "models.effort", "stimuli"),
+                        data=files_digest("models/*.sdf", "models/*.urdf", "models/*.yaml"),
+                        libraries=_library_versions(("drake", "numpy", "scipy", "matplotlib")))
+    paths, todo, cached = {}, [], {}
+    for trial in trials:
+        paths[trial.id] = out_dir / f"{trial.id}.html"
+        if cache is not None and cache.enabled:
+            cached[trial.id] = cache.root / f"replay-{input_key(trial=trial.id, digest=trial.digest, seed=seed, code=version)}.html"
+    lib = out_dir / REPLAY_LIBRARY
+    lib_cache = cache.root / f"meshcat-{drake}.min.js" if cache is not None and cache.enabled else None
+    if lib_cache is not None and lib_cache.exists():
+        shutil.copyfile(lib_cache, lib)
+    else:
+        lib.unlink(missing_ok=True)  # the first job writes it, from this Drake
+    for trial in trials:
+        c = cached.get(trial.id)
+        if c is not None and c.exists() and lib.exists():
+            shutil.copyfile(c, paths[trial.id])
+            _files(cache)["replay", "hit"] += 1
+        else:
+            todo.append(trial)
+    if todo:
+        times = (executor or SerialExecutor()).map(_replay_job, [(t, seed, str(paths[t.id])) for t in todo])
+        if log:
+            log(f"[replays] {len(todo)} trials planned (sample 0) and recorded: {sum(times):.1f} s of work, "
+                f"{max(times):.1f} s the longest")
+        for trial in todo:
+            if trial.id in cached:
+                cached[trial.id].parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(paths[trial.id], cached[trial.id])
+                _files(cache)["replay", "miss"] += 1
+        if lib_cache is not None and lib.exists():
+            lib_cache.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(lib, lib_cache)
+    return paths
+
+
+# ----------------------------------------------------------------------------- sections
+
+
+def library_versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for name in LIBRARIES:
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def _run_section(run: dict) -> str:
+    chips = " ".join(f"<code>{_e(k)}={_e(v)}</code>" for k, v in run.get("parameters", {}).items())
+    versions = pd.DataFrame(list(library_versions().items()), columns=["library", "version"])
+    stages = pd.DataFrame(list(run.get("stages", {}).items()), columns=["stage", "wall time (s)"])
+    settings = pd.DataFrame(list(run.get("engine_settings", {}).items()), columns=["setting", "value"])
+    cache = run.get("cache", {})
+    total = sum(run.get("stages", {}).values())
+    return f"""
+<section id="run"><h2>The run</h2>
+<p class="cmd"><code>{_e(run.get("command", ""))}</code></p>
+<p>Finished {_e(run.get("finished", ""))}; wall time {total:.1f} s in all on {_e(run.get("machine", platform.node()))}
+({_e(run.get("load", ""))}). Cache: {cache.get("hits", 0)} results reused, {cache.get("misses", 0)} computed
+(<code>{_e(cache.get("root", ""))}</code>: {_e(cache.get("summary", ""))}).</p>
+<p class="params"><b>Parameters</b> {chips}</p>
+<div class="grid4">
+<div><h3>Wall time per stage</h3>{table_html(stages)}</div>
+<div><h3>Risk engine: {_e(run.get("engine", ""))}</h3>{table_html(settings, "plain")}</div>
+<div><h3>Libraries</h3>{table_html(versions, "plain")}</div>
+</div></section>"""
+
+
+def pair_verdicts(pairs: pd.DataFrame) -> pd.DataFrame:
+    """The pair table with the paper's claim beside ours and whether they differ.
+
+    Ours: whether Eq. 1 (b1 > 0) can order the pair E < H for some b2/b1 >= 0, from
+    the ratio range of `lgp.reproduce.pair_orderings`; an effort difference below
+    EFFORT_TIE with equal risks is a tie.
+    """
+    df = pairs.copy()
+    tie = (df["effort_rel_diff"].abs() < EFFORT_TIE) & np.isclose(df["risk_E"], df["risk_H"])
+    rng = df["full_E_lt_H_for_b2_over_b1"].astype(str)
+    ours_ordered = (~tie) & (rng != "none")
+    df["paper (full model)"] = [("E < H" if PAPER_ORDERED[int(p)] else "not ordered (humans: no difference)") for p in df["pair"]]
+    df["ours (Eq. 1)"] = [("tie" if t else ("E < H for b2/b1 " + r if r not in ("any", "none") else ("E < H for any b2/b1" if r == "any" else "not ordered")))
+                          for t, r in zip(tie, rng)]
+    df["differs"] = [PAPER_ORDERED[int(p)] != bool(o) for p, o in zip(df["pair"], ours_ordered)]
+    return df
+
+
+def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None) -> str:
+    if pairs is None:
+        return '<section id="pairs"><h2>Easy/hard pairs</h2><p>A subset of trials was run: the pair table needs all 24.</p></section>'
+    df = pair_verdicts(pairs)
+    sigma = df["sigma"].iloc[0]
+    show = df[["pair", "dimension", "effort_E", "effort_H", "effort_rel_diff", "risk_E", "risk_H",
+               "paper (full model)", "ours (Eq. 1)", "differs"]].rename(columns={"effort_rel_diff": "(H-E)/E"})
+    extra = ""
+    if analysis is not None and "pairs" in analysis:
+        fitted = analysis["pairs"]
+        fitted = fitted[fitted["source"] == "full"]
+        if len(fitted):
+            wide = fitted.pivot_table(index="pair", columns="dataset", values="E_lt_H", aggfunc="first")
+            for d in wide.columns:
+                show.insert(len(show.columns) - 1, f"fitted full, {d}: E < H", show["pair"].map(wide[d]).map(lambda v: "yes" if v else "no"))
+
+    def attrs(i, row):
+        return f' class="pair-row{" differs" if row["differs"] else ""}" id="pair-{int(row["pair"])}"'
+
+    n_diff = int(df["differs"].sum())
+    return f"""
+<section id="pairs"><h2>Easy/hard pairs</h2>
+<p>Effort in J s (mean over layouts), risk at sigma = {sigma:g} d. The paper's fitted full model ordered 11 of 12 pairs
+E &lt; H, pair 11 the exception. Without fitted betas ours says for which ratios b2/b1 (b1 &gt; 0) Eq. 1 would order
+the pair E &lt; H; |(H-E)/E| &lt; {EFFORT_TIE:g} with equal risks is a solver-level tie.
+<strong>{n_diff} of {len(df)} pairs differ from the paper</strong> (marked <span class="differs-key">&#x2260;</span>).</p>
+{table_html(show.assign(differs=show["differs"].map(lambda v: "≠" if v else "")), row_attrs=attrs)}
+</section>"""
+
+
+def _figures_section(figures: list[Path], out: Path) -> str:
+    if not figures:
+        return ""
+    items = []
+    for f in figures:
+        stem = f.stem.removeprefix("simulated_")
+        caption = CAPTIONS.get(stem, stem.replace("_", " "))
+        if f.stem.startswith("simulated_"):
+            caption = "SIMULATED participants, not human data. " + caption
+        rel = os.path.relpath(f, out)
+        items.append(f'<figure><a href="{_e(rel)}"><img src="{_e(rel)}" alt="{_e(stem)}"></a>'
+                     f'<figcaption>{_e(caption)} <span class="file">({_e(rel)})</span></figcaption></figure>')
+    return f'<section id="figures"><h2>Figures</h2>{"".join(items)}</section>'
+
+
+def _extra_tables(out: Path, known: set[str]) -> dict[str, pd.DataFrame]:
+    """Other per-trial CSVs of the run (e.g. build-stage risks, sensitivity rows)."""
+    tables = {}
+    for path in sorted(out.glob("*.csv")):
+        if path.name in known:
+            continue
+        try:
+            df = pd.read_csv(path, dtype={"trial": str}, nrows=20000)
+        except Exception:  # not a table this page can show
+            continue
+        if "trial" in df.columns:
+            tables[path.stem] = df
+    return tables
+
+
+def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, picture: Path | None,
+                replay: Path | None, extras: dict[str, pd.DataFrame], out: Path) -> str:
+    e = samples["effort"].to_numpy(dtype=float)
+    sd = float(np.std(e, ddof=1)) if len(e) > 1 else 0.0
+    curve = risk.sort_values("sigma")
+    at = curve.loc[np.isclose(curve["sigma"], sigma), "risk"]
+    if "n_actions" not in samples:
+        plan_len = "length not recorded"
+    else:
+        n_actions = samples.sort_values("sample")["n_actions"].to_numpy()
+        plan_len = (f"{int(n_actions[0])} actions" if len(set(n_actions)) == 1
+                    else f"{int(n_actions.min())} to {int(n_actions.max())} actions (sample 0: {int(n_actions[0])})")
+    pic = (f'<img src="{_e(os.path.relpath(picture, out))}" alt="{_e(trial.id)}: A and B" width="440" height="220">'
+           if picture is not None else "")
+    link = (f'<a class="replay" href="{_e(os.path.relpath(replay, out))}">3-D replay of sample 0 &#9654;</a>'
+            if replay is not None else '<span class="replay none">no replay (--no-replays)</span>')
+    more = ""
+    for title, df in extras.items():
+        rows = df[df["trial"] == trial.id]
+        if len(rows):
+            more += f'<details><summary>{_e(title.replace("_", " "))} ({len(rows)} rows)</summary>{table_html(rows.drop(columns=["trial"]), max_rows=40)}</details>'
+    return f"""
+<article class="card" id="trial-{_e(trial.id)}">
+<h3><a href="#trial-{_e(trial.id)}">{_e(trial.id)}</a> <span class="dim">{_e(trial.dimension)}</span></h3>
+<p class="desc">{_e(trial.description)}</p>
+{pic}
+<div class="stats">
+<div><b>effort</b> {e.mean():.4g} &plusmn; {sd:.2g} J s<br><small>mean &plusmn; sd over {len(e)} layouts</small><br>{histogram_svg(e)}</div>
+<div><b>risk</b> {(f"{float(at.iloc[0]):.2f}" if len(at) else "n/a")} at sigma {sigma:g} d<br><small>over sigma (line: {sigma:g})</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma)}</div>
+</div>
+<p><b>plan</b> {plan_len} &middot; {link}</p>
+{more}
+</article>"""
+
+
+def _human_section(analysis: dict | None, out: Path) -> str:
+    if analysis is None:
+        return ('<section id="human"><h2>Human data</h2><p>No human data given (<code>--human-data FILE.csv</code>, '
+                'format in docs/human-data.md): the fits of Eq. 1, the sigma profile and the bootstrap need the responses, '
+                'which are not public.</p></section>')
+    settings = analysis.get("settings")
+    simulated = bool(settings["simulated"].iloc[0]) if settings is not None and "simulated" in settings else False
+    parts = ['<section id="human"><h2>Human data: fits, sigma profile, bootstrap</h2>']
+    if simulated:
+        parts.append('<p class="warn">SIMULATED participants, not human data.</p>')
+    if settings is not None:
+        parts.append(table_html(settings.T.reset_index().set_axis(["setting", "value"], axis=1), "plain"))
+    for key, title in (("fits", "Fits of Eq. 1 and its lesions"), ("sigma_choice", "Sigma chosen by RMSE"),
+                       ("sigma_profile", "RMSE profile over sigma"), ("bootstrap_summary", "Bootstrap over participants"),
+                       ("bootstrap_tests", "Direct bootstrap tests"), ("excluded_participants", "Excluded participants")):
+        df = analysis.get(key)
+        if isinstance(df, pd.DataFrame) and len(df):
+            parts.append(f"<h3>{_e(title)}</h3>{table_html(df, max_rows=400)}")
+    z = analysis.get("zscored")
+    pred = analysis.get("predictions")
+    if isinstance(z, pd.DataFrame) and len(z):
+        parts.append(f"<h3>Participants</h3>{table_html(participant_table(z, pred), max_rows=2000)}")
+    parts.append("</section>")
+    return "".join(parts)
+
+
+def participant_table(zscored: pd.DataFrame, predictions: pd.DataFrame | None) -> pd.DataFrame:
+    """Per participant: responses, and the correlation of their z-scores with the fitted full model."""
+    value = "z" if "z" in zscored.columns else [c for c in zscored.columns if c not in ("dataset", "participant", "trial")][-1]
+    rows = []
+    full = None
+    if isinstance(predictions, pd.DataFrame) and len(predictions):
+        full = predictions[predictions["model"] == "full"].set_index(["dataset", "trial"])["predicted"]
+    for (d, p), g in zscored.groupby(["dataset", "participant"], sort=True):
+        row = {"dataset": d, "participant": p, "responses": len(g)}
+        if "response" in g:
+            row["mean response"] = float(g["response"].mean())
+        if full is not None:
+            m = full.reindex(list(zip([d] * len(g), g["trial"]))).to_numpy()
+            ok = np.isfinite(m)
+            row["r with full model"] = float(np.corrcoef(g[value].to_numpy()[ok], m[ok])[0, 1]) if ok.sum() > 2 else float("nan")
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+# ----------------------------------------------------------------------------- the page
+
+
+def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
+               pairs: pd.DataFrame | None = None, analysis: dict | None = None, figures=(),
+               pictures: dict | None = None, replays: dict | None = None) -> Path:
+    """Write ``<out>/index.html`` (atomically) and return its path.
+
+    `run`: command, parameters, engine, engine_settings, stages (name -> s),
+    cache (hits, misses, root), finished, load. `pictures` and `replays` map trial
+    ids to files under `out`; `figures` are PNG files under `out`.
+    """
+    out = Path(out)
+    pictures = pictures or {}
+    replays = replays or {}
+    known = {"effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv"}
+    extras = _extra_tables(out, known)
+    cards = []
+    for trial in trials:
+        s = effort_samples[effort_samples["trial"] == trial.id]
+        r = risk[risk["trial"] == trial.id]
+        if not len(s) or not len(r):
+            raise ValueError(f"results page: trial {trial.id} has no effort or no risk rows")
+        cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out))
+    nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
+    title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"
+    body = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
+<title>{_e(title)}</title><style>{_STYLE}</style></head>
+<body>
+<header><h1>{_e(title)}</h1>
+<nav><a href="#run">run</a> <a href="#pairs">pairs</a> <a href="#figures">figures</a> <a href="#trials">trials</a> <a href="#human">human data</a>
+&middot; files: <a href="report.md">report.md</a> <a href="effort.csv">effort.csv</a> <a href="effort_samples.csv">effort_samples.csv</a> <a href="risk.csv">risk.csv</a>{' <a href="pairs.csv">pairs.csv</a>' if pairs is not None else ''}</nav>
+</header>
+<main>
+{_run_section(run)}
+{_pairs_section(pairs, analysis)}
+{_figures_section([Path(f) for f in figures], out)}
+<section id="trials"><h2>Trials</h2><p class="trialnav">{nav}</p>
+<p>A is the layout of sample 0 (the one the replay plays); effort is over all {effort_samples.groupby("trial").size().max()} layouts.
+Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over the run's sigma grid.</p>
+<div class="cards">{"".join(cards)}</div></section>
+{_human_section(analysis, out)}
+</main>
+<footer>Written by <code>python -m lgp.reproduce</code>; every file it links is beside this page.</footer>
+<script>{_SCRIPT}</script>
+</body></html>
+"""
+    path = out / "index.html"
+    tmp = out / ".index.html.tmp"
+    tmp.write_text(body)
+    os.replace(tmp, path)
+    return path
+
+
+
+class Stopwatch:
+    """Wall time per stage of a run: ``lap(name)`` closes the stage that ended now."""
+
+    def __init__(self):
+        self.laps: dict[str, float] = {}
+        self._t = time.perf_counter()
+
+    def lap(self, name: str) -> float:
+        now = time.perf_counter()
+        self.laps[name] = self.laps.get(name, 0.0) + now - self._t
+        self._t = now
+        return self.laps[name]
+
+
+def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
+                pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock: Stopwatch,
+                replays: dict | None = None, argv=None) -> Path:
+    """The page of a `lgp.reproduce` run (its parsed `args`): pictures, run record, index.html."""
+    from models.risk import DEFAULT_ENGINE, get_engine
+
+    out = Path(args.out) if out is None else Path(out)
+    pictures = trial_pictures(trials, args.seed, out / "page", cache)
+    clock.lap("trial pictures")
+    figures = []
+    if analysis is not None and "files" in analysis:
+        figures = [Path(p) for k, p in analysis["files"][["kind", "path"]].itertuples(index=False) if k == "figure" and str(p).endswith(".png")]
+    engine = args.engine or DEFAULT_ENGINE
+    try:
+        settings = get_engine(engine).settings()
+    except Exception as e:  # an engine that cannot load here still ran elsewhere: say so
+        settings = {"error": str(e)}
+    if argv is None and Path(sys.argv[0]).name == "reproduce.py":
+        argv = sys.argv[1:]
+    command = ("python -m lgp.reproduce " + shlex.join(str(a) for a in argv) if argv is not None
+               else f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below")
+    run = {
+        "command": command,
+        "parameters": {k: (", ".join(f"{x:g}" for x in v) if isinstance(v, tuple) else ("(default)" if v is None else str(v)))
+                       for k, v in vars(args).items()},
+        "engine": engine,
+        "engine_settings": settings,
+        "stages": dict(clock.laps),
+        "cache": {"hits": cache.hits + sum(n for (_, o), n in _files(cache).items() if o == "hit"),
+                  "misses": cache.misses + sum(n for (_, o), n in _files(cache).items() if o == "miss"),
+                  "root": str(cache.root),
+                  "summary": "; ".join([cache.summary()] + [f"{k} {_files(cache)[k, 'hit']} hit, {_files(cache)[k, 'miss']} miss"
+                                                            for k in sorted({k for k, _ in _files(cache)})])},
+        "finished": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "machine": f"{platform.node()}, {os.cpu_count()} cores",
+        "load": "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),
+    }
+    return write_page(out, run=run, trials=trials, effort_samples=effort_samples, risk=risk, sigma=sigma, pairs=pairs,
+                      analysis=analysis if getattr(args, "human_data", None) else None, figures=figures,
+                      pictures=pictures, replays=replays)
+
+
+_STYLE = """
+body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#1d1d1f;background:#f6f6f4}
+header{background:#26323a;color:#fff;padding:14px 24px}header h1{margin:0 0 6px;font-size:20px;font-weight:600}
+header a{color:#cfe3ff;margin-right:8px}main{padding:8px 24px 24px;max-width:1500px}
+h2{margin:22px 0 8px;font-size:18px;border-bottom:1px solid #ccc;padding-bottom:3px}h3{margin:8px 0 4px;font-size:14px}
+code{background:#e9e9e4;padding:1px 4px;border-radius:3px}.cmd code{display:inline-block;white-space:pre-wrap;word-break:break-all}
+table{border-collapse:collapse;background:#fff;font-size:12.5px;margin:4px 0}th,td{border:1px solid #d8d8d2;padding:3px 6px;text-align:left;vertical-align:top}
+th{background:#eceae4}table.sortable th{cursor:pointer;user-select:none}table.sortable th:after{content:" \\2195";color:#999}
+th.asc:after{content:" \\2191"!important;color:#333}th.desc:after{content:" \\2193"!important;color:#333}
+tr.differs td{background:#fde8e6}tr.differs td:last-child{color:#b3261e;font-weight:700;font-size:15px}.differs-key{color:#b3261e;font-weight:700}
+.grid4{display:grid;grid-template-columns:repeat(auto-fit,minmax(240px,max-content));gap:24px}
+#figures{display:block}figure{display:inline-block;vertical-align:top;margin:6px 12px 12px 0;max-width:680px;background:#fff;padding:8px;border:1px solid #ddd}
+figure img{max-width:100%;height:auto}figcaption{font-size:12.5px;color:#333}.file{color:#888}
+.trialnav a{display:inline-block;margin:0 4px 4px 0;padding:1px 6px;background:#fff;border:1px solid #ccc;border-radius:3px;text-decoration:none}
+.cards{display:grid;grid-template-columns:repeat(auto-fill,minmax(380px,1fr));gap:12px}.params code{display:inline-block;margin:0 4px 4px 0}
+.card{background:#fff;border:1px solid #d6d6d0;border-radius:6px;padding:8px 10px}.card:target{outline:3px solid #3b82f6}
+.card h3{font-size:16px;margin:0}.card h3 a{color:inherit;text-decoration:none}.dim{font-weight:400;color:#666;font-size:13px}
+.desc{margin:2px 0 4px;color:#444;font-size:12.5px}.card img{display:block;max-width:100%;height:auto}
+.stats{display:flex;flex-wrap:wrap;gap:14px;font-size:12.5px}.stats small{color:#777}
+svg text{font-size:9px;fill:#555}svg.hist rect{fill:#6b8fb5}svg.risk polyline{fill:none;stroke:#c0392b;stroke-width:1.5}
+svg.risk circle{fill:#c0392b}svg.risk .frame{fill:#fafafa;stroke:#ccc}svg.risk .mark{stroke:#888;stroke-dasharray:2 2}
+a.replay{font-weight:600}.none{color:#999}details{font-size:12.5px;margin-top:4px}.warn{background:#fff3cd;padding:6px;font-weight:700}
+footer{padding:12px 24px;color:#777;font-size:12px}
+"""
+
+# Sortable tables: click a header to sort by that column (numbers as numbers), again to reverse.
+_SCRIPT = """
+document.querySelectorAll('table.sortable').forEach(function (table) {
+  table.querySelectorAll('th').forEach(function (th, col) {
+    th.addEventListener('click', function () {
+      var asc = !th.classList.contains('asc');
+      table.querySelectorAll('th').forEach(function (h) { h.classList.remove('asc', 'desc'); });
+      th.classList.add(asc ? 'asc' : 'desc');
+      var body = table.tBodies[0], rows = Array.prototype.slice.call(body.rows);
+      var key = function (r) { var v = r.cells[col].getAttribute('data-v'), n = Number(v); return (v !== '' && !isNaN(n)) ? n : v; };
+      rows.sort(function (a, b) { var x = key(a), y = key(b); var c = (typeof x === typeof y) ? (x < y ? -1 : x > y ? 1 : 0) : (typeof x === 'number' ? -1 : 1); return asc ? c : -c; });
+      rows.forEach(function (r) { body.appendChild(r); });
+    });
+  });
+});
+"""

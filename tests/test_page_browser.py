@@ -1,0 +1,163 @@
+"""The results page and a 3-D replay, opened in a real browser.
+
+A small `python -m lgp.reproduce --quick` run writes results/index.html and the
+replays; headless Chromium (Debian's `chromium`, driven by `playwright` with
+`executable_path`) opens them with every network request refused, as on a laptop
+offline. Skipped, saying why, only when the browser or playwright is missing
+(.ci/run installs both). Set LGP_SCREENSHOTS=DIR to keep the screenshots.
+"""
+from __future__ import annotations
+
+import io
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lgp.paper import TRIAL_IDS
+
+pytestmark = pytest.mark.slow
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+VIEWPORT = {"width": 1280, "height": 800}
+
+
+@pytest.fixture(scope="module")
+def browser():
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        pytest.skip("playwright is not installed (pip install -e '.[test,browser]'); .ci/run installs it")
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no Chromium at {CHROMIUM} (apt-get install -y chromium); .ci/run installs it"
+                    + (f": {os.environ['LGP_NO_BROWSER']}" if os.environ.get("LGP_NO_BROWSER") else ""))
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM)
+        yield b
+        b.close()
+
+
+@pytest.fixture(scope="module")
+def results(browser, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("results")
+    cmd = [sys.executable, "-m", "lgp.reproduce", "--quick", "--samples", "2", "--n-sims", "5",
+           "--sigmas", "0.05", "0.065", "0.08", "--out", str(out)]
+    run = subprocess.run(cmd, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr[-3000:]
+    return out
+
+
+def _open(browser, path: Path):
+    """A page at 1280x800 that records console errors and refuses every non-file request."""
+    page = browser.new_page(viewport=VIEWPORT)
+    errors, refused = [], []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+
+    def route(r):
+        if r.request.url.startswith(("file:", "data:", "blob:")):
+            r.continue_()
+        else:
+            refused.append(r.request.url)
+            r.abort()
+
+    page.route("**/*", route)
+    page.goto(path.resolve().as_uri())
+    page.wait_for_load_state("load")
+    return page, errors, refused
+
+
+def _keep(page, name: str, **kw) -> None:
+    if os.environ.get("LGP_SCREENSHOTS"):
+        Path(os.environ["LGP_SCREENSHOTS"]).mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(Path(os.environ["LGP_SCREENSHOTS"]) / name), **kw)
+
+
+def test_results_page_opens_offline_with_every_picture_pair_and_trial(browser, results):
+    page, errors, refused = _open(browser, results / "index.html")
+    images = page.evaluate("Array.from(document.images).map(i => [i.getAttribute('src'), i.complete ? i.naturalWidth : 0])")
+    assert len(images) >= 24 + 1  # a picture per trial and at least one figure
+    assert [src for src, width in images if width <= 0] == []
+    assert page.locator("#pairs tr.pair-row").count() == 12
+    cards = page.locator("article.card")
+    assert cards.count() == 24
+    assert page.evaluate("Array.from(document.querySelectorAll('article.card')).map(c => c.id)") == [f"trial-{t}" for t in TRIAL_IDS]
+    # Every card links its replay, and every replay exists beside the page.
+    links = page.evaluate("Array.from(document.querySelectorAll('a.replay')).map(a => a.getAttribute('href'))")
+    assert links == [f"replays/{t}.html" for t in TRIAL_IDS]
+    assert all((results / link).exists() for link in links)
+    _keep(page, "results_page.png")
+    # A link to a trial lands on its card.
+    page.goto((results / "index.html").resolve().as_uri() + "#trial-7H")
+    assert page.evaluate("document.querySelector(':target').id") == "trial-7H"
+    _keep(page, "results_page_trial.png")
+    assert errors == [] and refused == []
+    page.close()
+
+
+def test_pair_table_sorts_by_the_clicked_column(browser, results):
+    page, errors, _ = _open(browser, results / "index.html")
+    table = page.locator("#pairs table")
+    col = page.evaluate("Array.from(document.querySelectorAll('#pairs th')).map(th => th.textContent).indexOf('effort_H')")
+    assert col >= 0
+
+    def column():
+        return [float(v) for v in table.locator(f"tbody tr td:nth-child({col + 1})").evaluate_all("tds => tds.map(td => td.dataset.v)")]
+
+    before = column()
+    table.locator("th").nth(col).click()
+    assert column() == sorted(before)
+    table.locator("th").nth(col).click()
+    assert column() == sorted(before, reverse=True)
+    assert errors == []
+    page.close()
+
+
+def _hue_pixels(rgb: np.ndarray, colour, tol_deg: float = 8.0) -> int:
+    """Pixels of `rgb` (h, w, 3 in 0..1) whose hue is within tol of `colour`'s, saturated and not dark.
+
+    Lighting changes a face's brightness and whitens it a little; its hue stays.
+    """
+    from matplotlib.colors import rgb_to_hsv
+
+    hsv = rgb_to_hsv(rgb.reshape(-1, 3))
+    h0 = rgb_to_hsv(np.asarray(colour, float))[0]
+    dh = np.abs(hsv[:, 0] - h0)
+    dh = np.minimum(dh, 1 - dh)
+    return int(((dh < tol_deg / 360) & (hsv[:, 1] > 0.3) & (hsv[:, 2] > 0.1)).sum())
+
+
+def test_replay_renders_the_blocks_in_their_placement_colours(browser, results):
+    from PIL import Image
+
+    import stimuli
+    from lgp.view import order_colours, placement_order
+    from models.effort import plan_of_sample
+
+    page, errors, refused = _open(browser, results / "replays" / "7H.html")
+    page.wait_for_function("typeof viewer !== 'undefined' && viewer.animator.duration > 0", timeout=20000)
+    page.wait_for_timeout(1500)
+    caption = page.locator("#lgp-caption").inner_text()
+    assert "7H" in caption and "action" in caption and "effort so far" in caption
+    _keep(page, "replay_7H.png")
+    # The end of the recording: the tower is built at the site; caption hidden, canvas only.
+    page.evaluate("viewer.animator.pause(); viewer.animator.seek(viewer.animator.duration); viewer.render()")
+    page.evaluate("document.getElementById('lgp-caption').style.display = 'none'")
+    page.wait_for_timeout(500)
+    shot = np.asarray(Image.open(io.BytesIO(page.locator("canvas").first.screenshot())).convert("RGB")) / 255.0
+    assert errors == [] and refused == []
+    page.close()
+
+    h, w, _ = shot.shape
+    assert shot.std() > 0.05, "the canvas is blank"
+    centre = shot[h // 4: 3 * h // 4, w // 4: 3 * w // 4]
+    plan = plan_of_sample(stimuli.load_trial("7H"), 0, 0)
+    colours = order_colours(plan)
+    order = placement_order(plan)
+    found = [name for name in order if _hue_pixels(centre, colours[name]) >= 10]
+    assert len(found) >= 0.7 * len(order), f"block colours seen in the centre: {found} of {order}"
+    assert _hue_pixels(centre, (0.9, 0.1, 0.9)) < 10  # magenta is in no block: the check can fail

@@ -1,0 +1,96 @@
+"""Plan views (lgp.view) and the results page's pure parts (lgp.page)."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import stimuli
+from lgp.paper import BUILD_SITE
+from lgp.view import CAMERA_FOV, camera_frame, cumulative_effort, order_colours, placement_order
+from models.effort import kinetic_energy, kinetic_energy_by_action, plan_of_sample
+
+
+@pytest.fixture(scope="module")
+def tower():
+    return plan_of_sample(stimuli.load_trial("7H"), 0, 0)
+
+
+def test_effort_so_far_adds_up_to_every_action_and_to_the_plan(tower):
+    cum = cumulative_effort(tower)
+    S = int(round(1.0 / tower.tau))  # slices per 1 s phase
+    at_ends = cum[[S * k for k in range(1, len(tower.actions) + 1)]]
+    assert np.allclose(at_ends, np.cumsum(kinetic_energy_by_action(tower)), rtol=1e-12, atol=1e-15)
+    assert cum[-1] == pytest.approx(kinetic_energy(tower), rel=1e-12)
+    assert np.all(np.diff(cum) >= 0)
+
+
+def test_a_tower_is_coloured_bottom_up_each_block_its_own_colour(tower):
+    order = placement_order(tower)
+    assert len(order) == 10
+    z_final = [tower.p_WB[name][-1, 2] for name in order]
+    assert np.all(np.diff(z_final) > 0)  # placed in the order they stack
+    colours = order_colours(tower)
+    rgb = np.array([colours[name] for name in order])
+    assert len({tuple(np.round(c, 3)) for c in rgb}) == 10
+    luminance = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    assert np.all(np.diff(luminance) > 0)  # a sequential colormap: later is lighter
+
+
+def test_unmoved_blocks_are_grey_and_not_in_the_order():
+    plan = plan_of_sample(stimuli.load_trial("9E"), 0, 0)  # half-built tower: 4 blocks stay
+    order = placement_order(plan)
+    colours = order_colours(plan)
+    still = [b.name for b in plan.initial.blocks if b.name not in order]
+    assert len(still) == 4 and len(order) == 2
+    assert all(np.ptp(colours[name]) < 0.05 for name in still)
+
+
+@pytest.mark.parametrize("trial_id", ["2H", "7H", "10H", "12E"])
+def test_the_camera_sees_the_build_site_the_blocks_and_the_hand(trial_id):
+    plan = plan_of_sample(stimuli.load_trial(trial_id), 0, 0)
+    p_WC, p_WT = camera_frame(plan)
+    axis = (p_WT - p_WC) / np.linalg.norm(p_WT - p_WC)
+    points = [np.array([*BUILD_SITE, 0.0])] + [p[i] for p in plan.p_WB.values() for i in (0, -1)]
+    for p in points:
+        ray = (p - p_WC) / np.linalg.norm(p - p_WC)
+        # inside the vertical field of view (the horizontal one is wider at 1280x800)
+        assert np.degrees(np.arccos(np.clip(ray @ axis, -1, 1))) < CAMERA_FOV / 2
+
+
+def test_pair_verdicts_mark_where_the_paper_and_we_differ():
+    from lgp.page import pair_verdicts
+
+    pairs = pd.DataFrame({
+        "pair": [4, 6, 11, 7],
+        "effort_rel_diff": [-0.02, 1e-5, -8e-4, 0.8],
+        "risk_E": [0.0, 0.0, 0.0, 0.0], "risk_H": [0.17, 0.0, 0.0, 0.02],
+        "full_E_lt_H_for_b2_over_b1": ["> 1.14", "any", "none", "any"],
+    })
+    v = pair_verdicts(pairs).set_index("pair")
+    assert v.loc[4, "ours (Eq. 1)"] == "E < H for b2/b1 > 1.14" and not v.loc[4, "differs"]
+    assert v.loc[6, "ours (Eq. 1)"] == "tie" and v.loc[6, "differs"]  # the paper ordered pair 6
+    assert v.loc[11, "ours (Eq. 1)"] == "not ordered" and not v.loc[11, "differs"]  # nor did it order 11
+    assert not v.loc[7, "differs"]
+
+
+def test_histogram_draws_every_layout_once():
+    from lgp.page import histogram_svg
+
+    values = np.random.default_rng(0).normal(0.5, 0.05, 30)
+    svg = histogram_svg(values)
+    counts = [int(c) for c in re.findall(r"<title>(\d+) layouts in", svg)]
+    assert sum(counts) == 30 and len(counts) == 10
+    assert sum(int(c) for c in re.findall(r"<title>(\d+) layouts", histogram_svg(np.full(5, 0.3)))) == 5
+
+
+def test_a_page_without_a_trials_rows_names_the_trial(tmp_path):
+    from lgp.page import write_page
+
+    trial = stimuli.load_trial("1E")
+    samples = pd.DataFrame({"trial": ["1E"], "sample": [0], "effort": [0.1], "n_actions": [4]})
+    with pytest.raises(ValueError, match="1E"):
+        write_page(tmp_path, run={}, trials=[trial], effort_samples=samples,
+                   risk=pd.DataFrame(columns=["trial", "sigma", "risk"]), sigma=0.065)
