@@ -13,11 +13,12 @@ from lgp.paper import SIGMA_GRID, TRIAL_IDS
 
 
 def pytest_collection_modifyitems(items):
-    """A case run with the Drake engine (a parameter "drake") is slow: Drake's
-    hydroelastic contact at 1 ms steps costs seconds per scene."""
+    """A case run with the Drake or a PhysX engine (a parameter "drake", "physx",
+    "physx:...") is slow: Drake's hydroelastic contact at 1 ms steps costs seconds
+    per scene, and PhysX is an optional extra; the fast subset checks MuJoCo."""
     for item in items:
         params = getattr(getattr(item, "callspec", None), "params", {})
-        if any(isinstance(v, str) and v == "drake" for v in params.values()):
+        if any(isinstance(v, str) and (v == "drake" or v.split(":")[0] == "physx") for v in params.values()):
             item.add_marker(pytest.mark.slow)
 
 
