@@ -2,6 +2,8 @@
 docs/benchmarks.md (other sections are kept).
 
     python bench/risk.py [--drake-runs 20] [--mujoco-runs 200] [--no-grid] [--out docs/benchmarks.md]
+    python bench/risk.py --physx [--physx-runs 100]    # only the "risk: physx" section
+
 
 Measures, in one process, runs per second of each engine on a 10-block tower and
 a 10-block line at the paper's sigma = 0.065 d (engines interleaved, so load from
@@ -24,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from common import write_section  # noqa: E402
+from common import machine, write_section  # noqa: E402
 from models.risk import SIGMA_GRID, draw_normals, get_engine, perturb_from_normals, risk_table  # noqa: E402
 from lgp.executor import default_jobs as _default_jobs  # noqa: E402
 from models.risk.core import check_stable  # noqa: E402
@@ -66,14 +68,59 @@ def measured_grid_seconds(engine: str, jobs: int) -> float:
     return time.perf_counter() - t0
 
 
+def physx_section(n: int) -> str:
+    """PhysX (both profiles) beside MuJoCo, per noisy run, interleaved in one process."""
+    import stimuli
+
+    load_before = machine()
+    scenes = [tower(10), line(10), stimuli.load_trial("4H").target, stimuli.load_trial("7H").target]
+    engines = ["mujoco", "physx", "physx:game-defaults"]
+    rows = []
+    for scene in scenes:
+        res = {}
+        for rnd in range(2):  # interleave the engines twice; keep the faster round of each
+            for engine in engines:
+                res.setdefault(engine, []).append(per_run_seconds(engine, scene, max(1, n // 2), seed=rnd))
+        for engine in engines:
+            s, sim = min(res[engine])
+            rows.append((scene.label, engine, s, sim, s / min(res["mujoco"])[0]))
+        print(rows[-3:], flush=True)
+    lines = [
+        "## risk: physx",
+        "",
+        "PhysX (`models/risk/physx_engine.py`, through sapien, CPU) beside MuJoCo: `python bench/risk.py --physx "
+        f"--physx-runs {n}`. Noisy runs at sigma = {SIGMA} d with early termination, {n} runs per engine and scene "
+        "in two interleaved rounds in one process (the faster round kept), so load from other processes hits "
+        "every engine alike. PhysX builds a fresh scene per run (docs/risk.md, \"PhysX\"); that is included. "
+        f"Machine: {load_before} at the start; {machine()} at the end: a loaded shared machine, so absolute times "
+        "are noisy and the ratios are the number to read.",
+        "",
+        "| scene | engine | ms / run | mean simulated time (s) | time / MuJoCo's |",
+        "|---|---|---|---|---|",
+    ]
+    for label, engine, s, sim, ratio in rows:
+        shown = engine + (" (UNFAITHFUL)" if engine == "physx:game-defaults" else "")
+        lines.append(f"| {label} | {shown} | {1000 * s:.1f} | {sim:.2f} | {ratio:.1f}x |")
+    faithful = [r[4] for r in rows if r[1] == "physx"]
+    lines += ["", f"PhysX faithful / MuJoCo time per run: {min(faithful):.1f}x to {max(faithful):.1f}x over these scenes; "
+              "MuJoCo stays the default engine (it passes the faithfulness suite and is the fastest that does)."]
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--physx", action="store_true", help="only the PhysX-beside-MuJoCo section")
+    p.add_argument("--physx-runs", type=int, default=100)
     p.add_argument("--mujoco-runs", type=int, default=200)
     p.add_argument("--drake-runs", type=int, default=20)
     p.add_argument("--grid-sample", type=int, default=2, help="Drake runs per (trial, sigma) in the grid sample")
     p.add_argument("--no-grid", action="store_true", help="skip the full MuJoCo grid and the Drake grid sample")
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks.md")
     args = p.parse_args(argv)
+    if args.physx:
+        write_section(args.out, "risk: physx", physx_section(args.physx_runs))
+        print(f"wrote the 'risk: physx' section of {args.out}")
+        return 0
 
     jobs = _default_jobs()
     runs = {"mujoco": args.mujoco_runs, "drake": args.drake_runs}

@@ -12,7 +12,7 @@ input order; ``on_result(index, result)`` as each arrives, for progress), with
   their parent, even on ``kill -9`` (Linux: PR_SET_PDEATHSIG). Create it in the
   main thread: the kernel ties that signal to the thread that started the worker.
 
-``sigterm_as_interrupt()`` makes SIGTERM stop a command like Ctrl-C.
+``stop_signals()`` makes SIGTERM stop a command as Ctrl-C does.
 
 A later backend (Dask) implements the same ``map``. This module knows nothing of
 the paper: it sits on the ground floor with the scene, so models may take an
@@ -81,7 +81,7 @@ def _die_with_parent(parent_pid: int) -> None:
       (PR_SET_PDEATHSIG), so even ``kill -9`` of the run leaves no orphan; SIGKILL
       rather than SIGTERM because a worker cannot catch it and live on.
     - SIGTERM gets its default action back (a forked worker inherits the parent's
-      handlers, e.g. `sigterm_as_interrupt`'s): ``Pool.terminate`` sends SIGTERM and
+      handlers, e.g. `stop_signals`'s): ``Pool.terminate`` sends SIGTERM and
       must kill the worker, not raise in it.
     - Ctrl-C is the parent's to handle, so SIGINT is ignored here.
     """
@@ -99,33 +99,41 @@ def _die_with_parent(parent_pid: int) -> None:
         os._exit(1)
 
 
-class _Interrupted(KeyboardInterrupt):
-    """Raised in the main thread by `sigterm_as_interrupt` when SIGTERM arrives."""
+class Interrupted(KeyboardInterrupt):
+    """KeyboardInterrupt raised by `stop_signals`; ``signal`` is the signal received."""
 
-    signal = signal.SIGTERM
+    def __init__(self, signum: int):
+        self.signal = signal.Signals(signum)
+        super().__init__(f"stopped by {self.signal.name}")
 
 
-class sigterm_as_interrupt:
-    """Context manager for command-line entry points: SIGTERM (what ``timeout``,
-    ``kill`` and job schedulers send) raises KeyboardInterrupt in the main thread,
-    so a run stops exactly as on Ctrl-C: the executor terminates its workers,
-    atomic writes leave no partial file, and the caller prints one line. The
-    exception's ``signal`` attribute is ``signal.SIGTERM``. The previous handler is
-    restored on exit; outside the main thread this does nothing."""
+class stop_signals:
+    """Context manager for command-line entry points: SIGINT (Ctrl-C) and SIGTERM
+    (what ``timeout``, ``kill`` and job schedulers send) both raise `Interrupted`
+    in the main thread, so a run stops the same way on either: the executor
+    terminates its workers, atomic writes leave no partial file, and the caller
+    prints one line. ``received`` keeps the first signal even when the exception is
+    converted on its way up (a C extension being imported turns it into an
+    ImportError), so the caller can still tell a stop from a failure. The previous
+    handlers are restored on exit; outside the main thread this does nothing."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __enter__(self):
-        self._previous = None
+        self.received: signal.Signals | None = None
+        self._previous = {}
         if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGTERM, self._raise)
+            self._previous = {s: signal.signal(s, self._raise) for s in self.SIGNALS}
         return self
 
-    @staticmethod
-    def _raise(signum, frame):
-        raise _Interrupted("terminated (SIGTERM)")
+    def _raise(self, signum, frame):
+        if self.received is None:
+            self.received = signal.Signals(signum)
+        raise Interrupted(signum)
 
     def __exit__(self, *exc):
-        if self._previous is not None:
-            signal.signal(signal.SIGTERM, self._previous)
+        for s, handler in self._previous.items():
+            signal.signal(s, handler)
 
 
 class ProcessExecutor:

@@ -50,3 +50,8 @@ def display_hex(colour: str) -> str:
 def pair_of(trial_id: str) -> int:
     """Pair number of a trial id of the paper's form ("7H" -> 7)."""
     return int(trial_id[:-1])
+
+#: The pairs whose easy and hard trials differ in risk by design (paper, Stimuli:
+#: 4 staircase vs aligned tower, 5 bridge vs pyramid, 7 tower vs line, 8): the
+#: paper's four risk contrasts, H riskier than E.
+RISK_PAIRS: tuple[int, ...] = (4, 5, 7, 8)

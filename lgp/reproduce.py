@@ -4,6 +4,8 @@
     python -m lgp.reproduce --quick                 # a small version, about a minute
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
+    python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/sensitivity.py)
+    python -m lgp.reproduce --fall-rule 3d --fall-threshold 0.1   # the risk model with another fall rule
 
 Every expensive result (effort of one trial, risk curve of one trial) is cached
 under ``<out>/cache`` by a hash of the trial file, the parameters and the code that
@@ -25,10 +27,10 @@ import pandas as pd
 
 import stimuli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import executor_for
+from lgp.executor import executor_for, stop_signals
 from lgp.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
-from lgp.executor import sigterm_as_interrupt
 from lgp.page import Stopwatch, write_index, write_replays
+from lgp import sensitivity
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
 
@@ -46,17 +48,18 @@ def effort_key_inputs() -> dict:
             "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
 
 
-def risk_key_inputs(engine: str | None) -> dict:
+def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> dict:
     """What a risk table depends on besides the trial and the parameters: the source
     of every project module risk_table can run (the engine module is loaded by name,
-    so it is named here), the engine's settings, and the libraries."""
+    so it is named here), the engine's settings, the fall rule, and the libraries."""
     from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
 
     name = DEFAULT_ENGINE if engine is None else engine
     spec = ENGINES[name]
     extra = (spec.requires,) if spec.requires else ()  # e.g. sapien for PhysX
     return {"code": modules_digest("models.risk", spec.target.split(":")[0], "stimuli"),
-            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra)}
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra),
+            "fall_rule": fall_rule, "fall_threshold": float(fall_threshold)}
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd.DataFrame:
@@ -102,7 +105,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
     return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
-def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6) -> pd.DataFrame:
+def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6,
+                fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> pd.DataFrame:
     """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
 
     Uncached trials are simulated a few at a time on the run's one executor, so
@@ -110,14 +114,15 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     """
     from models.risk import risk_table
 
-    depends = risk_key_inputs(engine)
+    depends = risk_key_inputs(engine, fall_rule, fall_threshold)
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
     tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
-        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor)
+        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
+                           fall_rule=fall_rule, fall_threshold=fall_threshold)
         for t in group:
             tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
@@ -130,20 +135,20 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     return pd.concat(out, ignore_index=True)
 
 
-def check_targets(trials, engine: str | None, cache: Cache) -> None:
+def check_targets(trials, engine: str | None, cache: Cache, fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> None:
     """Before the long work: B of every trial must stand unperturbed (the risk
     model's sigma = 0 run), one simulation per trial, cached like the results.
     Raises UnstableSceneError naming every trial whose B falls and its blocks."""
     from models.risk import UnstableSceneError, check_stable
 
-    depends = risk_key_inputs(engine)
+    depends = risk_key_inputs(engine, fall_rule, fall_threshold)
     problems = []
     for t in trials:
         key = input_key(trial=t.id, digest=t.digest, check="B stands unperturbed", **depends)
         df = cache.get("stable", key)
         if df is None:
             try:
-                check_stable(t.target, engine)
+                check_stable(t.target, engine, fall_rule=fall_rule, fall_threshold=fall_threshold)
                 df = pd.DataFrame([{"trial": t.id, "stable": True, "problem": ""}])
             except UnstableSceneError as e:
                 df = pd.DataFrame([{"trial": t.id, "stable": False, "problem": str(e)}])
@@ -213,7 +218,8 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         "# Reproduction report",
         "",
         f"Settings: trials {len(effort)}, M = {args.samples} layouts, N = {args.n_sims} runs per sigma, "
-        f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), engine {args.engine or 'default'}, seed {args.seed}"
+        f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), engine {args.engine or 'default'}, "
+        f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}"
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
         f"Wall time {elapsed:.0f} s.",
         "",
@@ -266,7 +272,10 @@ def main(argv=None) -> int:
     p.add_argument("--samples", type=int, help="M, random layouts of A per trial (default 30; --quick 3)")
     p.add_argument("--n-sims", type=int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
     p.add_argument("--sigmas", type=float, nargs="+", help="noise levels in units of d (default: 0.05..0.10 step 0.005)")
-    p.add_argument("--engine", choices=["mujoco", "drake"], help="physics engine for risk (default: the models.risk default)")
+    p.add_argument("--engine", help="physics engine for risk: mujoco, drake, physx (optional extra) (default: mujoco)")
+    p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
+    p.add_argument("--fall-rule", default="horizontal", help="a run falls by horizontal (default) or 3d displacement")
+    p.add_argument("--fall-threshold", type=float, default=0.25, help="fall threshold in units of d (default %(default)s)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--n-boot", type=int, help="bootstrap resamples (default 1000; --quick 200)")
@@ -275,20 +284,45 @@ def main(argv=None) -> int:
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
+    p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/build_stage.py)")
+    p.add_argument("--build-sigmas", type=float, nargs="+", help="noise levels of --build-risk (default 0.065 0.1)")
+    p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
+                   help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
+    p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
+    p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
+                   help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
+    sensitivity.add_arguments(p)
     args = p.parse_args(argv)
+    try:  # bad engine, profile, rule or threshold: one line, before any work
+        from models.risk import check_fall_rule, engine_name
+
+        if args.engine is not None or args.profile is not None:
+            args.engine = engine_name(args.engine or "mujoco", args.profile)
+        check_fall_rule(args.fall_rule, args.fall_threshold)
+        sensitivity.check_arguments(args)
+    except ValueError as e:
+        p.exit(2, f"{p.prog}: error: {e}\n")
+    if args.risk_measure and not (args.build_risk and args.human_data):
+        p.error("--risk-measure needs --build-risk and --human-data")
+    if args.per_participant_sigma and not args.human_data:
+        p.error("--per-participant-sigma needs --human-data FILE")
+    args.command = "python -m lgp.reproduce " + " ".join(argv if argv is not None else sys.argv[1:])
     q = QUICK if args.quick else {}
     args.samples = args.samples or q.get("samples", SAMPLES)
     args.n_sims = args.n_sims or q.get("n_sims", N_SIMS)
     args.sigmas = tuple(args.sigmas or q.get("sigmas", SIGMA_GRID))
     args.n_boot = args.n_boot or q.get("n_boot", N_BOOT)
-    with sigterm_as_interrupt():  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
+    with stop_signals() as stop:  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
         try:
             return run(args)
-        except KeyboardInterrupt as e:
-            how = "terminated (SIGTERM)" if getattr(e, "signal", None) == signal.SIGTERM else "interrupted"
+        except BaseException as e:
+            if stop.received is None and not isinstance(e, KeyboardInterrupt):
+                raise
+            sig = stop.received or getattr(e, "signal", signal.SIGINT)
+            how = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
             resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
             print(f"{p.prog}: {how}; {resume}", file=sys.stderr)
-            return 128 + int(getattr(e, "signal", signal.SIGINT))
+            return 128 + int(sig)
 
 
 def select_trials(ids: list[str] | None, directory=None) -> list:
@@ -325,17 +359,36 @@ def run(args) -> int:
     with executor_for(args.jobs) as executor:
         if hasattr(executor, "start"):
             executor.start()
-        check_targets(trials, args.engine, cache)  # an unstable B fails now, not after the effort stage
+        check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
-        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk)
+        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
+                           fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
         clock.lap("risk")
+        sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log)) \
+            if args.sensitivity else []
+        if args.sensitivity:
+            clock.lap("sensitivity")
+        if args.build_risk:
+            from lgp import build_stage
+
+            stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
+                                                   args.samples, args.seed, args.engine, executor, cache)
+            clock.lap("build risk")
         replays = None if args.no_replays else write_replays(trials, args.seed, out / "replays", cache, executor, _log)
         clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
+    sections, build = [], None
+    for s in sensitive:  # --sensitivity (lgp/sensitivity.py)
+        written += s.files
+        sections.append("\n".join(s.lines))
+    if args.build_risk:
+        paths, section, build = build_stage.build_risk_outputs(stages, out, args.command)
+        written += paths
+        sections.append(section)
     pairs, analysis = None, None
     if {t.id for t in trials} >= set(TRIAL_IDS):
         # Pair orderings, figures and fits are the paper's: on its 24 trials only;
@@ -350,12 +403,25 @@ def run(args) -> int:
         pairs = pair_orderings(e_mean, r, sigma, paper)
         written.append(write_csv_atomic(pairs, out / "pairs.csv"))
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
-                                seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma)
+                                seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
+                                build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
+                                risk_measure=args.risk_measure)
+        if args.per_participant_sigma:
+            from lgp import build_stage
+
+            paths, section = build_stage.participant_sigma_outputs(human, e_samples, r, out,
+                                                                   args.participant_betas, args.command)
+            written += paths
+            sections.append(section)
     else:
         _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
     clock.lap("analysis")
     software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0, software)
+    if sections:
+        from lgp.build_stage import append_report
+
+        append_report(report, sections)
     written.append(report)
     written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
     _log(f"cache: {cache.summary()}")

@@ -28,7 +28,8 @@ LAYERS = [
     # analysis imports nothing of the physics: no stimuli, scene, planner or models
     ("analysis", ["analysis", "analysis.*"], ["ground"]),
     # CLIs, caches and report or page writers
-    ("application", ["lgp.reproduce", "lgp.show", "lgp.cache", "lgp.view", "lgp.komo.view", "lgp.report", "lgp.page",
+    ("application", ["lgp.reproduce", "lgp.show", "lgp.cache", "lgp.view", "lgp.komo.view", "lgp.report", "lgp.build_stage",
+                     "lgp.page", "lgp.sensitivity",
                      "stimuli.sheet", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]

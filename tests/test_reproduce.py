@@ -127,7 +127,7 @@ def _fake_physics(monkeypatch):
         return pd.DataFrame([{"trial": t.id, "sample": s, "effort": 1.0 + t.pair / 10 + (t.level == "H") + s / 100}
                              for t in trials for s in range(samples)])
 
-    def risk(trials, sigmas, n_sims, seed, engine, executor, cache, chunk=6):
+    def risk(trials, sigmas, n_sims, seed, engine, executor, cache, chunk=6, **fall_rule):
         return pd.DataFrame([{"trial": t.id, "sigma": s, "risk": min(1.0, s * (2 if t.level == "H" else 1)),
                               "falls": 0, "n": n_sims, "engine": "none"} for t in trials for s in sigmas])
 

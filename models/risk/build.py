@@ -59,7 +59,8 @@ import pandas as pd
 from lgp.executor import borrowed, default_jobs
 from lgp.paper import N_SIMS, SAMPLES
 from lgp.scene import Scene, support_graph, supported_by
-from models.risk.core import _engine_name, _task_worker, check_stable, UnstableSceneError
+from models.risk.core import UnstableSceneError, _engine_name, _task_worker, check_fall_rule, check_stable
+from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
 from models.risk.noise import draw_normals
 
 #: The stage table, one row per (trial, sample, sigma, stage).
@@ -163,7 +164,8 @@ def _stage_key(scene: Scene, sources) -> str:
 
 def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed: int = 0,
                engine: str | None = None, jobs: int | None = 1, executor=None,
-               progress: Callable[[int, int], None] | None = None) -> pd.DataFrame:
+               progress: Callable[[int, int], None] | None = None, *, profile: str | None = None,
+               fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD) -> pd.DataFrame:
     """Risk of every stage of the plans of `samples` layouts of `trial`.
 
     `trial` is a stimuli.Trial or its id; `sigma` one noise level or several
@@ -172,7 +174,8 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
     sigma, stage), `stage` 1..K, `action_index` the 1-based index of the Place in
     the plan, `blocks_in_structure` the blocks at their B pose, `blocks_simulated`
     those plus the stack blocks not yet moved, `work_share` the effort-proxy
-    share w_k. Raises BuildStageError naming trial, sample and stage when a stage
+    share w_k. `engine`, `profile`, `fall_rule` and `fall_threshold` are those of
+    `physical_risk`. Raises BuildStageError naming trial, sample and stage when a stage
     falls without noise.
     """
     if isinstance(trial, str):
@@ -187,7 +190,8 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
     for s in sigmas:
         if not s >= 0:
             raise ValueError(f"trial {trial.id}: sigma must be >= 0 (a fraction of the block size), got {s}")
-    name = _engine_name(engine)
+    name = _engine_name(engine, profile)
+    fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
     drawn = range(samples) if trial.initial.is_random else [0]
     plans = {s: plan_stages(trial, seed, s) for s in drawn}
     unique: dict[str, Stage] = {}
@@ -212,7 +216,7 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
     for key in keys:
         st = unique[key]
         try:
-            check_stable(st.scene, name)
+            check_stable(st.scene, name, fall_rule=fall_rule, fall_threshold=fall_threshold)
         except UnstableSceneError as e:
             raise BuildStageError(f"trial {trial.id} sample {st.sample} stage {st.stage} "
                                   f"(after action {st.action_index}): {e}") from None
@@ -229,7 +233,7 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
         for s in sigmas:
             for a in range(0, n_sims, chunk):
                 tasks.append((key, s))
-                args.append((st.scene, s, z[a:min(a + chunk, n_sims)], a, name))
+                args.append((st.scene, s, z[a:min(a + chunk, n_sims)], a, name, fall_rule, fall_threshold))
     done = 0
 
     def arrived(k, res):

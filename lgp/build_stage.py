@@ -1,0 +1,200 @@
+"""The main job's beyond-the-paper options (issue 11), kept out of lgp/reproduce.py:
+
+* ``--build-risk``: risk through the build (models/risk/build.py) of every trial,
+  cached per trial, its aggregates, the pair table of aggregates, the
+  small-multiples figure of risk by stage and a report section;
+* ``--per-participant-sigma``: each participant's sigma
+  (analysis.fit_participant_sigma), its table, histogram and a report section.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from lgp.cache import Cache, input_key, library_versions, modules_digest, write_csv_atomic
+from lgp.paper import PAIRS
+
+#: The noise levels the build-risk report uses (issue 11: 0.065 d and 0.10 d).
+BUILD_SIGMAS: tuple[float, ...] = (0.065, 0.1)
+EASY, HARD = "tab:red", "tab:blue"
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def build_key_inputs(engine: str | None) -> dict:
+    """What a stage table depends on besides the trial and the parameters: the source
+    of every project module build_risk can run (the engine module is loaded by name),
+    the engine's settings and the libraries."""
+    from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
+
+    name = DEFAULT_ENGINE if engine is None else engine
+    return {"code": modules_digest("models.risk.build", ENGINES[name].target.split(":")[0], "stimuli"),
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
+
+
+def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, engine: str | None, executor,
+                      cache: Cache) -> pd.DataFrame:
+    """The stage table of every trial (models.risk.build_risk), one cached file per
+    trial keyed by the trial file, the parameters and the code it depends on."""
+    from models.risk.build import build_risk
+
+    depends = build_key_inputs(engine)
+    out = []
+    for k, trial in enumerate(trials, 1):
+        key = input_key(trial=trial.id, digest=trial.digest, sigmas=[float(s) for s in sigmas], n_sims=n_sims,
+                        samples=samples, seed=seed, **depends)
+        t0 = time.perf_counter()
+        df = cache.get("buildrisk", key)
+        how = "cached"
+        if df is None:
+            df = cache.put("buildrisk", key, build_risk(trial, list(sigmas), n_sims=n_sims, samples=samples, seed=seed,
+                                                        engine=engine, executor=executor))
+            how = f"{time.perf_counter() - t0:.1f} s"
+        final = df[df["stage"] == df.groupby("sample")["stage"].transform("max")]
+        curve = " ".join(f"{r:.2f}" for r in final.groupby("sigma")["risk"].mean())
+        _log(f"[build  {k:2d}/{len(trials)}] {trial.id:>3}: {df['stage'].max()} stages, final-stage risk {curve}  ({how})")
+        out.append(df)
+    return pd.concat(out, ignore_index=True)
+
+
+def aggregate_pairs(aggregates: pd.DataFrame) -> pd.DataFrame:
+    """Per (sigma, pair, measure): the aggregate of E and of H and whether E < H."""
+    from models.risk.build import MEASURES
+
+    rows = []
+    for sigma, g in aggregates.groupby("sigma", sort=True):
+        by = g.set_index("trial")
+        for pair in PAIRS:
+            e, h = f"{pair}E", f"{pair}H"
+            if e not in by.index or h not in by.index:
+                continue
+            for m in MEASURES:
+                rows.append((sigma, pair, m, by.at[e, m], by.at[h, m], bool(by.at[e, m] < by.at[h, m])))
+    return pd.DataFrame(rows, columns=["sigma", "pair", "measure", "E", "H", "E_lt_H"])
+
+
+def pair_markdown(pairs: pd.DataFrame, sigma: float) -> str:
+    """One row per pair, one column per measure, cells 'E / H' (a * where E < H)."""
+    from models.risk.build import MEASURES
+
+    g = pairs[np.isclose(pairs["sigma"], sigma)]
+    lines = ["| pair | " + " | ".join(f"{m} E / H" for m in MEASURES) + " |", "|---|" + "---|" * len(MEASURES)]
+    for pair, p in g.groupby("pair", sort=True):
+        p = p.set_index("measure")
+        cells = [f"{p.at[m, 'E']:.3f} / {p.at[m, 'H']:.3f}{' *' if p.at[m, 'E_lt_H'] else ''}" for m in MEASURES]
+        lines.append(f"| {pair} | " + " | ".join(cells) + " |")
+    counts = g.groupby("measure", sort=False)["E_lt_H"].sum()
+    lines.append("| pairs E < H | " + " | ".join(f"{int(counts[m])} of {g['pair'].nunique()}" for m in MEASURES) + " |")
+    return "\n".join(lines)
+
+
+def plot_stage_curves(stages: pd.DataFrame, out_dir: str | Path, stem: str = "build_risk_stages") -> list[Path]:
+    """Risk by stage, mean over layouts: one panel per pair, E (red) and H (blue),
+    solid at the first sigma, dashed at the others. PNG and PDF paths."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from models.risk.build import stage_curve
+
+    curve = stage_curve(stages)
+    sigmas = sorted(curve["sigma"].unique())
+    fig = Figure(figsize=(12, 8.2))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(3, 4, sharey=True).ravel()
+    for ax, pair in zip(axes, PAIRS):
+        for level, colour in (("E", EASY), ("H", HARD)):
+            for k, sigma in enumerate(sigmas):
+                c = curve[(curve["trial"] == f"{pair}{level}") & np.isclose(curve["sigma"], sigma)]
+                if len(c):
+                    ax.plot(c["stage"], c["risk"], "o-" if k == 0 else "s--", ms=3, color=colour, lw=1.2,
+                            label=f"{pair}{level}, sigma {sigma:g} d")
+        ax.set_title(f"pair {pair}", fontsize=9)
+        ax.set_xlabel("stage (after the k-th Place)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=6, frameon=False)
+    for ax in axes[::4]:
+        ax.set_ylabel("risk (mean over layouts)", fontsize=8)
+    fig.suptitle("Risk through the build: each stage's fraction of noisy runs that fall", fontsize=11)
+    fig.tight_layout()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = [out_dir / f"{stem}.png", out_dir / f"{stem}.pdf"]
+    for p in paths:
+        fig.savefig(p, dpi=130)
+    return paths
+
+
+def build_risk_outputs(stages: pd.DataFrame, out: Path, command: str) -> tuple[list[Path], str, pd.DataFrame]:
+    """Write the stage table, aggregates, pair table and figure; return the paths,
+    the report section (markdown) and the long measure table for the analysis."""
+    from models.risk.build import build_risk_aggregates, measure_table
+
+    aggregates = build_risk_aggregates(stages)
+    written = [write_csv_atomic(stages, out / "build_risk_stages.csv"),
+               write_csv_atomic(aggregates, out / "build_risk.csv")]
+    lines = ["## Risk through the build (beyond the paper)", "",
+             f"Command: `{command}`. Stages are the states after each Place of the plan of every layout "
+             "(models/risk/build.py); aggregates per plan, averaged over layouts: final = r_K, max = max r_k, "
+             "expected = sum r_k, any = 1 - prod(1 - r_k), care = sum w_k r_k (w_k: share of the plan's effort "
+             "already spent on the structure, a squared-carry-distance proxy checked against KOMO).", ""]
+    from models.risk.build import MEASURES
+
+    lines += ["| trial | sigma | " + " | ".join(MEASURES) + " | stages |", "|---|---|" + "---|" * (len(MEASURES) + 1)]
+    for _, r in aggregates.iterrows():
+        lines.append(f"| {r['trial']} | {r['sigma']:g} | " + " | ".join(f"{r[m]:.3f}" for m in MEASURES)
+                     + f" | {r['stages']:g} |")
+    lines.append("")
+    complete = set(aggregates["trial"]) >= {f"{p}{lv}" for p in PAIRS for lv in "EH"}
+    if complete:
+        pairs = aggregate_pairs(aggregates)
+        written.append(write_csv_atomic(pairs, out / "build_risk_pairs.csv"))
+        for sigma in sorted(aggregates["sigma"].unique()):
+            lines += [f"### sigma = {sigma:g} d (cells E / H; * where E < H)", "", pair_markdown(pairs, sigma), ""]
+        written += plot_stage_curves(stages, out / "figures")
+    else:
+        lines += ["A subset of trials: no pair table or figure (they need all 24).", ""]
+    return written, "\n".join(lines), measure_table(aggregates)
+
+
+def participant_sigma_outputs(human: pd.DataFrame, effort_samples: pd.DataFrame, risk: pd.DataFrame, out: Path,
+                              betas: str, command: str) -> tuple[list[Path], str]:
+    """Each participant's sigma: table, histogram and report section."""
+    from analysis import fit_participant_sigma
+    from analysis.figures import plot_participant_sigma
+
+    table = fit_participant_sigma(human, effort_samples, risk, betas=betas)
+    simulated = table["dataset"].astype(str).str.startswith("simulated-").any()
+    prefix = "simulated_" if simulated else ""
+    written = [write_csv_atomic(table, out / f"{prefix}participant_sigma.csv")]
+    written += plot_participant_sigma(table, out / "figures")
+    summary = (table.groupby("dataset", sort=False)
+               .agg(participants=("participant", "size"), median_sigma=("sigma", "median"),
+                    identified=("identified", "sum"),
+                    median_interval_width=("sigma_high", "median"))
+               .reset_index())
+    widths = (table["sigma_high"] - table["sigma_low"]).groupby(table["dataset"]).median()
+    summary["median_interval_width"] = summary["dataset"].map(widths)
+    lines = ["## Each participant's sigma (beyond the paper)" + (" -- SIMULATED participants" if simulated else ""), "",
+             f"Command: `{command}`. Betas: {betas} (analysis/participant_sigma.py). A participant counts as "
+             "identified when the 95% profile-likelihood interval is narrower than the whole sigma range.", "",
+             "| dataset | participants | median sigma | identified | median interval width |", "|---|---|---|---|---|"]
+    for _, r in summary.iterrows():
+        lines.append(f"| {r['dataset']} | {r['participants']} | {r['median_sigma']:.3f} | {int(r['identified'])} | "
+                     f"{r['median_interval_width']:.3f} |")
+    lines.append("")
+    return written, "\n".join(lines)
+
+
+def append_report(report: Path, sections: list[str]) -> Path:
+    """Add sections to report.md (written atomically by the caller first)."""
+    if sections:
+        tmp = report.with_suffix(".md.tmp")
+        tmp.write_text(report.read_text() + "\n" + "\n".join(sections))
+        tmp.replace(report)
+    return report

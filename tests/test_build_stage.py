@@ -1,0 +1,80 @@
+"""`python -m lgp.reproduce --build-risk` and `--per-participant-sigma` (lgp/build_stage.py):
+cached per trial, report sections, the pair table of aggregates. Participants here
+are SIMULATED."""
+import numpy as np
+import pandas as pd
+import pytest
+
+import models.risk.build
+from lgp import build_stage, reproduce
+from lgp.paper import TRIAL_IDS
+
+ARGS = ["--trials", "6E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.065", "--jobs", "1", "--build-risk",
+        "--no-replays"]
+
+
+def test_build_risk_flag_writes_stages_and_reuses_the_cache(tmp_path, monkeypatch):
+    out = tmp_path / "r"
+    assert reproduce.main([*ARGS, "--out", str(out)]) == 0
+    stages = pd.read_csv(out / "build_risk_stages.csv", dtype={"trial": str})
+    assert set(stages["trial"]) == {"6E", "6H"} and set(stages["sigma"]) == {0.065, 0.1}
+    assert stages.groupby(["trial", "sigma"])["stage"].max().eq(5).all()
+    report = (out / "report.md").read_text()
+    assert "## Risk through the build" in report and "--build-risk" in report
+
+    def boom(*a, **k):
+        raise AssertionError("recomputed a cached stage table")
+
+    monkeypatch.setattr(models.risk.build, "build_risk", boom)
+    assert reproduce.main([*ARGS, "--out", str(out)]) == 0
+    pd.testing.assert_frame_equal(pd.read_csv(out / "build_risk_stages.csv", dtype={"trial": str}), stages)
+
+
+def test_flags_that_need_human_data_say_so(capsys):
+    with pytest.raises(SystemExit):
+        reproduce.main(["--per-participant-sigma"])
+    assert "--per-participant-sigma needs --human-data" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        reproduce.main(["--build-risk", "--risk-measure", "max"])
+    assert "--risk-measure needs --build-risk and --human-data" in capsys.readouterr().err
+
+
+def _fake_stages():
+    """A stage table with hand-set risks: H's middle stage is risky, E is safe."""
+    rows = []
+    for t in TRIAL_IDS:
+        for sigma in (0.065, 0.1):
+            risks = [0.0, 0.4 if t.endswith("H") else 0.1, 0.2]
+            for k, r in enumerate(risks, 1):
+                rows.append(dict(trial=t, sample=0, sigma=sigma, stage=k, action_index=2 * k, blocks_in_structure=k,
+                                 blocks_simulated=k, risk=r, falls=int(r * 10), n_sims=10, work_share=k / 3,
+                                 engine="mujoco"))
+    return pd.DataFrame(rows)
+
+
+def test_pair_table_of_aggregates_and_figure(tmp_path):
+    paths, section, long = build_stage.build_risk_outputs(_fake_stages(), tmp_path, "cmd")
+    pairs = pd.read_csv(tmp_path / "build_risk_pairs.csv")
+    row = pairs[(pairs["pair"] == 6) & (pairs["measure"] == "max") & (pairs["sigma"] == 0.065)].iloc[0]
+    assert (row["E"], row["H"], bool(row["E_lt_H"])) == (0.2, 0.4, True)
+    fin = pairs[pairs["measure"] == "final"]
+    assert (fin["E"] == fin["H"]).all() and not fin["E_lt_H"].any()
+    anyr = pairs[(pairs["measure"] == "any")].iloc[0]
+    assert anyr["H"] == pytest.approx(1 - 0.6 * 0.8)
+    assert "12 of 12" in section and "0 of 12" in section
+    assert (tmp_path / "figures" / "build_risk_stages.png").exists()
+    assert set(long["measure"]) == {"final", "max", "expected", "any", "care"}
+
+
+def test_participant_sigma_outputs_are_labelled_simulated(tmp_path):
+    from analysis import simulate_participants
+
+    rng = np.random.default_rng(0)
+    effort = pd.DataFrame({"trial": list(TRIAL_IDS), "effort": rng.uniform(1, 4, 24)})
+    grid = pd.DataFrame([(t, s, min(1.0, s * (i % 5))) for i, t in enumerate(TRIAL_IDS) for s in (0.05, 0.075, 0.1)],
+                        columns=["trial", "sigma", "risk"])
+    sim = simulate_participants(effort, grid, (0, 1, 3), 0.075, 8, 1.0, rng, datasets=("time",))
+    paths, section = build_stage.participant_sigma_outputs(sim, effort, grid, tmp_path, "shared", "cmd")
+    assert (tmp_path / "simulated_participant_sigma.csv").exists()
+    assert any(p.name == "simulated_participant_sigma.png" for p in paths)
+    assert "SIMULATED" in section and "simulated-time" in section
