@@ -11,7 +11,7 @@ from analysis.data import (DATASETS, PAIRS, TRIAL_IDS, HumanDataError,  # noqa: 
                            trial_means, validate_human_data, zscore_responses)
 from analysis.models import (MODELS, ModelFit, ModelInputError, effort_per_trial,  # noqa: F401
                              fit_model, fit_models, full_model_cost, pearson_r, risk_at_sigma)
-from analysis.pairs import pair_table  # noqa: F401
+from analysis.pairs import TIE_REL, pair_order, pair_table  # noqa: F401
 from analysis.participant_sigma import fit_participant_sigma  # noqa: F401
 from analysis.run import run_analysis  # noqa: F401
 from analysis.sigma import (PAPER_SIGMA, SIGMA_GRID, choose_sigma, pooled_sigma,  # noqa: F401

@@ -140,7 +140,7 @@ def validate_human_data(
     for column in ("dataset", "participant", "trial"):
         col = table[column]
         table[column] = col.where(col.notna(), "").astype(str).str.strip()
-    table["trial"] = table["trial"].str.upper()
+    table["trial"] = table["trial"].str.upper()  # "1e" is 1E: lgp.paper.canonical_trial_id, as on every command line
     if len(table) == 0:
         raise HumanDataError(f"{source}: no responses; expected one row per (dataset, participant, trial)", line=1)
 

@@ -17,9 +17,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis.models import ModelInputError
 from analysis.run import run_analysis
-from lgp.paper import PAPER_SIGMA
 from analysis.simulate import simulate_participants
+from lgp import cli
+from lgp.paper import PAPER_SIGMA
 
 #: Stated, not fitted: risky effort costs 4x safe effort; n as in the paper's datasets.
 BETAS = (0.0, 1.0, 4.0)
@@ -28,21 +30,39 @@ PARTICIPANTS = {"difficulty": 59, "time": 60, "build": 20}
 NOISE_SD = 0.1
 
 
-def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--results", default="results", help="output folder of python -m lgp.reproduce")
-    p.add_argument("--out", default="results/simulated")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-boot", type=int, default=1000)
+PROG = "python -m analysis.demo"
+
+
+def read_results(results: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """effort_samples.csv and risk.csv of a full `lgp.reproduce` run, checked."""
+    tables = []
+    for name, columns in (("effort_samples.csv", ("trial", "sample", "effort")), ("risk.csv", ("trial", "sigma", "risk"))):
+        path = results / name
+        if not path.is_file():
+            raise ModelInputError(f"{path} does not exist: --results must be the output folder of a full "
+                                  "`python -m lgp.reproduce` run")
+        table = pd.read_csv(path, dtype={"trial": str})
+        missing = [c for c in columns if c not in table.columns]
+        if missing:
+            raise ModelInputError(f"{path}: missing column(s) {', '.join(missing)}")
+        tables.append(table)
+    return tables[0], tables[1]
+
+
+def main(argv=None) -> int:
+    p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--results", default="results", type=cli.input_dir, help="output folder of python -m lgp.reproduce")
+    p.add_argument("--out", default="results/simulated", type=cli.output_dir)
+    p.add_argument("--seed", type=cli.seed, default=0)
+    p.add_argument("--n-boot", type=cli.positive_int, default=1000)
     args = p.parse_args(argv)
-    results = Path(args.results)
-    effort = pd.read_csv(results / "effort_samples.csv", dtype={"trial": str})
-    risk = pd.read_csv(results / "risk.csv", dtype={"trial": str})
+    effort, risk = read_results(Path(args.results))
     rng = np.random.default_rng(args.seed)
     people = simulate_participants(effort, risk, BETAS, SIGMA, PARTICIPANTS, NOISE_SD, rng, datasets=list(PARTICIPANTS))
     run_analysis(people, effort, risk, args.out, seed=args.seed, n_boot=args.n_boot, jobs=2)
     print(f"SIMULATED-participant analysis written to {Path(args.out).resolve()}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(cli.run_cli(main, prog=PROG))

@@ -26,7 +26,7 @@ from matplotlib.lines import Line2D
 
 from analysis.data import PAIRS, TRIAL_IDS, is_simulated_dataset, ordered_datasets
 from analysis.models import MODEL_LABELS, MODELS, effort_per_trial, full_model_cost, risk_at_sigma
-from analysis.pairs import pair_table
+from analysis.pairs import TIE_REL, pair_table
 
 EASY_COLOUR = "tab:red"
 HARD_COLOUR = "tab:blue"
@@ -55,7 +55,7 @@ def plot_trial_means(means: pd.DataFrame, predictions: pd.DataFrame, out_dir: st
     dotted lines; easy trials red, hard blue. Returns the PNG and PDF paths.
     """
     datasets = ordered_datasets(means["dataset"].unique())
-    fig = Figure(figsize=(11, 2.9 * len(datasets) + 0.6))
+    fig = Figure(figsize=(11, 2.9 * len(datasets) + 0.6), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(len(datasets), 1, squeeze=False)[:, 0]
     x = _trial_x()
@@ -106,7 +106,7 @@ def plot_model_correlations(summary: pd.DataFrame, out_dir: str | Path,
     """
     datasets = ordered_datasets(summary["dataset"].unique())
     models = [m for m in MODELS if m in set(summary["model"])]
-    fig = Figure(figsize=(2.4 * len(datasets) + 3.0, 4.2))
+    fig = Figure(figsize=(2.4 * len(datasets) + 3.0, 4.2), layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.subplots()
     offsets = np.linspace(-0.22, 0.22, len(models)) if len(models) > 1 else np.zeros(1)
@@ -134,7 +134,7 @@ def plot_sigma_profile(profile: pd.DataFrame, out_dir: str | Path,
     (dashed), with the pooled choice (`choose_sigma`) marked. Returns PNG and PDF
     paths."""
     datasets = ordered_datasets(profile["dataset"].unique())
-    fig = Figure(figsize=(6.5, 4.2))
+    fig = Figure(figsize=(6.5, 4.2), layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.subplots()
     for dataset in datasets:
@@ -146,9 +146,8 @@ def plot_sigma_profile(profile: pd.DataFrame, out_dir: str | Path,
         pooled = choice[choice["dataset"] == "pooled"]
         if len(pooled):
             s = float(pooled["sigma"].iloc[0])
-            ax.axvline(s, color="0.4", lw=1, ls=":")
-            ax.text(s, 0.02, f" chosen sigma = {s:g} d", fontsize=8, va="bottom",
-                    transform=ax.get_xaxis_transform())
+            # Named in the legend, not written on the axes, so no label covers a point.
+            ax.axvline(s, color="0.4", lw=1, ls=":", label=f"chosen sigma = {s:g} d")
     ax.set_xlabel("sigma (units of block length d)")
     ax.set_ylabel("RMSE of Eq. 1 fit (z units)")
     ax.legend(fontsize=8, frameon=False, loc="best")
@@ -171,33 +170,40 @@ def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
     """
     E = effort_per_trial(effort_by_trial)
     R = risk_at_sigma(risk_table, sigma)
-    panels = [("physical effort E", E), (f"physical risk R at sigma = {sigma:g} d", R)]
+    panels = [("physical effort E", "E (J s)", E),
+              (f"physical risk R at sigma = {sigma:g} d", "R (fraction\nof runs that fall)", R)]
     if betas is not None:
         named = betas if isinstance(betas, Mapping) else {"": betas}
-        for name, b in named.items():
+        order = ordered_datasets(named) if isinstance(betas, Mapping) else [""]  # the paper's order in every figure
+        for name, b in ((n, named[n]) for n in order):
             label = f", {dataset_label(name)} fit" if name else ""
             b_text = ", ".join(f"{v:.3g}" for v in b)
-            panels.append((f"Eq. 1 cost{label}, b = ({b_text})", full_model_cost(E, R, b)))
-    fig = Figure(figsize=(9, 2.5 * len(panels) + 0.6))
+            panels.append((f"Eq. 1 cost{label}, b = ({b_text})", "predicted\nresponse (z)", full_model_cost(E, R, b)))
+    fig = Figure(figsize=(9, 2.5 * len(panels) + 0.6), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(len(panels), 1, squeeze=False, sharex=True)[:, 0]
     pairs = np.array(PAIRS, dtype=float)
-    for ax, (label, values) in zip(axes, panels):
+    for ax, (label, ylabel, values) in zip(axes, panels):
         table = pair_table(values)
         for k, row in table.iterrows():
-            if not row["E_lt_H"]:
+            if not row["E_lt_H"]:  # reversed or tied (analysis.pairs.TIE_REL)
                 ax.axvspan(row["pair"] - 0.45, row["pair"] + 0.45, color="0.88", zorder=0)
             ax.plot([row["pair"] - 0.15, row["pair"] + 0.15], [row["cost_E"], row["cost_H"]],
                     "-", color="0.5", lw=1, zorder=1)
         ax.plot(pairs - 0.15, table["cost_E"], "o", color=EASY_COLOUR, label="easy (E)", zorder=2)
         ax.plot(pairs + 0.15, table["cost_H"], "o", color=HARD_COLOUR, label="hard (H)", zorder=2)
         n_ok = int(table["E_lt_H"].sum())
-        reversed_pairs = table.loc[~table["E_lt_H"], "pair"].tolist()
-        rev = f"; not: {', '.join(map(str, reversed_pairs))}" if reversed_pairs else ""
-        ax.set_title(f"{label}: E < H in {n_ok}/12 pairs{rev}", fontsize=9)
+        notes = []
+        for order, word in (("tie", "tied"), ("H<E", "reversed")):
+            found = table.loc[table["order"] == order, "pair"].tolist()
+            if found:
+                notes.append(f"{word}: {', '.join(map(str, found))}")
+        rest = f"; {'; '.join(notes)}" if notes else ""
+        ax.set_title(f"{label}: E < H in {n_ok}/{len(PAIRS)} pairs{rest}", fontsize=9)
+        ax.set_ylabel(ylabel, fontsize=9)
     axes[0].legend(fontsize=8, frameon=False, loc="upper left")
     axes[-1].set_xticks(pairs, [str(p) for p in PAIRS])
-    axes[-1].set_xlabel("pair (grey: easy trial not lower than hard)")
+    axes[-1].set_xlabel(f"pair (grey: easy trial not lower than hard; tie: |H - E| <= {TIE_REL:g} x max(E, H))")
     from_fits = list(betas) if isinstance(betas, Mapping) else []
     return _finish(fig, "Model quantities per easy/hard pair", from_fits, out_dir, stem)
 
@@ -239,6 +245,21 @@ def _trial_x() -> np.ndarray:
     return np.array([2.6 * (int(t[:-1]) - 1) + (t[-1] == "H") for t in TRIAL_IDS], dtype=float)
 
 
+def _fit_title(fig: Figure, title: str, **style) -> None:
+    """Set the figure title, wrapping each line until it fits the figure's width."""
+    import textwrap
+
+    lines = title.split("\n")
+    width = max(len(line) for line in lines)
+    while True:
+        text = "\n".join(textwrap.fill(line, width) for line in lines)
+        artist = fig.suptitle(text, **style)
+        box = artist.get_window_extent(fig.canvas.get_renderer())
+        if box.width <= 0.96 * fig.bbox.width or width <= 20:
+            return
+        width = max(20, int(width * 0.96 * fig.bbox.width / box.width) - 1)
+
+
 def _finish(fig: Figure, title: str, datasets: Iterable[str], out_dir: str | Path,
             stem: str) -> list[Path]:
     """Label simulated figures, save PNG and PDF, return their paths."""
@@ -247,8 +268,9 @@ def _finish(fig: Figure, title: str, datasets: Iterable[str], out_dir: str | Pat
         title = f"{SIMULATED_TITLE}\n{title}"
         if "simulated" not in stem:
             stem = f"simulated_{stem}"
-    fig.suptitle(title, fontsize=11, color="darkred" if simulated else "black")
-    fig.tight_layout()
+    # Constrained layout (set when the figure was made) keeps the title above the
+    # panels; _fit_title wraps it to the figure's width. Tests check its bounding box.
+    _fit_title(fig, title, fontsize=11, color="darkred" if simulated else "black")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [out_dir / f"{stem}.png", out_dir / f"{stem}.pdf"]

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.bootstrap import COMPARISONS, bootstrap_model_correlations, bootstrap_tests, summarize_bootstrap
-from analysis.data import (exclude_constant_participants, is_simulated, load_human_data,
+from analysis.data import (exclude_constant_participants, is_simulated, load_human_data, ordered_datasets,
                            resample_trial_means, trial_mean_intervals, validate_human_data,
                            zscore_responses)
 from analysis.figures import (plot_effort_risk, plot_model_correlations, plot_sigma_profile,
@@ -61,8 +61,9 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     -------
     dict of DataFrames, each also written as ``<key>.csv``:
     settings (one row: seed, n_boot, sigma used and why, z-score SD ...),
-    pairs (dataset, source, pair, cost_E, cost_H, E_lt_H; source is effort,
-    risk, human or a model name) and, with human data, excluded_participants,
+    orderings (dataset, source, pair, cost_E, cost_H, order, E_lt_H; source is
+    effort, risk, human or a model name; dataset "all" for effort and risk, which
+    do not depend on it; order under the tie rule of analysis.pairs.TIE_REL) and, with human data, excluded_participants,
     zscored, trial_means (mean_z with 95% CI), sigma_profile, sigma_choice,
     fits, predictions, bootstrap_correlations, bootstrap_summary,
     bootstrap_tests; plus files (kind, path) listing everything written.
@@ -81,7 +82,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         else:
             rule = "given by caller"
         R = risk_at_sigma(risk_table, sigma)
-        results["pairs"] = _model_pairs(E, R)
+        results["orderings"] = _model_pairs(E, R)
         results["settings"] = pd.DataFrame([{
             "human_data": False, "simulated": False, "seed": seed, "n_boot": 0, "jobs": jobs,
             "sigma": sigma, "sigma_rule": rule}])
@@ -155,7 +156,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         "bootstrap_correlations": boot,
         "bootstrap_summary": summarize_bootstrap(boot, fits),
         "bootstrap_tests": bootstrap_tests(boot, fits, comparisons),
-        "pairs": _tidy_pairs(pd.concat(pairs, ignore_index=True)),
+        "orderings": _tidy_pairs(pd.concat(pairs, ignore_index=True)),
     })
     if figures:
         full = fits[fits["model"] == "full"].set_index("dataset")[["b0", "b1", "b2"]]
@@ -165,20 +166,20 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         figure_paths += plot_sigma_profile(profile, out_dir, choice, stem=f"{prefix}sigma_profile")
         figure_paths += plot_effort_risk(
             E, risk_table, sigma, out_dir,
-            betas={d: tuple(row) for d, row in full.iterrows()},
+            betas={d: tuple(full.loc[d]) for d in ordered_datasets(full.index)},  # the paper's order, as every figure
             stem=f"{prefix}effort_risk_pairs")
     return _write(results, out_dir, prefix, figure_paths)
 
 
 def _model_pairs(E: pd.Series, R: pd.Series) -> pd.DataFrame:
     """Pair tables of effort and risk alone (no human data needed)."""
-    return _tidy_pairs(pd.concat([pair_table(E).assign(dataset="", source="effort"),
-                                  pair_table(R).assign(dataset="", source="risk")],
+    return _tidy_pairs(pd.concat([pair_table(E).assign(dataset="all", source="effort"),
+                                  pair_table(R).assign(dataset="all", source="risk")],
                                  ignore_index=True))
 
 
 def _tidy_pairs(table: pd.DataFrame) -> pd.DataFrame:
-    return table[["dataset", "source", "pair", "cost_E", "cost_H", "E_lt_H"]]
+    return table[["dataset", "source", "pair", "cost_E", "cost_H", "order", "E_lt_H"]]
 
 
 def _write(results: dict[str, pd.DataFrame], out_dir: Path, prefix: str,

@@ -39,22 +39,25 @@ def build_key_inputs(engine: str | None) -> dict:
 
 
 def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, engine: str | None, executor,
-                      cache: Cache) -> pd.DataFrame:
+                      cache: Cache, *, fall_rule: str | None = None, fall_threshold: float | None = None) -> pd.DataFrame:
     """The stage table of every trial (models.risk.build_risk), one cached file per
     trial keyed by the trial file, the parameters and the code it depends on."""
     from models.risk.build import build_risk
+    from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
 
+    rule = {"fall_rule": fall_rule or DEFAULT_FALL_RULE,
+            "fall_threshold": FALL_THRESHOLD if fall_threshold is None else float(fall_threshold)}
     depends = build_key_inputs(engine)
     out = []
     for k, trial in enumerate(trials, 1):
         key = input_key(trial=trial.id, digest=trial.digest, sigmas=[float(s) for s in sigmas], n_sims=n_sims,
-                        samples=samples, seed=seed, **depends)
+                        samples=samples, seed=seed, **rule, **depends)
         t0 = time.perf_counter()
         df = cache.get("buildrisk", key)
         how = "cached"
         if df is None:
             df = cache.put("buildrisk", key, build_risk(trial, list(sigmas), n_sims=n_sims, samples=samples, seed=seed,
-                                                        engine=engine, executor=executor))
+                                                        engine=engine, executor=executor, **rule))
             how = f"{time.perf_counter() - t0:.1f} s"
         final = df[df["stage"] == df.groupby("sample")["stage"].transform("max")]
         curve = " ".join(f"{r:.2f}" for r in final.groupby("sigma")["risk"].mean())
@@ -99,6 +102,7 @@ def plot_stage_curves(stages: pd.DataFrame, out_dir: str | Path, stem: str = "bu
     solid at the first sigma, dashed at the others. PNG and PDF paths."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     from models.risk.build import stage_curve
 
@@ -115,9 +119,10 @@ def plot_stage_curves(stages: pd.DataFrame, out_dir: str | Path, stem: str = "bu
                     ax.plot(c["stage"], c["risk"], "o-" if k == 0 else "s--", ms=3, color=colour, lw=1.2,
                             label=f"{pair}{level}, sigma {sigma:g} d")
         ax.set_title(f"pair {pair}", fontsize=9)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("stage (after the k-th Place)", fontsize=8)
         ax.tick_params(labelsize=7)
-        ax.legend(fontsize=6, frameon=False)
+        ax.legend(fontsize=6, frameon=False, loc="upper left")
     for ax in axes[::4]:
         ax.set_ylabel("risk (mean over layouts)", fontsize=8)
     fig.suptitle("Risk through the build: each stage's fraction of noisy runs that fall", fontsize=11)

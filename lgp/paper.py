@@ -47,6 +47,16 @@ def display_hex(colour: str) -> str:
     return f"#{round(r * 255):02x}{round(g * 255):02x}{round(b * 255):02x}"
 
 
+def canonical_trial_id(text: str) -> str:
+    """A trial id in its one spelling: surrounding spaces dropped, letters upper-cased.
+
+    Trial ids are case-insensitive everywhere (command lines, `stimuli.load_trial`,
+    the human-data loader): ``" 7h"`` is ``"7H"``. Whether the id names a trial is
+    the caller's check (e.g. ``canonical_trial_id(t) in TRIAL_IDS``).
+    """
+    return str(text).strip().upper()
+
+
 def pair_of(trial_id: str) -> int:
     """Pair number of a trial id of the paper's form ("7H" -> 7)."""
     return int(trial_id[:-1])

@@ -111,6 +111,18 @@ class Plan:
         v = np.diff(self.p_WB[name], axis=0) / self.tau
         return np.concatenate([[0.0], np.linalg.norm(v, axis=1)])
 
+    def __repr__(self) -> str:
+        """One line: scene, actions, duration, KOMO status, planning time; the arrays
+        stay behind the attributes (t, q, p_WB, R_WB). The effort is the effort
+        model's measure of the plan (models.effort.kinetic_energy), not the plan's."""
+        actions = self.actions
+        shown = " -> ".join(map(str, actions[:2])) + (" -> ..." if len(actions) > 2 else "")
+        komo = f", {self.komo.solver} {self.komo.status}, cost {self.komo.cost:.4g}" if self.komo is not None else ""
+        duration = float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
+        return (f"Plan({self.initial.label or 'scene'}: {len(actions)} actions [{shown}], "
+                f"{duration:g} s in {len(self.t)} slices{komo}, planned in {self.planning_time:.2f} s)")
+
+
 
 # ----------------------------------------------------------------------------- planning
 

@@ -26,11 +26,16 @@ import numpy as np
 import pandas as pd
 
 import stimuli
+from lgp import cli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import executor_for, stop_signals
+from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
+from lgp.progress import Progress
 from lgp.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
+from lgp.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 from lgp.page import Stopwatch, write_index, write_replays
 from lgp import sensitivity
+
+PROG = "python -m lgp.reproduce"
 
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
 
@@ -86,8 +91,10 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
     started = {t.id: None for t in todo}
     t0 = time.perf_counter()
+    bar = Progress("effort", len(units), "plans")
 
     def arrived(k, row):
+        bar.advance()
         trial = owner[k]
         rows[trial.id].append(row)
         pending[trial.id] -= 1
@@ -101,7 +108,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
         if t.id in tables and t.id not in rows:
             _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
                  f" over {len(tables[t.id])} layouts  (cached)")
-    executor.map(effort_of_unit, units, arrived)
+    with bar:
+        executor.map(effort_of_unit, units, arrived)
     return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
@@ -118,14 +126,19 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
     tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
+    bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs")
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
+        base = bar.done
         table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
-                           fall_rule=fall_rule, fall_threshold=fall_threshold)
+                           fall_rule=fall_rule, fall_threshold=fall_threshold,
+                           progress=lambda done, total: bar.advance(base + done - bar.done))
         for t in group:
             tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
+    if todo:
+        bar.close()
     out = []
     for k, trial in enumerate(trials, 1):
         df = tables[trial.id]
@@ -163,8 +176,8 @@ def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
     order = {t.id: i for i, t in enumerate(trials)}
     g = samples.groupby("trial")["effort"]
     df = pd.DataFrame({"effort": g.mean(), "effort_sd": g.std(ddof=1), "samples": g.size()}).reset_index()
-    df["pair"] = df["trial"].str[:-1].astype(int)
-    df["level"] = df["trial"].str[-1]
+    df["pair"] = df["trial"].map({t.id: t.pair for t in trials}).astype("Int64")  # empty for a trial of no pair
+    df["level"] = df["trial"].map({t.id: t.level for t in trials})
     return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]
 
 
@@ -191,14 +204,73 @@ def pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trial
     from analysis import pair_table, risk_at_sigma
 
     dims = {t.pair: t.dimension for t in trials}
-    e = pair_table(effort.set_index("trial")["effort"]).rename(columns={"cost_E": "effort_E", "cost_H": "effort_H", "E_lt_H": "effort_E_lt_H"})
-    r = pair_table(risk_at_sigma(risk, sigma)).rename(columns={"cost_E": "risk_E", "cost_H": "risk_H", "E_lt_H": "risk_E_lt_H"})
+    e = pair_table(effort.set_index("trial")["effort"]).rename(
+        columns={"cost_E": "effort_E", "cost_H": "effort_H", "order": "effort_order", "E_lt_H": "effort_E_lt_H"})
+    r = pair_table(risk_at_sigma(risk, sigma)).rename(
+        columns={"cost_E": "risk_E", "cost_H": "risk_H", "order": "risk_order", "E_lt_H": "risk_E_lt_H"})
     table = e.merge(r, on="pair")
     table.insert(1, "dimension", table["pair"].map(dims))
     table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
-    table.insert(6, "sigma", sigma)
-    table["full_E_lt_H_for_b2_over_b1"] = [kappa_range(*row) for row in table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy()]
+    table.insert(table.columns.get_loc("risk_E"), "sigma", sigma)
+    # Tied in effort and in risk (analysis.pairs.TIE_REL): Eq. 1 ties them for every b.
+    table["full_E_lt_H_for_b2_over_b1"] = [
+        "none (tie)" if (eo == "tie" and ro == "tie") else kappa_range(*row)
+        for row, eo, ro in zip(table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy(),
+                               table["effort_order"], table["risk_order"])]
     return table
+
+
+def declared_pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trials) -> pd.DataFrame | None:
+    """pair_orderings (same columns, same tie rule) for a stimulus set other than
+    the paper's: the pairs whose E and H trials (ids <pair>E, <pair>H) are both in
+    the run; None when there are none."""
+    from analysis.pairs import pair_order
+
+    ids = {t.id for t in trials}
+    declared = sorted({t.pair for t in trials if t.pair is not None and {f"{t.pair}E", f"{t.pair}H"} <= ids})
+    if not declared:
+        return None
+    at = risk[np.isclose(risk["sigma"].astype(float), sigma, rtol=0, atol=1e-9)]
+    costs = {"effort": effort.set_index("trial")["effort"].astype(float), "risk": at.set_index("trial")["risk"].astype(float)}
+    table = pd.DataFrame({"pair": declared})
+    for name, cost in costs.items():
+        table[f"{name}_E"] = [cost[f"{p}E"] for p in declared]
+        table[f"{name}_H"] = [cost[f"{p}H"] for p in declared]
+        table[f"{name}_order"] = [pair_order(e, h) for e, h in zip(table[f"{name}_E"], table[f"{name}_H"])]
+        table[f"{name}_E_lt_H"] = table[f"{name}_order"] == "E<H"
+    table.insert(1, "dimension", table["pair"].map({t.pair: t.dimension for t in trials}))
+    table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
+    table.insert(table.columns.get_loc("risk_E"), "sigma", sigma)
+    table["full_E_lt_H_for_b2_over_b1"] = [
+        "none (tie)" if (eo == "tie" and ro == "tie") else kappa_range(*row)
+        for row, eo, ro in zip(table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy(),
+                               table["effort_order"], table["risk_order"])]
+    return table
+
+
+def _orders(pairs: pd.DataFrame, source: str) -> str:
+    """'E < H in 10 of 12 pairs (tied: 6; reversed: 11)' from a pair table."""
+    n = int(pairs[f"{source}_E_lt_H"].sum())
+    notes = []
+    for order, word in (("tie", "tied"), ("H<E", "reversed")):
+        found = pairs.loc[pairs[f"{source}_order"] == order, "pair"].tolist()
+        if found:
+            notes.append(f"{word}: {', '.join(map(str, found))}")
+    return f"E < H in {n} of {len(pairs)} pairs" + (f" ({'; '.join(notes)})" if notes else "")
+
+
+def engine_description(engine: str | None, settings: dict | None = None) -> str:
+    """The risk engine by name with its settings, e.g. 'mujoco 3.3.0 (timestep 0.002, ...)'."""
+    from models.risk.core import DEFAULT_ENGINE
+    from models.risk.engine import get_engine
+
+    name = engine or DEFAULT_ENGINE
+    settings = dict(get_engine(name).settings() if settings is None else settings)
+    settings.pop("engine", None)
+    version = settings.pop("version", None)
+    text = ", ".join(f"{k} {v}" for k, v in settings.items())
+    return f"{name}" + (f" {version}" if version else "") + (f" ({text})" if text else "") + \
+        ("" if engine else " [the default engine]")
 
 
 def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -210,18 +282,28 @@ def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
     return "\n".join(lines)
 
 
-def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None, elapsed: float,
-                 software: dict | None = None) -> Path:
+def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None,
+                 elapsed: float, software: dict | None = None, compute: tuple[float, int] = (float("nan"), 0)) -> Path:
+    """report.md: settings, the engine with its settings, both times, the tables, and
+    the pair orderings under the one tie rule (analysis.pairs.TIE_REL)."""
+    from analysis.pairs import TIE_REL
+
+    engine = engine_description(args.engine, (software or {}).get("engine"))
     wide = risk.pivot_table(index="trial", columns="sigma", values="risk").reindex(effort["trial"])
     wide.columns = [f"{s:g}" for s in wide.columns]
+    compute_s, unknown = compute
+    compute_text = (f"Compute time of these results {compute_s:.0f} s (wall time spent computing each cached effort and risk "
+                    "result when it was computed" + (f"; {unknown} result(s) cached by an older version have no recorded time"
+                                                     if unknown else "") + f"); this run took {elapsed:.0f} s.")
     lines = [
         "# Reproduction report",
         "",
         f"Settings: trials {len(effort)}, M = {args.samples} layouts, N = {args.n_sims} runs per sigma, "
-        f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), engine {args.engine or 'default'}, "
+        f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), "
         f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}"
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
-        f"Wall time {elapsed:.0f} s.",
+        f"Risk engine: {engine or args.engine or 'default'}.",
+        compute_text,
         "",
         "## Physical effort (J*s: integral of the carried blocks' kinetic energy over time, 1 kg blocks)",
         "",
@@ -238,13 +320,20 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
             "",
             _markdown(pairs.drop(columns=["sigma"])),
             "",
-            f"Effort orders {int(pairs['effort_E_lt_H'].sum())} of {len(pairs)} pairs E < H; "
-            f"risk orders {int(pairs['risk_E_lt_H'].sum())} of {len(pairs)} (ties count as not ordered). "
-            "The paper's fitted full model ordered 11 of 12 (pair 11 the exception); without human data "
-            "there are no fitted betas, so the last column says for which ratios b2/b1 (b1 > 0) Eq. 1 would "
-            "order each pair E < H. effort_rel_diff = (H - E) / E: |values| below ~1e-4 are solver-level ties.",
+            f"Tie rule (one rule for this table, pairs.csv, the figures and docs/results.md): E and H are tied when "
+            f"|H - E| <= {TIE_REL:g} x max(E, H), the plan-to-plan noise of effort (analysis.pairs.TIE_REL); "
+            "a tie counts as not ordered. effort_rel_diff = (H - E) / E.",
+            "",
+            f"Effort: {_orders(pairs, 'effort')}. Risk: {_orders(pairs, 'risk')}. "
+            "The paper's fitted full model ordered 11 of 12 (pair 11 the exception).",
             "",
         ]
+        if analysis is None:
+            lines += ["Without human data there are no fitted betas, so the last column says for which ratios b2/b1 "
+                      "(b1 > 0) Eq. 1 would order each pair E < H.", ""]
+        else:
+            lines += ["The last column says for which ratios b2/b1 (b1 > 0) Eq. 1 would order each pair E < H; the "
+                      "fitted betas and the orderings they give are below.", ""]
     if analysis is None:
         lines += ["No human data given (`--human-data FILE`, format in docs/human-data.md): the fits of Eq. 1, "
                   "the sigma profile and the bootstrap need the responses, which are not public.", ""]
@@ -252,9 +341,8 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         for key in ("sigma_choice", "fits", "bootstrap_summary", "bootstrap_tests"):
             if key in analysis and isinstance(analysis[key], pd.DataFrame) and len(analysis[key]):
                 lines += [f"## {key.replace('_', ' ')}", "", _markdown(analysis[key]), ""]
-        if "pairs" in analysis:
-            model_pairs = analysis["pairs"]
-            lines += ["## Pair orderings by source", "", _markdown(model_pairs), ""]
+        if "orderings" in analysis:
+            lines += ["## Pair orderings by source (orderings.csv)", "", _markdown(analysis["orderings"]), ""]
     if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers
         lines += ["## Software", "", "Libraries: " + ", ".join(f"{k} {v}" for k, v in software["libraries"].items()) + ".",
                   "", f"Risk engine settings: `{json.dumps(software['engine'], sort_keys=True, default=str)}`.", ""]
@@ -265,27 +353,38 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
     return path
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m lgp.reproduce", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default="results", help="output directory (default: results/)")
-    p.add_argument("--trials", nargs="+", help="trial ids, or 'all' for every trial file (default: the paper's 24)")
-    p.add_argument("--samples", type=int, help="M, random layouts of A per trial (default 30; --quick 3)")
-    p.add_argument("--n-sims", type=int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
-    p.add_argument("--sigmas", type=float, nargs="+", help="noise levels in units of d (default: 0.05..0.10 step 0.005)")
+
+def parse_args(argv=None) -> argparse.Namespace:
+    """The command line, checked: every count, sigma, trial id and path is refused
+    here, in one line, before any work (lgp.cli)."""
+    p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default="results", type=cli.output_dir,
+                   help="output directory (default: results/); an earlier run's outputs in it are removed, its cache kept")
+    p.add_argument("--stimuli", metavar="DIR", type=cli.input_dir,
+                   help="run on the trial files of DIR (default: stimuli/trials, the paper's): all of them unless --trials "
+                   "names some; pair table only for pairs whose E and H files are both there")
+    p.add_argument("--trials", nargs="+", type=cli.trial_id_or_all,
+                   help="trial ids (case-insensitive), or 'all' for every trial file (default: the paper's 24)")
+    p.add_argument("--samples", type=cli.positive_int, help="M, random layouts of A per trial (default 30; --quick 3)")
+    p.add_argument("--n-sims", type=cli.positive_int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
+    p.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
     p.add_argument("--engine", help="physics engine for risk: mujoco, drake, physx (optional extra) (default: mujoco)")
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
     p.add_argument("--fall-rule", default="horizontal", help="a run falls by horizontal (default) or 3d displacement")
     p.add_argument("--fall-threshold", type=float, default=0.25, help="fall threshold in units of d (default %(default)s)")
-    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: all cores)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-boot", type=int, help="bootstrap resamples (default 1000; --quick 200)")
-    p.add_argument("--human-data", help="CSV of human responses (docs/human-data.md)")
+    p.add_argument("--jobs", type=cli.positive_int, default=default_jobs(),
+                   help="processes, or LocalCluster workers with --scheduler local-dask, >= 1 (default: all cores, %(default)s here)")
+    p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
+                   "(a LocalCluster of --jobs workers); default: a local process pool. Needs the [dask] extra (docs/scaling.md)")
+    p.add_argument("--seed", type=cli.seed, default=0)
+    p.add_argument("--n-boot", type=cli.positive_int, help="bootstrap resamples (default 1000; --quick 200)")
+    p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
     p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
-    p.add_argument("--risk-chunk", type=int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
+    p.add_argument("--risk-chunk", type=cli.positive_int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
     p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/build_stage.py)")
-    p.add_argument("--build-sigmas", type=float, nargs="+", help="noise levels of --build-risk (default 0.065 0.1)")
+    p.add_argument("--build-sigmas", type=cli.sigma, nargs="+", help="noise levels of --build-risk in (0, 1] (default 0.065 0.1)")
     p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
@@ -308,26 +407,39 @@ def main(argv=None) -> int:
         p.error("--per-participant-sigma needs --human-data FILE")
     args.command = "python -m lgp.reproduce " + " ".join(argv if argv is not None else sys.argv[1:])
     q = QUICK if args.quick else {}
-    args.samples = args.samples or q.get("samples", SAMPLES)
-    args.n_sims = args.n_sims or q.get("n_sims", N_SIMS)
-    args.sigmas = tuple(args.sigmas or q.get("sigmas", SIGMA_GRID))
-    args.n_boot = args.n_boot or q.get("n_boot", N_BOOT)
+    args.samples = args.samples if args.samples is not None else q.get("samples", SAMPLES)
+    args.n_sims = args.n_sims if args.n_sims is not None else q.get("n_sims", N_SIMS)
+    args.sigmas = tuple(dict.fromkeys(args.sigmas or q.get("sigmas", SIGMA_GRID)))
+    args.n_boot = args.n_boot if args.n_boot is not None else q.get("n_boot", N_BOOT)
+    if args.trials:
+        args.trials = list(dict.fromkeys(args.trials))  # 7h and 7H are one trial
+        if "all" in args.trials and len(args.trials) > 1:
+            p.error("--trials all runs every trial file; give it alone")
+    return args
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
     with stop_signals() as stop:  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
         try:
-            return run(args)
+            return run(args, argv)
         except BaseException as e:
             if stop.received is None and not isinstance(e, KeyboardInterrupt):
                 raise
             sig = stop.received or getattr(e, "signal", signal.SIGINT)
             how = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
             resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
-            print(f"{p.prog}: {how}; {resume}", file=sys.stderr)
+            print(f"{PROG}: {how}; {resume}", file=sys.stderr)
             return 128 + int(sig)
 
 
 def select_trials(ids: list[str] | None, directory=None) -> list:
     """The trials of a run: the paper's 24 by default (other trial files in the
     directory are named, not run), ``all`` for every trial file, or the ids given."""
+    if not ids and directory is not None:  # a user's stimulus set (--stimuli DIR): every trial file in it
+        if not stimuli.trial_ids(directory):
+            raise stimuli.StimulusError(f"--stimuli {directory}: no trial files (*.yaml) there")
+        return stimuli.load_all(directory)
     if not ids:
         extra = stimuli.extra_ids(directory)
         if extra:
@@ -339,26 +451,37 @@ def select_trials(ids: list[str] | None, directory=None) -> list:
     return [stimuli.load_trial(t, directory) for t in ids]
 
 
-def run(args) -> int:
+def run(args, argv=None) -> int:
     """The pipeline for parsed command-line `args` (see `main`)."""
     t0 = time.perf_counter()
     clock = Stopwatch()  # wall time per stage, for the results page
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    cache = Cache(out / "cache", enabled=not args.no_cache)
-    trials = select_trials(args.trials)
+    # Validate every input before anything is written or computed.
+    trials = select_trials(args.trials, args.stimuli)
     human = None
     if args.human_data:
         from analysis import load_human_data
 
-        human = load_human_data(args.human_data)  # validate before the long work
-    _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}; cache {cache.root}")
+        human = load_human_data(args.human_data)
+        if not {t.id for t in trials} >= set(TRIAL_IDS):
+            raise ValueError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    removed = clear_previous(out)  # this folder describes this run only (lgp/manifest.py)
+    if removed:
+        _log(f"removed the outputs of an earlier run from {out}: {', '.join(removed)} (the cache is kept)")
+    cache = TimedCache(out / "cache", enabled=not args.no_cache)
+    _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}"
+         f"{', scheduler ' + args.scheduler if args.scheduler else ''}; cache {cache.root}")
 
     # One executor for the whole run: its workers start now, before this process
     # imports Drake or MuJoCo, and stay warm across trials and stages.
-    with executor_for(args.jobs) as executor:
+    # SchedulerUnreachable / DaskMissing: one line from lgp.cli, exit 1
+    with executor_for_scheduler(args.scheduler, args.jobs) as executor, cache.stage():
         if hasattr(executor, "start"):
             executor.start()
+        with cli.deferred_interrupt():  # Drake loads here; a Ctrl-C meanwhile waits until it has
+            import models.effort  # noqa: F401
+            import models.risk  # noqa: F401
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
         clock.lap("effort")
@@ -374,13 +497,16 @@ def run(args) -> int:
             from lgp import build_stage
 
             stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
-                                                   args.samples, args.seed, args.engine, executor, cache)
+                                                   args.samples, args.seed, args.engine, executor, cache,
+                                                   fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(trials, args.seed, out / "replays", cache, executor, _log)
         clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
+    if replays:
+        written += [Path(p) for p in replays.values()]
     sections, build = [], None
     for s in sensitive:  # --sensitivity (lgp/sensitivity.py)
         written += s.files
@@ -406,6 +532,7 @@ def run(args) -> int:
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
                                 build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
                                 risk_measure=args.risk_measure)
+        written += [Path(path) for path in analysis["files"]["path"]]
         if args.per_participant_sigma:
             from lgp import build_stage
 
@@ -414,25 +541,46 @@ def run(args) -> int:
             written += paths
             sections.append(section)
     else:
-        _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
+        pairs = declared_pair_orderings(effort, risk, sigma, trials)
+        if pairs is not None:
+            written.append(write_csv_atomic(pairs, out / "pairs.csv"))
+        _log("not all of the paper's 24 trials: no figures or fits (they need all 24); "
+             + (f"pair table for the {len(pairs)} pair(s) whose E and H trials are both in the run" if pairs is not None
+                else "no pair table (no trial files declare both trials of a pair)"))
     clock.lap("analysis")
     software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
-    report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None, time.perf_counter() - t0, software)
+    compute = cache.compute_time()
+    report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None,
+                          time.perf_counter() - t0, software, compute)
     if sections:
         from lgp.build_stage import append_report
 
         append_report(report, sections)
     written.append(report)
     written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
+    if (out / "page").is_dir():
+        written.append(out / "page")
     _log(f"cache: {cache.summary()}")
-    print(f"Outputs in {out.resolve()}:")
-    for path in written:
+    parameters = {"trials": [t.id for t in trials], "samples": args.samples, "n_sims": args.n_sims,
+                  "sigmas": list(args.sigmas), "sigma_of_pairs": sigma if pairs is not None else None,
+                  "engine": args.engine, "seed": args.seed, "n_boot": args.n_boot, "quick": args.quick,
+                  "no_cache": args.no_cache, "build_risk": args.build_risk, "build_sigmas": args.build_sigmas,
+                  "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
+                  "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
+                  "sensitivity": getattr(args, "sensitivity", None)}
+    inputs = {"trial_files": {t.id: t.digest for t in trials},
+              "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
+    files = list(dict.fromkeys(expand(written)))
+    manifest = write_manifest(out, files, command=[PROG, *(sys.argv[1:] if argv is None else argv)],
+                              parameters=parameters, inputs=inputs, input_hash=input_hash(**parameters, **inputs),
+                              engine=engine_description(args.engine, software["engine"]), software=software,
+                              run_time_s=round(time.perf_counter() - t0, 1),
+                              compute_time_s=round(compute[0], 1), compute_time_unknown_results=compute[1])
+    print(f"Outputs of this run in {out.resolve()} (listed in {manifest.name}):")
+    for path in files + [manifest]:
         print(f"  {path}")
-    for sub in ("analysis", "figures"):
-        if (out / sub).exists():
-            print(f"  {out / sub}/ ({len(list((out / sub).iterdir()))} files: CSVs and figures)")
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(cli.run_cli(main, prog=PROG))

@@ -10,17 +10,21 @@ From a script, use ``lgp.plan(...)`` (lgp/planner.py) and ``lgp.view.write_html`
 """
 from __future__ import annotations
 
-import argparse
 import sys
+
+from lgp import cli
+
+PROG = "python -m lgp.show"
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m lgp.show", description=__doc__.splitlines()[0])
-    parser.add_argument("trial", help="trial id, e.g. 7H")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the run, as `lgp.reproduce --seed` (default 0)")
-    parser.add_argument("--sample", type=int, default=0, help="layout index K: replays row (trial, K) of effort_samples.csv (default 0)")
-    parser.add_argument("--html", help="write a self-contained 3-D replay here")
-    parser.add_argument("--png", help="write a figure of block paths and speeds here")
+    parser = cli.parser(PROG, description=__doc__.splitlines()[0])
+    parser.add_argument("trial", type=cli.trial_id, help="trial id, e.g. 7H (case-insensitive)")
+    parser.add_argument("--seed", type=cli.seed, default=0, help="seed of the run, as `lgp.reproduce --seed` (default 0)")
+    parser.add_argument("--sample", type=cli.seed, default=0,
+                        help="layout index K >= 0: replays row (trial, K) of effort_samples.csv (default 0)")
+    parser.add_argument("--html", type=cli.output_file, help="write a self-contained 3-D replay here (its folder must exist)")
+    parser.add_argument("--png", type=cli.output_file, help="write a figure of block paths and speeds here (its folder must exist)")
     parser.add_argument("--formulation", default="reduced", choices=("reduced", "full"))
     parser.add_argument("--solver", default="snopt", choices=("snopt", "ipopt"))
     args = parser.parse_args(argv)
@@ -49,4 +53,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(cli.run_cli(main, prog=PROG))

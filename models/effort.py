@@ -21,13 +21,13 @@ Command line, the table of docs/effort.md::
 """
 from __future__ import annotations
 
-import argparse
 import sys
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 import pandas as pd
 
+from lgp import cli
 from lgp.paper import SAMPLES
 from lgp.executor import borrowed
 from lgp.planner import PHASE_DURATION, PlanningError, plan
@@ -121,6 +121,18 @@ def effort_of_sample(trial, seed: int, sample: int) -> dict:
     }
 
 
+class EffortResult(NamedTuple):
+    """What `physical_effort` returns: ``.mean`` the mean effort over the layouts
+    (J s) and ``.table`` one row per layout (columns COLUMNS). A named tuple, so
+    ``mean, table = physical_effort(...)`` works too."""
+
+    mean: float
+    table: pd.DataFrame
+
+    def __repr__(self) -> str:
+        return f"EffortResult(mean={self.mean:.6g} J*s over {len(self.table)} layouts)"
+
+
 def effort_units(trial, samples: int, seed: int) -> list[tuple]:
     """The work units of a trial's effort, (trial, seed, sample), one per layout
     that needs planning: every sample, or only sample 0 when A is not random."""
@@ -142,8 +154,10 @@ def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
 
 
 def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
-                    progress: Callable[[int, int], None] | None = None, executor=None) -> tuple[float, pd.DataFrame]:
-    """Mean physical effort (J s) of `trial` over `samples` random layouts, and the tidy table.
+                    progress: Callable[[int, int], None] | None = None, executor=None) -> EffortResult:
+    """Physical effort of `trial` over `samples` random layouts: an `EffortResult`
+    with ``.mean`` (J s) and ``.table`` (one row per layout: trial, sample, effort,
+    n_actions, solve_time, solver, status).
 
     `trial` is a stimuli.Trial or its id ("7H"). Sample i draws its layout with
     numpy.random.default_rng([seed, i]); `jobs` > 1 spreads samples over that many
@@ -170,16 +184,19 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
     with borrowed(executor, jobs if len(units) > 1 else 1) as ex:
         rows = ex.map(effort_of_unit, units, record)
     table = effort_table(trial, samples, rows)
-    return float(table["effort"].mean()), table
+    return EffortResult(float(table["effort"].mean()), table)
+
+
+PROG = "python -m models.effort"
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m models.effort", description="Physical effort of every trial.")
-    parser.add_argument("trials", nargs="*", help="trial ids (default: all 24)")
-    parser.add_argument("--samples", type=int, default=SAMPLES)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("--out", help="write the per-sample table (CSV) here")
+    parser = cli.parser(PROG, description="Physical effort of every trial.")
+    parser.add_argument("trials", nargs="*", type=cli.trial_id, help="trial ids (default: all 24; case-insensitive)")
+    parser.add_argument("--samples", type=cli.positive_int, default=SAMPLES, help="layouts per trial (default %(default)s)")
+    parser.add_argument("--seed", type=cli.seed, default=0)
+    parser.add_argument("--jobs", type=cli.positive_int, default=1)
+    parser.add_argument("--out", type=cli.output_file, help="write the per-sample table (CSV) here")
     args = parser.parse_args(argv)
 
     import stimuli
@@ -198,4 +215,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(cli.run_cli(main, prog=PROG))

@@ -7,11 +7,10 @@ the structures at a glance against the paper's Figure 1.
 """
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 
 import stimuli
+from lgp import cli
 from lgp.paper import COLOURS, display_hex
 from lgp.scene import Scene
 
@@ -74,15 +73,21 @@ def contact_sheet(trials, seed: int = 0, out: str = "stimuli.png") -> str:
     return out
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", default="stimuli.png")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--trials", nargs="*", help="trial ids (default: all)")
+PROG = "python -m stimuli.sheet"
+
+
+def main(argv=None) -> int:
+    import argparse
+
+    parser = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", default="stimuli.png", type=cli.output_file, help="PNG to write (its folder must exist)")
+    parser.add_argument("--seed", type=cli.seed, default=0)
+    parser.add_argument("--trials", nargs="+", type=cli.trial_id, help="trial ids (default: all; case-insensitive)")
     args = parser.parse_args(argv)
     trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
     print(contact_sheet(trials, args.seed, args.out))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(cli.run_cli(main, prog=PROG))

@@ -116,13 +116,13 @@ def test_run_analysis_on_simulated_participants_writes_labelled_tables_and_figur
     summary = out["bootstrap_summary"].set_index(["dataset", "model"])
     for dataset in ("simulated-difficulty", "simulated-time", "simulated-build"):
         assert summary.loc[(dataset, "full"), "r_low"] > summary.loc[(dataset, "effort"), "r_high"]
-        assert len(out["pairs"].query("dataset == @dataset and source == 'full'")) == 12
+        assert len(out["orderings"].query("dataset == @dataset and source == 'full'")) == 12
     assert len(out["bootstrap_correlations"]) == 3 * 3 * 200
     assert len(out["bootstrap_tests"]) == 3 * 3
     # Every file name says simulated, every figure title says simulated participants.
     paths = out["files"]["path"].tolist()
     assert all("simulated" in p.split("/")[-1] for p in paths)
-    for key in ("fits", "sigma_profile", "bootstrap_tests", "pairs", "trial_means"):
+    for key in ("fits", "sigma_profile", "bootstrap_tests", "orderings", "trial_means"):
         assert (tmp_path / f"simulated_{key}.csv").exists()
     pngs = [p for p in paths if p.endswith(".png")]
     assert len(pngs) == 4 and sum(p.endswith(".pdf") for p in paths) == 4
@@ -133,7 +133,7 @@ def test_run_analysis_on_simulated_participants_writes_labelled_tables_and_figur
 def test_run_analysis_without_human_data_writes_pairs_and_effort_risk_figure(tmp_path, E, RISK):
     out = run_analysis(None, E, RISK, tmp_path, seed=0)
     assert out["settings"].iloc[0]["sigma"] == pytest.approx(0.065)
-    assert out["pairs"]["source"].value_counts().to_dict() == {"effort": 12, "risk": 12}
+    assert out["orderings"]["source"].value_counts().to_dict() == {"effort": 12, "risk": 12}
     png = tmp_path / "effort_risk_pairs.png"
     assert png.exists() and (tmp_path / "effort_risk_pairs.pdf").exists()
     assert "SIMULATED" not in Image.open(png).text["Title"]

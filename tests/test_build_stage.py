@@ -78,3 +78,16 @@ def test_participant_sigma_outputs_are_labelled_simulated(tmp_path):
     assert (tmp_path / "simulated_participant_sigma.csv").exists()
     assert any(p.name == "simulated_participant_sigma.png" for p in paths)
     assert "SIMULATED" in section and "simulated-time" in section
+
+
+def test_models_risk_cli_prints_a_stage_curve(capsys, tmp_path):
+    from models.risk.__main__ import main
+
+    out = tmp_path / "stages.csv"
+    assert main(["--build-risk", "9E", "--samples", "1", "--n-sims", "3", "--jobs", "1", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "9E sigma 0.065 d: risk by stage" in text and "stage  2" in text
+    assert len(pd.read_csv(out)) == 2  # 9E moves 2 blocks: 2 stages at one sigma
+    with pytest.raises(SystemExit):
+        main(["--build-risk", "99X"])
+    assert "unknown trial id '99X'" in capsys.readouterr().err

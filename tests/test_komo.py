@@ -71,6 +71,20 @@ def test_free_point_full_and_reduced_programs_agree():
     np.testing.assert_allclose(reduced.q, full.q, atol=1e-6)
 
 
+def test_linear_structure_is_built_once_per_declaration_and_again_when_it_changes(monkeypatch):
+    import lgp.komo.solve as solve_module
+
+    built = []
+    real = solve_module.linear_structure
+    monkeypatch.setattr(solve_module, "linear_structure", lambda komo: built.append(1) or real(komo))
+    komo = cubic_komo(20)
+    result = komo.solve(seeds={1.0: [1.0]})  # interpolates the seeds, solves, evaluates the cost
+    komo.reduced_cost(result.keyframes)
+    assert len(built) == 1
+    komo.add_objective([0.5], "qItself", type="sos", scale=10.0, target=[0.2])
+    moved = komo.solve()
+    assert len(built) == 2 and moved.cost > result.cost  # the new sos term is in the cost
+
 def test_free_slice_over_a_joint_limit_is_promoted_and_the_limit_holds():
     # Reaching 0.9 at a quarter of the phase and 1.0 at rest at the end overshoots 1.0
     # in between when unconstrained; with the limit at 1.0 every slice must obey it.

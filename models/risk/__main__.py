@@ -16,32 +16,36 @@ tidy stage table.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
+from lgp import cli
 from lgp.paper import N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID
 from models.risk.core import DEFAULT_ENGINE, _engine_name, check_fall_rule, risk_table, summarise
 from models.risk.engine import DEFAULT_FALL_RULE, ENGINES, FALL_RULES, FALL_THRESHOLD, PROFILES
 
 
+PROG = "python -m models.risk"
+
+
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m models.risk", description=__doc__.splitlines()[0])
-    p.add_argument("--table", help="CSV to write: trial, sigma, risk, falls, n, engine, fall_rule, fall_threshold")
-    p.add_argument("--runs", help="also write the per-run CSV here")
-    p.add_argument("--n-sims", type=int, default=N_SIMS, help="simulations per trial and sigma (default %(default)s)")
-    p.add_argument("--seed", type=int, default=0)
+    p = cli.parser(PROG, description=__doc__.splitlines()[0])
+    p.add_argument("--table", type=cli.output_file, help="CSV to write: trial, sigma, risk, falls, n, engine, fall_rule, fall_threshold")
+    p.add_argument("--runs", type=cli.output_file, help="also write the per-run CSV here")
+    p.add_argument("--n-sims", type=cli.positive_int, default=N_SIMS, help="simulations per trial and sigma (default %(default)s)")
+    p.add_argument("--seed", type=cli.seed, default=0)
     p.add_argument("--engine", default=DEFAULT_ENGINE, help=f"physics engine: {', '.join(ENGINES)} (default %(default)s)")
     p.add_argument("--profile", help="engine profile: " + "; ".join(f"{e}: {', '.join(v)}" for e, v in PROFILES.items())
                    + " (default: faithful; game-defaults is unfaithful, docs/risk.md)")
     p.add_argument("--fall-rule", default=DEFAULT_FALL_RULE, help=f"{' or '.join(FALL_RULES)} displacement (default %(default)s)")
     p.add_argument("--fall-threshold", type=float, default=FALL_THRESHOLD, help="fall threshold in units of d (default %(default)s)")
-    p.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
-    p.add_argument("--sigmas", type=float, nargs="+", default=list(SIGMA_GRID), help="noise SDs, fractions of d")
-    p.add_argument("--trials", nargs="+", help="trial ids (default: all 24)")
-    p.add_argument("--build-risk", nargs="+", metavar="TRIAL", help="print the stage curve of these trials ('all': the 24)")
-    p.add_argument("--samples", type=int, default=SAMPLES, help="layouts of A per trial for --build-risk (default %(default)s)")
-    p.add_argument("--out", help="with --build-risk: write the stage table (CSV) here")
+    p.add_argument("--jobs", type=cli.positive_int, default=None, help="worker processes (default: all cores)")
+    p.add_argument("--sigmas", type=cli.sigma, nargs="+", default=list(SIGMA_GRID), help="noise SDs in (0, 1], fractions of d")
+    p.add_argument("--trials", type=cli.trial_id, nargs="+", help="trial ids (default: all 24; case-insensitive)")
+    p.add_argument("--build-risk", nargs="+", metavar="TRIAL", type=cli.trial_id_or_all,
+                   help="print the stage curve of these trials ('all': the 24)")
+    p.add_argument("--samples", type=cli.positive_int, default=SAMPLES, help="layouts of A per trial for --build-risk (default %(default)s)")
+    p.add_argument("--out", type=cli.output_file, help="with --build-risk: write the stage table (CSV) here")
     args = p.parse_args(argv)
     try:
         args.engine = _engine_name(args.engine, args.profile)
@@ -119,4 +123,4 @@ def _build_risk(args) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(cli.run_cli(main, prog=PROG))

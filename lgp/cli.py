@@ -1,0 +1,286 @@
+"""What every command line of the project shares: argument checks, one-line errors, Ctrl-C.
+
+Each CLI (``python -m lgp.reproduce``, ``lgp.show``, ``models.risk``,
+``models.effort``, ``analysis.demo``, ``stimuli.sheet``) builds its parser with
+`parser`, checks its arguments with the ``type=`` validators below (so a bad
+count, sigma, trial id or path fails before any work, with argparse's usage line
+and exit code 2), and runs under `run_cli`:
+
+- an error the project raises on purpose (an exception class of the project, a
+  ValueError raised by the project's own code, an OSError) prints one line
+  ``prog: error: ...`` and exits 1 (bad data: a trial file, a human-data file, a
+  results folder, a plan that cannot be made); ``--debug`` or ``LGP_DEBUG=1`` in
+  the environment shows the traceback as well;
+- any other exception is a bug and keeps its traceback;
+- Ctrl-C prints one line (the CLI says what survives, e.g. the cache) and exits 130.
+
+Trial ids are case-insensitive everywhere (``7h`` is ``7H``; `lgp.paper.canonical_trial_id`).
+This module imports nothing of the project but `lgp.paper`, so a CLI on any floor may use it.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import re
+import sys
+import traceback
+from pathlib import Path
+from typing import Callable, Sequence
+
+from lgp.paper import TRIAL_IDS, canonical_trial_id
+
+#: Environment variable that turns on tracebacks, like ``--debug``.
+DEBUG_ENV = "LGP_DEBUG"
+#: The project's packages: an exception class defined in one of them is a known error.
+PROJECT_PACKAGES = ("lgp", "models", "analysis", "stimuli")
+_ROOT = Path(__file__).resolve().parent.parent
+#: Exit codes: 1 bad data or environment, 2 bad usage (argparse), 130 Ctrl-C (128 + SIGINT).
+EXIT_DATA, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
+
+
+# ----------------------------------------------------------------------------- validators (argparse type=)
+
+
+def positive_int(text: str) -> int:
+    """A whole number >= 1 (counts: --samples, --n-sims, --jobs, --n-boot ...)."""
+    try:
+        value = int(str(text).strip(), 10)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
+    return value
+
+
+def nonnegative_int(text: str) -> int:
+    """A whole number >= 0 (seeds: numpy Generators take no negative seed; indices)."""
+    try:
+        value = int(str(text).strip(), 10)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}")
+    return value
+
+
+seed = nonnegative_int
+
+
+def sigma(text: str) -> float:
+    """A noise SD in units of the block length d, in (0, 1]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1] (units of d), got {text!r}") from None
+    if not (math.isfinite(value) and 0 < value <= 1):
+        raise argparse.ArgumentTypeError(f"a sigma must be in (0, 1] (units of the block size d), got {text!r}")
+    return value
+
+
+def trial_id(text: str) -> str:
+    """A trial id, case-insensitive, returned in its canonical spelling: the paper's
+    1E ... 12H, or another <pair><E|H> (a trial file the loader then looks for)."""
+    tid = canonical_trial_id(text)
+    if tid not in TRIAL_IDS and not re.fullmatch(r"\d+[EH]", tid) and not re.fullmatch(r"[A-Z][A-Z0-9_-]{0,63}", tid):
+        raise argparse.ArgumentTypeError(f"unknown trial id {text!r}; expected <pair><E|H> such as 1E, 1H, ..., 12H "
+                                         "or the name of a trial of no pair such as G0001 (case-insensitive)")
+    return tid
+
+
+def trial_id_or_all(text: str) -> str:
+    """A trial id (see `trial_id`) or the word ``all``."""
+    return "all" if str(text).strip().lower() == "all" else trial_id(text)
+
+
+def _nearest_existing(path: Path) -> Path:
+    path = path.absolute()
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def output_dir(text: str) -> str:
+    """A directory that exists and is writable, or can be created (its nearest
+    existing ancestor is a writable directory)."""
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} exists and is not a directory")
+    base = _nearest_existing(path)
+    if not base.is_dir():
+        raise argparse.ArgumentTypeError(f"cannot create directory {text!r}: {base} is not a directory")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"cannot write to {text!r}: {base} is not writable")
+    return text
+
+
+def output_file(text: str) -> str:
+    """A file to write whose directory already exists and is writable."""
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a directory, expected a file name")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise argparse.ArgumentTypeError(f"cannot write {text!r}: directory {str(parent)!r} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise argparse.ArgumentTypeError(f"cannot write {text!r}: not writable")
+    return text
+
+
+def input_file(text: str) -> str:
+    """A file that exists and can be read."""
+    path = Path(text)
+    if not path.exists():
+        raise argparse.ArgumentTypeError(f"{text!r} does not exist")
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a file")
+    if not os.access(path, os.R_OK):
+        raise argparse.ArgumentTypeError(f"{text!r} is not readable")
+    return text
+
+
+def input_dir(text: str) -> str:
+    """A directory that exists and can be read."""
+    path = Path(text)
+    if not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a directory" if path.exists() else f"{text!r} does not exist")
+    if not os.access(path, os.R_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"{text!r} is not readable")
+    return text
+
+
+# ----------------------------------------------------------------------------- parser and runner
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line on stderr (exit 2); --help shows the usage."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (--help shows the usage)\n")
+
+
+def parser(prog: str, description: str | None = None, **kwargs) -> argparse.ArgumentParser:
+    """An ArgumentParser with the shared ``--debug`` flag whose usage errors are one line."""
+    p = _Parser(prog=prog, description=description, **kwargs)
+    p.add_argument("--debug", action="store_true",
+                   help=f"show the traceback of an error (or set {DEBUG_ENV}=1)")
+    return p
+
+
+def debug_requested(argv: Sequence[str] | None = None) -> bool:
+    argv = sys.argv[1:] if argv is None else argv
+    return "--debug" in argv or os.environ.get(DEBUG_ENV, "").strip().lower() not in ("", "0", "false", "no")
+
+
+def _raised_in_project(exc: BaseException) -> bool:
+    tb = exc.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    path = Path(tb.tb_frame.f_code.co_filename).resolve()
+    try:
+        rel = path.relative_to(_ROOT)
+    except ValueError:
+        return False
+    return rel.parts[0] in PROJECT_PACKAGES
+
+
+def is_known_error(exc: BaseException) -> bool:
+    """An error the project raises on purpose: a class of its own (StimulusError,
+    HumanDataError, ModelInputError, PlanningError, UnstableSceneError, ...), a
+    ValueError raised by its own code (a check), or an OSError (a file). Anything
+    else (a ValueError from inside numpy, a TypeError ...) is a bug."""
+    if isinstance(exc, OSError):
+        return True
+    if not isinstance(exc, Exception):
+        return False
+    if type(exc).__module__.split(".")[0] in PROJECT_PACKAGES:
+        return True
+    return isinstance(exc, ValueError) and _raised_in_project(exc)
+
+
+def one_line(exc: BaseException) -> str:
+    """The message of `exc` on one line: its first line, and how many more there were."""
+    text = str(exc).strip() or type(exc).__name__
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        text = f"{exc.filename}: {exc.strerror}"
+    lines = [line for line in text.splitlines() if line.strip()]
+    if len(lines) > 1:
+        return f"{lines[0]} (and {len(lines) - 1} more line(s); --debug shows all)"
+    return lines[0]
+
+
+def run_cli(main: Callable[[Sequence[str] | None], int | None], argv: Sequence[str] | None = None, *,
+            prog: str, interrupted: str = "interrupted") -> int:
+    """Run ``main(argv)`` and turn known errors and Ctrl-C into one line on stderr.
+
+    Returns the exit code (main's, 1 for a known error, 130 for Ctrl-C); argparse's
+    own exit (2 for usage) passes through as SystemExit. Use as
+    ``raise SystemExit(run_cli(main, prog=PROG))``.
+    """
+    debug = debug_requested(argv)
+    try:
+        return int(main(argv) or 0)
+    except KeyboardInterrupt:
+        return _interrupted(prog, interrupted, debug)
+    except Exception as exc:
+        if _caused_by_interrupt(exc):  # e.g. pydrake turns Ctrl-C during its import into ImportError
+            return _interrupted(prog, interrupted, debug)
+        if not is_known_error(exc):
+            raise
+        if debug:
+            traceback.print_exc()
+        print(f"{prog}: error: {one_line(exc)}", file=sys.stderr, flush=True)
+        return EXIT_DATA
+
+
+class deferred_interrupt:
+    """Context manager: a Ctrl-C inside the block takes effect when the block ends.
+
+    For imports of compiled libraries: pydrake turns a KeyboardInterrupt during its
+    import into ImportError, logs a critical message, and leaves CPython marked to
+    kill itself with SIGINT at exit. Main thread only (elsewhere it does nothing).
+    """
+
+    def __enter__(self):
+        import signal
+
+        self.hit, self.old = False, None
+        try:
+            self.old = signal.signal(signal.SIGINT, self._note)
+        except ValueError:  # not the main thread
+            pass
+        return self
+
+    def _note(self, signum, frame):
+        self.hit = True
+
+    def __exit__(self, *exc):
+        import signal
+
+        if self.old is not None:
+            signal.signal(signal.SIGINT, self.old)
+        if self.hit and exc[0] is None:
+            raise KeyboardInterrupt
+        return False
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def _interrupted(prog: str, message: str, debug: bool) -> int:
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not interrupt the goodbye
+    if debug:
+        traceback.print_exc()
+    print(f"{prog}: {message}", file=sys.stderr, flush=True)
+    return EXIT_INTERRUPTED

@@ -1,0 +1,232 @@
+"""Every command line refuses bad input in one line, before any work, and writes nothing.
+
+Each case runs a CLI's ``main`` under `lgp.cli.run_cli` (as ``python -m ...`` does)
+and checks the exit code (2: usage, refused by argparse; 1: bad data), that stderr
+is exactly one line ``prog: error: ...`` naming the problem, and that no output
+file was written. A few cases run the real ``python -m`` command in a subprocess.
+"""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lgp import cli
+from lgp.paper import TRIAL_IDS
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _mains():
+    from analysis import demo
+    from lgp import reproduce, show
+    from models import effort
+    from models.risk import __main__ as risk_cli
+    from stimuli import sheet
+
+    return {"lgp.reproduce": reproduce, "lgp.show": show, "models.risk": risk_cli, "models.effort": effort,
+            "analysis.demo": demo, "stimuli.sheet": sheet}
+
+
+def run(module: str, argv, capsys):
+    mod = _mains()[module]
+    try:
+        code = cli.run_cli(mod.main, list(argv), prog=mod.PROG)
+    except SystemExit as e:
+        code = e.code
+    captured = capsys.readouterr()
+    return code, captured.err
+
+
+def human_csv(path: Path, response="3.5", columns=("dataset", "participant", "trial", "response")) -> str:
+    rows = [("difficulty", "p1", t, response if k == 5 else str(k % 7)) for k, t in enumerate(TRIAL_IDS)]
+    pd.DataFrame(rows, columns=list(columns)).to_csv(path, index=False)
+    return str(path)
+
+
+def files_in(folder: Path) -> list[Path]:
+    return [p for p in folder.rglob("*") if p.is_file()] if folder.exists() else []
+
+
+# (module, arguments, exit code, words the one line must contain); {out} is an output folder
+# and {tmp} the test's temporary folder.
+BAD = [
+    ("lgp.show", ["99X"], 2, "unknown trial id '99X'"),
+    ("lgp.show", ["13E"], 1, "no trial '13E'"),
+    ("lgp.show", ["7H", "--sample", "-1"], 2, "--sample"),
+    ("lgp.show", ["7H", "--seed", "x"], 2, "--seed"),
+    ("lgp.show", ["7H", "--png", "/nonexistent/dir/x.png"], 2, "does not exist"),
+    ("lgp.show", ["7H", "--html", "/nonexistent/dir/x.html"], 2, "does not exist"),
+    ("lgp.reproduce", ["--out", "{out}", "--trials", "99X"], 2, "unknown trial id"),
+    ("lgp.reproduce", ["--out", "{out}", "--trials"], 2, "--trials"),
+    ("lgp.reproduce", ["--out", "{out}", "--trials", "13h"], 1, "no trial '13H'"),
+    ("lgp.reproduce", ["--out", "{out}", "--samples", "0"], 2, "--samples"),
+    ("lgp.reproduce", ["--out", "{out}", "--samples", "-1"], 2, "--samples"),
+    ("lgp.reproduce", ["--out", "{out}", "--samples", "1.5"], 2, "--samples"),
+    ("lgp.reproduce", ["--out", "{out}", "--n-sims", "0"], 2, "--n-sims"),
+    ("lgp.reproduce", ["--out", "{out}", "--sigmas", "-0.05"], 2, "(0, 1]"),
+    ("lgp.reproduce", ["--out", "{out}", "--sigmas", "0"], 2, "(0, 1]"),
+    ("lgp.reproduce", ["--out", "{out}", "--sigmas", "1.5"], 2, "(0, 1]"),
+    ("lgp.reproduce", ["--out", "{out}", "--sigmas", "nan"], 2, "(0, 1]"),
+    ("lgp.reproduce", ["--out", "{out}", "--jobs", "0"], 2, "--jobs"),
+    ("lgp.reproduce", ["--out", "{out}", "--n-boot", "0"], 2, "--n-boot"),
+    ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/missing.csv"], 2, "does not exist"),
+    ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/wrong_columns.csv"], 1, "missing column(s) response"),
+    ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/non_numeric.csv"], 1, "non-numeric response 'lots'"),
+    ("lgp.reproduce", ["--out", "{out}", "--human-data", "{tmp}/good.csv", "--trials", "1E"], 1, "24 trials"),
+    ("lgp.reproduce", ["--out", "{tmp}/a_file"], 2, "not a directory"),
+    ("models.risk", ["--table", "{tmp}/t.csv", "--n-sims", "0"], 2, "--n-sims"),
+    ("models.risk", ["--table", "{tmp}/t.csv", "--n", "0"], 2, "--n-sims"),
+    ("models.risk", ["--table", "{tmp}/t.csv", "--sigmas", "-0.065"], 2, "(0, 1]"),
+    ("models.risk", ["--table", "{tmp}/t.csv", "--trials", "99X"], 2, "unknown trial id"),
+    ("models.risk", ["--table", "{tmp}/t.csv", "--jobs", "0"], 2, "--jobs"),
+    ("models.risk", ["--table", "/nonexistent/dir/t.csv"], 2, "does not exist"),
+    ("models.effort", ["99X", "--out", "{tmp}/e.csv"], 2, "unknown trial id"),
+    ("models.effort", ["7H", "--samples", "0", "--out", "{tmp}/e.csv"], 2, "--samples"),
+    ("models.effort", ["7H", "--out", "/nonexistent/dir/e.csv"], 2, "does not exist"),
+    ("analysis.demo", ["--results", "/nonexistent", "--out", "{out}"], 2, "does not exist"),
+    ("analysis.demo", ["--results", "{tmp}/empty", "--out", "{out}"], 1, "effort_samples.csv does not exist"),
+    ("analysis.demo", ["--results", "{tmp}/empty", "--out", "{out}", "--n-boot", "0"], 2, "--n-boot"),
+    ("stimuli.sheet", ["--out", "/nodir/s.png"], 2, "does not exist"),
+    ("stimuli.sheet", ["--out", "{tmp}/s.png", "--trials", "99X"], 2, "unknown trial id"),
+    ("stimuli.sheet", ["--out", "{tmp}/s.png", "--trials"], 2, "--trials"),
+]
+
+
+@pytest.mark.parametrize("module, argv, code, words", BAD, ids=[f"{m} {' '.join(a)}" for m, a, _, _ in BAD])
+def test_bad_input_fails_in_one_line_before_any_work_and_writes_nothing(module, argv, code, words, tmp_path, capsys):
+    out = tmp_path / "out"
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "a_file").write_text("not a folder")
+    human_csv(tmp_path / "good.csv")
+    human_csv(tmp_path / "wrong_columns.csv", columns=("dataset", "participant", "trial", "answer"))
+    human_csv(tmp_path / "non_numeric.csv", response="lots")
+    before = set(files_in(tmp_path))
+    argv = [a.format(out=out, tmp=tmp_path) for a in argv]
+    t0 = time.perf_counter()
+    got, err = run(module, argv, capsys)
+    assert got == code, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"python -m {module}: error: ") and words in lines[0], lines[0]
+    assert "Traceback" not in err
+    assert set(files_in(tmp_path)) == before  # nothing written anywhere
+    assert not files_in(out)
+    assert time.perf_counter() - t0 < 20  # refused before the expensive stages
+
+
+def test_trial_ids_are_case_insensitive_on_the_command_line_and_in_the_loaders(tmp_path):
+    import argparse
+
+    import stimuli
+    from analysis import load_human_data
+
+    assert cli.trial_id("7h") == cli.trial_id(" 7H ") == "7H"
+    assert stimuli.load_trial("7h") is stimuli.load_trial("7H")
+    path = tmp_path / "h.csv"
+    pd.DataFrame([("time", "p", t.lower(), k) for k, t in enumerate(TRIAL_IDS)],
+                 columns=["dataset", "participant", "trial", "response"]).to_csv(path, index=False)
+    assert list(load_human_data(path)["trial"]) == list(TRIAL_IDS)
+    with pytest.raises(argparse.ArgumentTypeError):
+        cli.trial_id("7X")
+    with pytest.raises(stimuli.StimulusError, match="no trial '13E'"):
+        stimuli.load_trial("13e")  # a well-formed id without a file: the loader's one-line error
+
+
+def test_counts_and_sigmas_are_checked_exactly():
+    import argparse
+
+    assert cli.positive_int("3") == 3
+    assert cli.sigma("1") == 1.0 and cli.sigma("0.065") == 0.065
+    for bad in ("0", "-2", "1.5", "1e3", "", "three"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            cli.positive_int(bad)
+    for bad in ("0", "-0.05", "1.0001", "inf", "nan", "x"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            cli.sigma(bad)
+
+
+def test_a_bug_keeps_its_traceback_and_a_known_error_is_one_line(capsys):
+    def numpy_bug(argv):
+        np.zeros(2).reshape(3)  # a ValueError raised inside numpy: a bug, not bad input
+
+    with pytest.raises(ValueError):
+        cli.run_cli(numpy_bug, [], prog="p")
+
+    def project_check(argv):
+        from models.effort import physical_effort
+
+        physical_effort("7H", samples=0)  # a ValueError raised by the project's own check
+
+    assert cli.run_cli(project_check, [], prog="p") == 1
+    assert capsys.readouterr().err == "p: error: physical_effort needs samples >= 1, got 0\n"
+
+    def many_problems(argv):
+        from analysis import HumanDataError
+
+        raise HumanDataError("h.csv: line 2: non-numeric response 'x'\nh.csv: line 3: empty participant id")
+
+    assert cli.run_cli(many_problems, [], prog="p") == 1
+    assert capsys.readouterr().err == ("p: error: h.csv: line 2: non-numeric response 'x' "
+                                       "(and 1 more line(s); --debug shows all)\n")
+
+
+def test_debug_flag_and_environment_variable_show_the_traceback(capsys, monkeypatch):
+    from stimuli import StimulusError
+
+    def fails(argv):
+        raise StimulusError("7H-B block b3 overlaps b2 by 4 mm")
+
+    assert cli.run_cli(fails, [], prog="p") == 1
+    assert capsys.readouterr().err.count("\n") == 1
+    assert cli.run_cli(fails, ["--debug"], prog="p") == 1
+    assert "Traceback" in capsys.readouterr().err
+    monkeypatch.setenv("LGP_DEBUG", "1")
+    assert cli.run_cli(fails, [], prog="p") == 1
+    err = capsys.readouterr().err
+    assert "Traceback" in err and err.strip().splitlines()[-1] == "p: error: 7H-B block b3 overlaps b2 by 4 mm"
+
+
+def test_keyboard_interrupt_is_one_line_and_exit_130(capsys):
+    def interrupted(argv):
+        raise KeyboardInterrupt
+
+    assert cli.run_cli(interrupted, [], prog="p", interrupted="interrupted; finished trials are cached, rerun to resume") == 130
+    assert capsys.readouterr().err == "p: interrupted; finished trials are cached, rerun to resume\n"
+
+
+def _env():
+    return {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+
+
+@pytest.mark.parametrize("argv, code", [(["-m", "lgp.show", "99X"], 2), (["-m", "stimuli.sheet", "--out", "/nodir/s.png"], 2),
+                                        (["-m", "lgp.reproduce", "--sigmas", "-0.05", "--out", "{tmp}/r"], 2)])
+def test_python_dash_m_commands_exit_with_one_line(argv, code, tmp_path):
+    argv = [a.format(tmp=tmp_path) for a in argv]
+    proc = subprocess.run([sys.executable, *argv], capture_output=True, text=True, env=_env(), cwd=tmp_path, timeout=120)
+    assert proc.returncode == code
+    assert len(proc.stderr.strip().splitlines()) == 1 and "error:" in proc.stderr
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("after", [0.3, 2.5])
+def test_ctrl_c_during_a_run_prints_one_line_and_exits_130(tmp_path, after):
+    """SIGINT while Drake loads (0.3 s) or effort is being planned: one line, exit 130, no traceback."""
+    proc = subprocess.Popen([sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "3H", "--samples", "30", "--jobs", "1",
+                             "--no-cache", "--out", str(tmp_path / "r")], stderr=subprocess.PIPE, text=True, env=_env(),
+                            cwd=tmp_path, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as in a terminal
+    first = proc.stderr.readline()  # "lgp.reproduce: 2 trials ..." once validation is over
+    assert first.startswith("lgp.reproduce:"), first
+    time.sleep(after)
+    proc.send_signal(signal.SIGINT)
+    rest = proc.stderr.read()
+    assert proc.wait(timeout=60) == 130, rest
+    assert "Traceback" not in rest
+    last = rest.strip().splitlines()[-1]
+    assert last == "python -m lgp.reproduce: interrupted; nothing cached (--no-cache)"
