@@ -123,7 +123,7 @@ def test_no_cache_simulates_each_trial_once(tmp_path, monkeypatch):
 def _fake_physics(monkeypatch):
     """Effort and risk tables without planning or simulating: this checks which
     trials reach which stage, not model numbers (those have their own tests)."""
-    def effort(trials, samples, seed, executor, cache):
+    def effort(trials, samples, seed, executor, cache, **design):
         return pd.DataFrame([{"trial": t.id, "sample": s, "effort": 1.0 + t.pair / 10 + (t.level == "H") + s / 100}
                              for t in trials for s in range(samples)])
 
