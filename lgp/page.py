@@ -219,10 +219,10 @@ def _replay_job(item) -> float:
     from lgp.view import replay_html
     from models.effort import plan_of_sample
 
-    trial, seed, path = item
+    trial, seed, path, *options = item
     logging.getLogger("drake").setLevel(logging.WARNING)  # not a line per replay about Meshcat's port
     t0 = time.perf_counter()
-    plan = plan_of_sample(trial, seed, 0)
+    plan = plan_of_sample(trial, seed, 0, **(options[0] if options else {}))
     title = f"{trial.id}: {trial.description} (sample 0 of seed {seed})"
     page, library = split_library(replay_html(plan, title))
     path = Path(path)
@@ -232,8 +232,10 @@ def _replay_job(item) -> float:
     return time.perf_counter() - t0
 
 
-def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, executor=None, log=None) -> dict[str, Path]:
-    """``<out_dir>/<trial>.html`` for every trial: the replay of layout sample 0 of `seed`.
+def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, executor=None, log=None,
+                  planner_options: dict | None = None) -> dict[str, Path]:
+    """``<out_dir>/<trial>.html`` for every trial: the replay of layout sample 0 of `seed`
+    (planned with `planner_options`, e.g. approach_height and slices_per_phase).
 
     One plan per trial (the one behind row (trial, 0) of effort_samples.csv); a replay
     made before with the same trial, seed and code is copied from `cache`.
@@ -250,7 +252,8 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
     for trial in trials:
         paths[trial.id] = out_dir / f"{trial.id}.html"
         if cache is not None and cache.enabled:
-            cached[trial.id] = cache.root / f"replay-{input_key(trial=trial.id, digest=trial.digest, seed=seed, code=version)}.html"
+            key = input_key(trial=trial.id, digest=trial.digest, seed=seed, code=version, **(planner_options or {}))
+            cached[trial.id] = cache.root / f"replay-{key}.html"
     lib = out_dir / REPLAY_LIBRARY
     lib_cache = cache.root / f"meshcat-{drake}.min.js" if cache is not None and cache.enabled else None
     if lib_cache is not None and lib_cache.exists():
@@ -265,7 +268,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
         else:
             todo.append(trial)
     if todo:
-        times = (executor or SerialExecutor()).map(_replay_job, [(t, seed, str(paths[t.id])) for t in todo])
+        times = (executor or SerialExecutor()).map(_replay_job, [(t, seed, str(paths[t.id]), dict(planner_options or {})) for t in todo])
         if log:
             log(f"[replays] {len(todo)} trials planned (sample 0) and recorded: {sum(times):.1f} s of work, "
                 f"{max(times):.1f} s the longest")
