@@ -145,6 +145,7 @@ def noisy_scenes():
     return out
 
 
+@pytest.mark.slow  # every noisy scene in two engines
 @pytest.mark.parametrize("other", engines(["drake", "physx", GAME], failure="agree"))
 def test_engines_agree_on_the_same_noisy_scenes(other):
     scenes = noisy_scenes()
