@@ -6,6 +6,7 @@
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
     python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/sensitivity.py)
     python -m lgp.reproduce --fall-rule 3d --fall-threshold 0.1   # the risk model with another fall rule
+    python -m lgp.reproduce --approach-height 0 --slices 40       # effort with another motion design (docs/effort.md)
 
 Every expensive result (effort of one trial, risk curve of one trial) is cached
 under ``<out>/cache`` by a hash of the trial file, the parameters and the code that
@@ -28,8 +29,9 @@ import pandas as pd
 import stimuli
 from lgp import cli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
-from lgp.executor import default_jobs, executor_for, stop_signals
-from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
+from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
+from lgp.progress import Progress
+from lgp.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 from lgp.page import Stopwatch, write_index, write_replays
 from lgp import sensitivity
@@ -59,13 +61,29 @@ def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_thre
     from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
 
     name = DEFAULT_ENGINE if engine is None else engine
-    return {"code": modules_digest("models.risk", ENGINES[name].target.split(":")[0], "stimuli"),
-            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(),
+    spec = ENGINES[name]
+    extra = (spec.requires,) if spec.requires else ()  # e.g. sapien for PhysX
+    return {"code": modules_digest("models.risk", spec.target.split(":")[0], "stimuli"),
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra),
             "fall_rule": fall_rule, "fall_threshold": float(fall_threshold)}
 
 
-def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd.DataFrame:
-    """Per (trial, sample) effort, one cached file per trial.
+def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
+               slices_per_phase: int | None = None) -> str:
+    """The cache key of one trial's effort table: the trial file, M, the seed, the
+    planner's design (approach height, slices per phase) and effort_key_inputs()."""
+    from lgp.planner import APPROACH, SLICES_PER_PHASE, check_design
+
+    h, S = check_design(APPROACH if approach_height is None else approach_height,
+                        SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase)
+    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=h,
+                     slices_per_phase=S, **effort_key_inputs())
+
+
+def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
+                  slices_per_phase: int | None = None, log: bool = True) -> pd.DataFrame:
+    """Per (trial, sample) effort, one cached file per trial (and design: the
+    planner's `approach_height` and `slices_per_phase`, defaults when None).
 
     The layouts of every uncached trial are one stream of work units on the run's
     one executor (warm workers plan across trial boundaries); a trial's file is
@@ -74,36 +92,43 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
     """
     from models.effort import effort_of_unit, effort_table, effort_units
 
-    depends = effort_key_inputs()
-    keys = {t.id: input_key(trial=t.id, digest=t.digest, samples=samples, seed=seed, **depends) for t in trials}
+    from lgp.planner import APPROACH, SLICES_PER_PHASE
+
+    design = {"approach_height": APPROACH if approach_height is None else approach_height,
+              "slices_per_phase": SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase}
+    keys = {t.id: effort_key(t, samples, seed, **design) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
         cached = cache.get("effort", keys[t.id])
         if cached is not None:
             tables[t.id] = cached
     todo = [t for t in trials if t.id not in tables]
-    units = [u for t in todo for u in effort_units(t, samples, seed)]
+    units = [u for t in todo for u in effort_units(t, samples, seed, **design)]
     owner = [u[0] for u in units]
-    pending = {t.id: len(effort_units(t, samples, seed)) for t in todo}
+    pending = {t.id: len(effort_units(t, samples, seed, **design)) for t in todo}
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
     started = {t.id: None for t in todo}
     t0 = time.perf_counter()
+    bar = Progress("effort", len(units), "plans")
 
     def arrived(k, row):
+        bar.advance()
         trial = owner[k]
         rows[trial.id].append(row)
         pending[trial.id] -= 1
         if pending[trial.id] == 0:
             tables[trial.id] = cache.put("effort", keys[trial.id], effort_table(trial, samples, rows[trial.id]))
             df = tables[trial.id]
-            _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
-                 f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
+            if log:
+                _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
+                     f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
 
     for t in trials:
-        if t.id in tables and t.id not in rows:
+        if log and t.id in tables and t.id not in rows:
             _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
                  f" over {len(tables[t.id])} layouts  (cached)")
-    executor.map(effort_of_unit, units, arrived)
+    with bar:
+        executor.map(effort_of_unit, units, arrived)
     return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
@@ -120,14 +145,19 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
     tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
+    bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs")
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
+        base = bar.done
         table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
-                           fall_rule=fall_rule, fall_threshold=fall_threshold)
+                           fall_rule=fall_rule, fall_threshold=fall_threshold,
+                           progress=lambda done, total: bar.advance(base + done - bar.done))
         for t in group:
             tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
+    if todo:
+        bar.close()
     out = []
     for k, trial in enumerate(trials, 1):
         df = tables[trial.id]
@@ -165,8 +195,8 @@ def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
     order = {t.id: i for i, t in enumerate(trials)}
     g = samples.groupby("trial")["effort"]
     df = pd.DataFrame({"effort": g.mean(), "effort_sd": g.std(ddof=1), "samples": g.size()}).reset_index()
-    df["pair"] = df["trial"].str[:-1].astype(int)
-    df["level"] = df["trial"].str[-1]
+    df["pair"] = df["trial"].map({t.id: t.pair for t in trials}).astype("Int64")  # empty for a trial of no pair
+    df["level"] = df["trial"].map({t.id: t.level for t in trials})
     return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]
 
 
@@ -209,6 +239,34 @@ def pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trial
     return table
 
 
+def declared_pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trials) -> pd.DataFrame | None:
+    """pair_orderings (same columns, same tie rule) for a stimulus set other than
+    the paper's: the pairs whose E and H trials (ids <pair>E, <pair>H) are both in
+    the run; None when there are none."""
+    from analysis.pairs import pair_order
+
+    ids = {t.id for t in trials}
+    declared = sorted({t.pair for t in trials if t.pair is not None and {f"{t.pair}E", f"{t.pair}H"} <= ids})
+    if not declared:
+        return None
+    at = risk[np.isclose(risk["sigma"].astype(float), sigma, rtol=0, atol=1e-9)]
+    costs = {"effort": effort.set_index("trial")["effort"].astype(float), "risk": at.set_index("trial")["risk"].astype(float)}
+    table = pd.DataFrame({"pair": declared})
+    for name, cost in costs.items():
+        table[f"{name}_E"] = [cost[f"{p}E"] for p in declared]
+        table[f"{name}_H"] = [cost[f"{p}H"] for p in declared]
+        table[f"{name}_order"] = [pair_order(e, h) for e, h in zip(table[f"{name}_E"], table[f"{name}_H"])]
+        table[f"{name}_E_lt_H"] = table[f"{name}_order"] == "E<H"
+    table.insert(1, "dimension", table["pair"].map({t.pair: t.dimension for t in trials}))
+    table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
+    table.insert(table.columns.get_loc("risk_E"), "sigma", sigma)
+    table["full_E_lt_H_for_b2_over_b1"] = [
+        "none (tie)" if (eo == "tie" and ro == "tie") else kappa_range(*row)
+        for row, eo, ro in zip(table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy(),
+                               table["effort_order"], table["risk_order"])]
+    return table
+
+
 def _orders(pairs: pd.DataFrame, source: str) -> str:
     """'E < H in 10 of 12 pairs (tied: 6; reversed: 11)' from a pair table."""
     n = int(pairs[f"{source}_E_lt_H"].sum())
@@ -231,7 +289,8 @@ def engine_description(engine: str | None, settings: dict | None = None) -> str:
     version = settings.pop("version", None)
     text = ", ".join(f"{k} {v}" for k, v in settings.items())
     return f"{name}" + (f" {version}" if version else "") + (f" ({text})" if text else "") + \
-        ("" if engine else " [the default engine]")
+        ("" if engine else " [the default engine]") + \
+        (" [UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md]" if settings.get("faithful") is False else "")
 
 
 def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -241,6 +300,15 @@ def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
         cells = [format(v, floatfmt) if isinstance(v, (float, np.floating)) else str(v) for v in row]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _design_text(approach_height: float | None, slices: int | None) -> str:
+    """'5 cm approach legs, 20 slices per phase' (or the clearance design at height 0)."""
+    from lgp.planner import APPROACH, SLICES_PER_PHASE
+
+    h = APPROACH if approach_height is None else approach_height
+    legs = f"{h * 100:g} cm approach legs" if h > 0 else "no approach legs (clearance constraint)"
+    return f"{legs}, {SLICES_PER_PHASE if slices is None else slices} slices per phase"
 
 
 def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None,
@@ -261,7 +329,8 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         "",
         f"Settings: trials {len(effort)}, M = {args.samples} layouts, N = {args.n_sims} runs per sigma, "
         f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), "
-        f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}"
+        f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}, "
+        f"effort planned with {_design_text(getattr(args, 'approach_height', None), getattr(args, 'slices', None))}"
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
         f"Risk engine: {engine or args.engine or 'default'}.",
         compute_text,
@@ -321,6 +390,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="results", type=cli.output_dir,
                    help="output directory (default: results/); an earlier run's outputs in it are removed, its cache kept")
+    p.add_argument("--stimuli", metavar="DIR", type=cli.input_dir,
+                   help="run on the trial files of DIR (default: stimuli/trials, the paper's): all of them unless --trials "
+                   "names some; pair table only for pairs whose E and H files are both there")
     p.add_argument("--trials", nargs="+", type=cli.trial_id_or_all,
                    help="trial ids (case-insensitive), or 'all' for every trial file (default: the paper's 24)")
     p.add_argument("--samples", type=cli.positive_int, help="M, random layouts of A per trial (default 30; --quick 3)")
@@ -330,7 +402,15 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
     p.add_argument("--fall-rule", default="horizontal", help="a run falls by horizontal (default) or 3d displacement")
     p.add_argument("--fall-threshold", type=float, default=0.25, help="fall threshold in units of d (default %(default)s)")
-    p.add_argument("--jobs", type=cli.positive_int, default=default_jobs(), help="processes, >= 1 (default: all cores, %(default)s here)")
+    p.add_argument("--approach-height", type=cli.approach_height, default=None,
+                   help="effort: vertical approach/retreat leg (m) at every grasp and place; 0 = a clearance constraint "
+                        "instead (default 0.05; docs/effort.md)")
+    p.add_argument("--slices", type=cli.positive_int, default=None,
+                   help="effort: KOMO slices per 1 s phase (default 20; docs/effort.md, time discretisation)")
+    p.add_argument("--jobs", type=cli.positive_int, default=default_jobs(),
+                   help="processes, or LocalCluster workers with --scheduler local-dask, >= 1 (default: all cores, %(default)s here)")
+    p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
+                   "(a LocalCluster of --jobs workers); default: a local process pool. Needs the [dask] extra (docs/scaling.md)")
     p.add_argument("--seed", type=cli.seed, default=0)
     p.add_argument("--n-boot", type=cli.positive_int, help="bootstrap resamples (default 1000; --quick 200)")
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
@@ -366,6 +446,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.n_sims = args.n_sims if args.n_sims is not None else q.get("n_sims", N_SIMS)
     args.sigmas = tuple(dict.fromkeys(args.sigmas or q.get("sigmas", SIGMA_GRID)))
     args.n_boot = args.n_boot if args.n_boot is not None else q.get("n_boot", N_BOOT)
+    from lgp.planner import APPROACH, SLICES_PER_PHASE
+
+    args.approach_height = APPROACH if args.approach_height is None else args.approach_height
+    args.slices = SLICES_PER_PHASE if args.slices is None else args.slices
     if args.trials:
         args.trials = list(dict.fromkeys(args.trials))  # 7h and 7H are one trial
         if "all" in args.trials and len(args.trials) > 1:
@@ -391,6 +475,10 @@ def main(argv=None) -> int:
 def select_trials(ids: list[str] | None, directory=None) -> list:
     """The trials of a run: the paper's 24 by default (other trial files in the
     directory are named, not run), ``all`` for every trial file, or the ids given."""
+    if not ids and directory is not None:  # a user's stimulus set (--stimuli DIR): every trial file in it
+        if not stimuli.trial_ids(directory):
+            raise stimuli.StimulusError(f"--stimuli {directory}: no trial files (*.yaml) there")
+        return stimuli.load_all(directory)
     if not ids:
         extra = stimuli.extra_ids(directory)
         if extra:
@@ -407,7 +495,7 @@ def run(args, argv=None) -> int:
     t0 = time.perf_counter()
     clock = Stopwatch()  # wall time per stage, for the results page
     # Validate every input before anything is written or computed.
-    trials = select_trials(args.trials)
+    trials = select_trials(args.trials, args.stimuli)
     human = None
     if args.human_data:
         from analysis import load_human_data
@@ -421,18 +509,21 @@ def run(args, argv=None) -> int:
     if removed:
         _log(f"removed the outputs of an earlier run from {out}: {', '.join(removed)} (the cache is kept)")
     cache = TimedCache(out / "cache", enabled=not args.no_cache)
-    _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}; cache {cache.root}")
+    _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}"
+         f"{', scheduler ' + args.scheduler if args.scheduler else ''}; cache {cache.root}")
 
     # One executor for the whole run: its workers start now, before this process
     # imports Drake or MuJoCo, and stay warm across trials and stages.
-    with executor_for(args.jobs) as executor, cache.stage():
+    # SchedulerUnreachable / DaskMissing: one line from lgp.cli, exit 1
+    with executor_for_scheduler(args.scheduler, args.jobs) as executor, cache.stage():
         if hasattr(executor, "start"):
             executor.start()
         with cli.deferred_interrupt():  # Drake loads here; a Ctrl-C meanwhile waits until it has
             import models.effort  # noqa: F401
             import models.risk  # noqa: F401
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
-        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
+        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache,
+                                       approach_height=args.approach_height, slices_per_phase=args.slices)
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
@@ -449,7 +540,9 @@ def run(args, argv=None) -> int:
                                                    args.samples, args.seed, args.engine, executor, cache,
                                                    fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
             clock.lap("build risk")
-        replays = None if args.no_replays else write_replays(trials, args.seed, out / "replays", cache, executor, _log)
+        replays = None if args.no_replays else write_replays(
+            trials, args.seed, out / "replays", cache, executor, _log,
+            planner_options={"approach_height": args.approach_height, "slices_per_phase": args.slices})
         clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
@@ -490,7 +583,12 @@ def run(args, argv=None) -> int:
             written += paths
             sections.append(section)
     else:
-        _log("not all of the paper's 24 trials: no pair table, figures or fits (they need all 24)")
+        pairs = declared_pair_orderings(effort, risk, sigma, trials)
+        if pairs is not None:
+            written.append(write_csv_atomic(pairs, out / "pairs.csv"))
+        _log("not all of the paper's 24 trials: no figures or fits (they need all 24); "
+             + (f"pair table for the {len(pairs)} pair(s) whose E and H trials are both in the run" if pairs is not None
+                else "no pair table (no trial files declare both trials of a pair)"))
     clock.lap("analysis")
     software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
     compute = cache.compute_time()
@@ -511,7 +609,8 @@ def run(args, argv=None) -> int:
                   "no_cache": args.no_cache, "build_risk": args.build_risk, "build_sigmas": args.build_sigmas,
                   "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
                   "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
-                  "sensitivity": getattr(args, "sensitivity", None)}
+                  "sensitivity": getattr(args, "sensitivity", None), "approach_height": args.approach_height,
+                  "slices_per_phase": args.slices}
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
     files = list(dict.fromkeys(expand(written)))

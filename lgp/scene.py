@@ -195,6 +195,74 @@ def penetration(a, b) -> float:
     return min(vertical, horizontal_penetration(a, b))
 
 
+def bounding_boxes(solids) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned bounds (lo, hi), each (n, 3), of the solids' footprints x heights."""
+    return _outlines(solids)[1:]
+
+
+def _outlines(solids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Footprint corners (n, 4, 2) and bounds lo, hi (n, 3) of the solids."""
+    solids = list(solids)
+    if not solids:
+        return np.zeros((0, 4, 2)), np.zeros((0, 3)), np.zeros((0, 3))
+    corners = np.array([s.footprint() for s in solids]).reshape(len(solids), 4, 2)
+    z = np.array([[s.bottom, s.top] for s in solids]).reshape(len(solids), 2)
+    lo = np.column_stack([corners.min(axis=1), z[:, 0]])
+    hi = np.column_stack([corners.max(axis=1), z[:, 1]])
+    return corners, lo, hi
+
+
+def _box_pairs(lo_a, hi_a, lo_b, hi_b, same: bool, margin: float = 0.0, rows: int = 1024) -> tuple[np.ndarray, np.ndarray]:
+    """Index arrays (i, j) of the boxes that touch or overlap when grown by `margin`
+    (i < j when `same`), in row-major order; memory O(rows x n)."""
+    I, J = [], []
+    for start in range(0, len(lo_a), rows):
+        la, ha = lo_a[start:start + rows, None, :], hi_a[start:start + rows, None, :]
+        hit = np.all((la <= hi_b[None] + margin) & (lo_b[None] <= ha + margin), axis=2)
+        if same:
+            hit &= np.arange(len(lo_b))[None, :] > np.arange(start, start + len(la))[:, None]
+        i, j = np.nonzero(hit)
+        I.append(i + start)
+        J.append(j)
+    if not I:
+        return np.zeros(0, int), np.zeros(0, int)
+    return np.concatenate(I), np.concatenate(J)
+
+
+def near_pairs(a_solids, b_solids=None, margin: float = 0.0, rows: int = 1024) -> list[tuple[int, int]]:
+    """Broad phase: index pairs (i, j) whose bounding boxes, grown by `margin` (m),
+    touch or overlap; with one list, pairs i < j of that list.
+
+    A superset of the pairs that can penetrate or touch, found with array
+    operations; the exact checks then run on these pairs only, which keeps the
+    verdicts of the pairwise checks while a 500-block trial validates in well
+    under a second.
+    """
+    same = b_solids is None
+    _, lo_a, hi_a = _outlines(a_solids)
+    lo_b, hi_b = (lo_a, hi_a) if same else _outlines(b_solids)[1:]
+    i, j = _box_pairs(lo_a, hi_a, lo_b, hi_b, same, margin, rows)
+    return list(zip(i.tolist(), j.tolist()))
+
+
+def _sat_depths(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """horizontal_penetration for many pairs of outlines at once, A and B (P, 4, 2).
+
+    Used only to discard pairs far from a threshold: a pair near it is decided by
+    the scalar function, so rounding here cannot change a verdict.
+    """
+    edges = np.concatenate([A[:, 1:3] - A[:, 0:2], B[:, 1:3] - B[:, 0:2]], axis=1)  # (P, 4 axes, 2)
+    axes = edges / np.linalg.norm(edges, axis=2, keepdims=True)
+    pa = np.einsum("pcd,pkd->pkc", A, axes)  # (P, axis, corner)
+    pb = np.einsum("pcd,pkd->pkc", B, axes)
+    depth = np.minimum(pa.max(axis=2), pb.max(axis=2)) - np.maximum(pa.min(axis=2), pb.min(axis=2))
+    return depth.min(axis=1)
+
+
+#: Slack (m, m^2) by which the vectorised filters keep pairs near a threshold for the exact scalar check.
+_SLACK = 1e-7
+
+
 def rests_on(upper: Block, lower, tol: float = CONTACT_TOLERANCE) -> bool:
     """True when `upper`'s bottom face lies on `lower`'s top face over a real area."""
     return abs(upper.bottom - lower.top) <= tol and footprint_overlap_area(upper, lower) > MIN_SUPPORT_AREA
@@ -239,22 +307,52 @@ def validate_scene(scene: Scene) -> None:
             raise StimulusError(f"{label} block {b.name}: unknown colour {b.colour!r} (known: {', '.join(COLOURS)})")
         if b.bottom < -CONTACT_TOLERANCE:
             raise StimulusError(f"{label} block {b.name}: lies under the table (bottom at z = {b.bottom * 1000:.1f} mm)")
-    solids = list(scene.blocks)
-    for i, a in enumerate(solids):
-        for b in solids[i + 1:]:
-            depth = penetration(a, b)
-            if depth > OVERLAP_TOLERANCE:
-                raise StimulusError(f"{label} block {a.name} overlaps {b.name} by {depth * 1000:.1f} mm")
-        for f in scene.fixed:
-            depth = penetration(a, f)
-            if depth > OVERLAP_TOLERANCE:
-                raise StimulusError(f"{label} block {a.name} overlaps fixed {f.name} by {depth * 1000:.1f} mm")
-    for b in scene.blocks:
+    blocks, fixed = list(scene.blocks), list(scene.fixed)
+    cb, lob, hib = _outlines(blocks)
+    cf, lof, hif = _outlines(fixed)
+    # The first overlap in the order of a pairwise scan (block i against blocks
+    # j > i, then against fixed boxes), over the pairs the broad phase lets
+    # through and a vectorised depth does not rule out; the scalar check decides.
+    overlaps = []
+    for kind, others, C, lo, hi, same in (("", blocks, cb, lob, hib, True), ("fixed ", fixed, cf, lof, hif, False)):
+        i, j = _box_pairs(lob, hib, lo, hi, same)
+        vertical = np.minimum(hib[i, 2], hi[j, 2]) - np.maximum(lob[i, 2], lo[j, 2])
+        keep = np.minimum(vertical, _sat_depths(cb[i], C[j]) if len(i) else vertical) > OVERLAP_TOLERANCE - _SLACK
+        overlaps += [((a, int(kind != ""), c), blocks[a], others[c], kind) for a, c in zip(i[keep].tolist(), j[keep].tolist())]
+    for _, a, b, kind in sorted(overlaps, key=lambda o: o[0]):
+        depth = penetration(a, b)
+        if depth > OVERLAP_TOLERANCE:
+            raise StimulusError(f"{label} block {a.name} overlaps {kind}{b.name} by {depth * 1000:.1f} mm")
+    below = _resting_candidates(blocks, fixed, CONTACT_TOLERANCE)
+    for i, b in enumerate(blocks):
         on_table = abs(b.bottom) <= CONTACT_TOLERANCE
-        if not on_table and not any(rests_on(b, o) for o in (*scene.blocks, *scene.fixed) if o is not b):
+        if not on_table and not any(rests_on(b, o) for o in below[i]):
             raise StimulusError(
                 f"{label} block {b.name}: floats (bottom at z = {b.bottom * 1000:.1f} mm rests on neither the table nor another solid)"
             )
+
+
+def _resting_candidates(blocks: list, fixed: list, tol: float) -> list[list]:
+    """Per block, the solids it might rest on (blocks in scene order, then fixed
+    boxes): its top is within `tol` (m) of the block's bottom and their outline
+    boxes share more than MIN_SUPPORT_AREA (the outlines share at most that).
+    A superset of what `rests_on` accepts."""
+    out: list[list] = [[] for _ in blocks]
+    if not blocks:
+        return out
+    _, lob, hib = _outlines(blocks)
+    for others, is_block in ((blocks, True), (fixed, False)):
+        if not others:
+            continue
+        lo, hi = (lob, hib) if is_block else _outlines(others)[1:]
+        i, j = _box_pairs(lob, hib, lo, hi, False, margin=tol)
+        shared = np.prod(np.clip(np.minimum(hib[i, :2], hi[j, :2]) - np.maximum(lob[i, :2], lo[j, :2]), 0, None), axis=1)
+        keep = (np.abs(lob[i, 2] - hi[j, 2]) <= tol + _SLACK) & (shared > MIN_SUPPORT_AREA - _SLACK * 1e-3)
+        if is_block:
+            keep &= i != j
+        for a, c in zip(i[keep].tolist(), j[keep].tolist()):  # row-major: per block, in the others' order
+            out[a].append(others[c])
+    return out
 
 
 def colour_shortfall(initial: Scene, target: Scene) -> dict[str, tuple[int, int]]:
@@ -275,9 +373,11 @@ def support_graph(scene: Scene, tol: float = CONTACT_TOLERANCE) -> dict[str, lis
     supporter's top face and the outlines share more than MIN_SUPPORT_AREA.
     """
     graph: dict[str, list[str]] = {}
-    for b in scene.blocks:
-        under = [o.name for o in scene.blocks if o is not b and rests_on(b, o, tol)]
-        under += sorted({f.name for f in scene.fixed if rests_on(b, f, tol)})
+    below = _resting_candidates(list(scene.blocks), list(scene.fixed), tol)
+    for i, b in enumerate(scene.blocks):
+        near = below[i]
+        under = [o.name for o in near if isinstance(o, Block) and rests_on(b, o, tol)]
+        under += sorted({o.name for o in near if not isinstance(o, Block) and rests_on(b, o, tol)})
         if abs(b.bottom) <= tol:
             under.append(TABLE)
         graph[b.name] = under

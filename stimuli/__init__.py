@@ -18,16 +18,22 @@ import numpy as np
 import yaml
 
 from lgp.paper import BLOCK_SIZE, BUILD_SITE, TRIAL_IDS, canonical_trial_id
-from lgp.scene import (SOLID_SIZE, WORKSPACE_XY, Block, FixedBox, Scene, StimulusError, colour_shortfall,
+from lgp.scene import (SOLID_SIZE, WORKSPACE_XY, Block, FixedBox, Scene, StimulusError, bounding_boxes, colour_shortfall,
                        horizontal_penetration)
 
 TRIAL_DIR = Path(__file__).parent / "trials"
 TRIAL_ID = re.compile(r"^(\d+)([EH])$")
+#: Id of a trial that belongs to no pair (a user's or generated stimulus, e.g. G0001).
+FREE_ID = re.compile(r"^[A-Z][A-Z0-9_-]{0,63}$")
 
 #: Attempts to place one scattered block before the whole layout is redrawn, and
 #: redraws before the region is declared too small.
 _TRIES_PER_BLOCK = 2000
 _LAYOUT_REDRAWS = 50
+#: Largest trial file read (bytes): a 10,000-block trial is about 0.6 MB.
+MAX_TRIAL_BYTES = 2_000_000
+#: Largest |coordinate| (m) a scatter region may have.
+MAX_REGION_EXTENT = 1000.0
 
 _TRIAL_KEYS = {"id", "pair", "level", "dimension", "description", "build_site", "provenance", "fixed", "initial", "target"}
 _INITIAL_KEYS = {"blocks", "scattered", "recolour"}
@@ -98,11 +104,47 @@ class StartState:
             blocks = [replace(b, colour=colour) if i in chosen else b for i, b in enumerate(blocks)]
         return Scene(blocks, self.fixed, self.label).validate()
 
+    def check_room(self) -> None:
+        """Raise StimulusError at once when the region cannot hold the scattered
+        blocks whatever the draw: the blocks' outlines, each grown by min_gap / 2,
+        are disjoint and lie in the region's rectangle grown by d/sqrt(2) +
+        min_gap / 2 (centres lie in the rectangle), so their total area cannot
+        exceed that grown rectangle's (nor, with r_S, the grown annulus')."""
+        if not self.scattered:
+            return
+        r, d, g = self.region, BLOCK_SIZE, self.min_gap
+        bounds = [*r.x, *r.y, *(r.r_S or ())]
+        if not all(np.isfinite(bounds)) or not np.isfinite(r.x[1] - r.x[0]) or not np.isfinite(r.y[1] - r.y[0]):
+            raise StimulusError(f"{self.label} scattered region: bounds must be finite numbers (x {r.x}, y {r.y}, r_S {r.r_S})")
+        if max(abs(v) for v in bounds) > MAX_REGION_EXTENT:
+            raise StimulusError(f"{self.label} scattered region: bounds beyond {MAX_REGION_EXTENT:g} m from the origin "
+                                f"(x {r.x}, y {r.y}, r_S {r.r_S}): a table top is not that large, and block outlines "
+                                "lose their millimetre precision there")
+        if r.x[0] > r.x[1] or r.y[0] > r.y[1] or (r.r_S is not None and not 0 <= r.r_S[0] <= r.r_S[1]):
+            raise StimulusError(f"{self.label} scattered region: each range must be [min, max] with min <= max (x {r.x}, y {r.y}, r_S {r.r_S})")
+        if not (np.isfinite(g) and g >= 0 and np.isfinite(self.clearance) and self.clearance >= 0):
+            raise StimulusError(f"{self.label} scattered: min_gap and clearance must be finite and >= 0 (got {g}, {self.clearance})")
+        grow = d / np.sqrt(2) + g / 2
+        room = (r.x[1] - r.x[0] + 2 * grow) * (r.y[1] - r.y[0] + 2 * grow)
+        if r.r_S is not None:
+            room = min(room, np.pi * ((r.r_S[1] + grow) ** 2 - max(0.0, r.r_S[0] - grow) ** 2))
+        need = len(self.scattered) * (d * d + 2 * d * g + np.pi * g * g / 4)
+        if need > room:
+            raise StimulusError(f"{self.label}: cannot scatter {len(self.scattered)} blocks in region {r}: they need at least "
+                                f"{need:.4g} m^2 with min_gap {g:g} m, the region offers at most {room:.4g} m^2 (too small)")
+
     def _scatter(self, rng: np.random.Generator) -> list[Block]:
+        self.check_room()
         d = BLOCK_SIZE
-        obstacles = [*self.blocks, *self.fixed]
+        obstacles = [*self.blocks, *self.fixed, *self.keep_clear]
+        obs_lo, obs_hi = bounding_boxes(obstacles)  # broad phase against the fixed things
+        # Spatial hash of the blocks placed so far: a candidate is tested only
+        # against blocks in the 3 x 3 cells around it (cells wider than any two
+        # inflated outlines can reach), so a layout costs O(n), not O(n^2).
+        cell = np.sqrt(2) * (d + 2 * self.min_gap)
         for _ in range(_LAYOUT_REDRAWS):
             placed: list[Block] = []
+            grid: dict[tuple[int, int], list[Block]] = {}
             for name, colour in self.scattered:
                 for _ in range(_TRIES_PER_BLOCK):
                     p = np.array([rng.uniform(*self.region.x), rng.uniform(*self.region.y), d / 2])
@@ -112,17 +154,25 @@ class StartState:
                     # Inflate the candidate: gaps are measured between outlines.
                     cand_gap = Block(name, p, yaw, colour, size=np.full(3, d + 2 * self.min_gap))
                     cand_clear = Block(name, p, yaw, colour, size=np.full(3, d + 2 * self.clearance))
-                    if any(horizontal_penetration(cand_gap, o) > 0 for o in placed):
+                    ci, cj = int(np.floor(p[0] / cell)), int(np.floor(p[1] / cell))
+                    near = [o for a in (ci - 1, ci, ci + 1) for b in (cj - 1, cj, cj + 1) for o in grid.get((a, b), ())]
+                    if any(horizontal_penetration(cand_gap, o) > 0 for o in near):
                         continue
-                    if any(horizontal_penetration(cand_clear, o) > 0 for o in (*obstacles, *self.keep_clear)):
+                    reach = (d / 2 + self.clearance) * (abs(np.cos(yaw)) + abs(np.sin(yaw))) + 1e-12  # half-width of its outline box
+                    hits = np.nonzero((obs_lo[:, 0] <= p[0] + reach) & (p[0] - reach <= obs_hi[:, 0])
+                                      & (obs_lo[:, 1] <= p[1] + reach) & (p[1] - reach <= obs_hi[:, 1]))[0]
+                    if any(horizontal_penetration(cand_clear, obstacles[j]) > 0 for j in hits):
                         continue
-                    placed.append(Block(name, p, yaw, colour))
+                    block = Block(name, p, yaw, colour)
+                    placed.append(block)
+                    grid.setdefault((ci, cj), []).append(block)
                     break
                 else:
                     break
             if len(placed) == len(self.scattered):
                 return placed
-        raise StimulusError(f"{self.label}: cannot scatter {len(self.scattered)} blocks in region {self.region} (too small)")
+        raise StimulusError(f"{self.label}: cannot scatter {len(self.scattered)} blocks in region {self.region} "
+                            f"(no layout found in {_LAYOUT_REDRAWS} redraws of {_TRIES_PER_BLOCK} tries per block: too small or too crowded)")
 
 
 @dataclass(frozen=True)
@@ -130,8 +180,8 @@ class Trial:
     """One construction task: start state A, target state B, and where facts come from."""
 
     id: str
-    pair: int
-    level: str
+    pair: int | None  # None: the trial belongs to no easy/hard pair
+    level: str | None
     dimension: str
     description: str
     initial: StartState
@@ -164,34 +214,73 @@ def _check_keys(where: str, data: dict, allowed: set[str]) -> None:
 
 
 def _vector(where: str, value, n: int) -> np.ndarray:
-    try:
-        v = np.asarray(value, dtype=float).reshape(n)
-    except (TypeError, ValueError):
-        raise StimulusError(f"{where}: expected {n} numbers, got {value!r}") from None
-    return v
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise StimulusError(f"{where}: expected {n} numbers, got {value!r}")
+    return np.array([_number(where, v) for v in value], dtype=float)
+
+
+def _number(where: str, value) -> float:
+    """A real number from a YAML field, or a StimulusError naming the field.
+
+    Text that reads as a number is accepted: YAML 1.1 (PyYAML) reads ``1e-3``
+    without a dot as a string."""
+    if isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            raise StimulusError(f"{where}: expected a number, got {value!r}") from None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise StimulusError(f"{where}: expected a number, got {value!r}")
+    return float(value)  # finiteness is a rule of the scene or region it belongs to, checked there
+
+
+def _integer(where: str, value, minimum: int | None = None) -> int:
+    """A whole number from a YAML field (no strings, no fractions), at least `minimum`."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise StimulusError(f"{where}: expected a whole number, got {value!r}")
+    if minimum is not None and value < minimum:
+        raise StimulusError(f"{where}: must be >= {minimum}, got {value}")
+    return int(value)
+
+
+def _text(where: str, value) -> str:
+    if not isinstance(value, (str, int, float)) or isinstance(value, bool):
+        raise StimulusError(f"{where}: expected text, got {value!r}")
+    return str(value)
+
+
+def _range(where: str, value) -> tuple[float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise StimulusError(f"{where}: expected [min, max], got {value!r}")
+    return (_number(where, value[0]), _number(where, value[1]))
 
 
 def _block(where: str, data: dict) -> Block:
     _check_keys(where, data, _BLOCK_KEYS)
     if "name" not in data or "p_WB" not in data:
         raise StimulusError(f"{where}: a block needs a name and p_WB")
-    where = f"{where} block {data['name']}"
+    name = _text(f"{where} block name", data["name"])
+    where = f"{where} block {name}"
     size = _vector(where + " size", data.get("size", [BLOCK_SIZE] * 3), 3)
-    return Block(str(data["name"]), _vector(where + " p_WB", data["p_WB"], 3), float(data.get("yaw", 0.0)), str(data.get("colour", "natural")), size)
+    return Block(name, _vector(where + " p_WB", data["p_WB"], 3), _number(where + " yaw", data.get("yaw", 0.0)),
+                 _text(where + " colour", data.get("colour", "natural")), size)
 
 
 def _fixed(where: str, data: list) -> tuple[FixedBox, ...]:
     boxes = []
+    if data is not None and not isinstance(data, list):
+        raise StimulusError(f"{where}: expected a list of obstacles, got {data!r}")
     for obstacle in data or []:
         _check_keys(where, obstacle, {"name", "boxes"})
         if "name" not in obstacle or not isinstance(obstacle.get("boxes"), list):
             raise StimulusError(f"{where}: an obstacle needs a name and a list of boxes")
+        name = _text(f"{where} name", obstacle["name"])
         for k, box in enumerate(obstacle["boxes"]):
-            at = f"{where} {obstacle['name']} box {k + 1}"
+            at = f"{where} {name} box {k + 1}"
             _check_keys(at, box, {"p_WO", "size"})
             if "p_WO" not in box or "size" not in box:
                 raise StimulusError(f"{at}: a box needs p_WO and size")
-            boxes.append(FixedBox(str(obstacle["name"]), _vector(at + " p_WO", box["p_WO"], 3), _vector(at + " size", box["size"], 3)))
+            boxes.append(FixedBox(name, _vector(at + " p_WO", box["p_WO"], 3), _vector(at + " size", box["size"], 3)))
     return tuple(boxes)
 
 
@@ -201,10 +290,17 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     _check_keys(where, data, _TRIAL_KEYS)
     tid = str(data.get("id", ""))
     m = TRIAL_ID.match(tid)
-    if not m:
-        raise StimulusError(f"{path}: trial id {tid!r} is not of the form <pair><E|H>, e.g. 7H")
-    if int(data.get("pair", -1)) != int(m.group(1)) or data.get("level") != m.group(2):
-        raise StimulusError(f"{tid}: pair/level fields disagree with the id")
+    if m:
+        if _integer(f"{tid} pair", data.get("pair", -1)) != int(m.group(1)) or data.get("level") != m.group(2):
+            raise StimulusError(f"{tid}: pair/level fields disagree with the id")
+        pair, level = int(m.group(1)), m.group(2)
+    elif FREE_ID.match(tid):
+        if "pair" in data or "level" in data:
+            raise StimulusError(f"{tid}: pair and level need an id of the form <pair><E|H> (e.g. 7H); {tid!r} is a trial of no pair")
+        pair, level = None, None
+    else:
+        raise StimulusError(f"{path}: trial id {tid!r} is neither of the form <pair><E|H> (e.g. 7H) nor a name of "
+                            "capital letters, digits, _ and - starting with a letter (e.g. G0001; ids are upper case)")
     fixed = _fixed(f"{tid} fixed", data.get("fixed"))
     build_site = tuple(_vector(f"{tid} build_site", data.get("build_site", list(BUILD_SITE)), 2))
     if not (np.all(np.isfinite(build_site)) and np.all(np.abs(build_site) <= WORKSPACE_XY)):
@@ -212,28 +308,32 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
 
     target_data = data.get("target") or {}
     _check_keys(f"{tid}-B", target_data, {"blocks"})
-    target = Scene([_block(f"{tid}-B", b) for b in target_data.get("blocks", [])], fixed, f"{tid}-B").validate()
+    target = Scene([_block(f"{tid}-B", b) for b in _list(f"{tid}-B blocks", target_data.get("blocks", []))], fixed, f"{tid}-B").validate()
     if not target.blocks:
         raise StimulusError(f"{tid}-B: the target has no blocks")
 
     init = data.get("initial") or {}
     _check_keys(f"{tid}-A", init, _INITIAL_KEYS)
-    fixed_blocks = tuple(_block(f"{tid}-A", b) for b in init.get("blocks", []))
+    fixed_blocks = tuple(_block(f"{tid}-A", b) for b in _list(f"{tid}-A blocks", init.get("blocks", [])))
     Scene(fixed_blocks, fixed, f"{tid}-A").validate()
     scattered, region, kw = (), None, {}
     if "scattered" in init:
         s = init["scattered"]
         _check_keys(f"{tid}-A scattered", s, _SCATTER_KEYS)
-        colours = s.get("colours") or [s.get("colour", "natural")] * int(s.get("count", 0))
-        prefix = s.get("prefix", "s")
-        scattered = tuple((f"{prefix}{i + 1}", str(c)) for i, c in enumerate(colours))
+        where = f"{tid}-A scattered"
+        if "colours" in s:
+            colours = [_text(f"{where} colours", c) for c in _list(f"{where} colours", s["colours"])]
+        else:
+            colours = [_text(f"{where} colour", s.get("colour", "natural"))] * _integer(f"{where} count", s.get("count", 0), 0)
+        prefix = _text(f"{where} prefix", s.get("prefix", "s"))
+        scattered = tuple((f"{prefix}{i + 1}", c) for i, c in enumerate(colours))
         r = s.get("region") or {}
-        _check_keys(f"{tid}-A scattered region", r, {"x", "y", "r_S"})
-        try:
-            region = ScatterRegion(tuple(map(float, r["x"])), tuple(map(float, r["y"])), tuple(map(float, r["r_S"])) if "r_S" in r else None)
-        except (KeyError, TypeError, ValueError):
-            raise StimulusError(f"{tid}-A scattered region: needs x: [min, max] and y: [min, max]") from None
-        kw = {k: float(s[k]) for k in ("min_gap", "clearance") if k in s}
+        _check_keys(f"{where} region", r, {"x", "y", "r_S"})
+        if "x" not in r or "y" not in r:
+            raise StimulusError(f"{where} region: needs x: [min, max] and y: [min, max]")
+        region = ScatterRegion(_range(f"{where} region x", r["x"]), _range(f"{where} region y", r["y"]),
+                               _range(f"{where} region r_S", r["r_S"]) if "r_S" in r else None)
+        kw = {k: _number(f"{where} {k}", s[k]) for k in ("min_gap", "clearance") if k in s}
         for k, v in kw.items():
             if not 0.0 <= v <= SOLID_SIZE[1]:
                 raise StimulusError(f"{tid}-A scattered {k}: {v} m must lie in [0, {SOLID_SIZE[1]:g}] m")
@@ -246,7 +346,9 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     if "recolour" in init:
         rc = init["recolour"]
         _check_keys(f"{tid}-A recolour", rc, {"count", "colour"})
-        recolour = (int(rc["count"]), str(rc["colour"]))
+        if "count" not in rc or "colour" not in rc:
+            raise StimulusError(f"{tid}-A recolour: needs count and colour")
+        recolour = (_integer(f"{tid}-A recolour count", rc["count"], 0), _text(f"{tid}-A recolour colour", rc["colour"]))
         if recolour[0] > len(fixed_blocks):
             raise StimulusError(f"{tid}-A recolour: {recolour[0]} blocks asked, only {len(fixed_blocks)} listed")
     names = [b.name for b in fixed_blocks] + [n for n, _ in scattered]
@@ -254,12 +356,13 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     if dup:
         raise StimulusError(f"{tid}-A: duplicate block name {sorted(dup)[0]!r}")
     start = StartState(f"{tid}-A", fixed_blocks, fixed, scattered, region, recolour=recolour, build_site=build_site, keep_clear=target.blocks, **kw)
+    start.check_room()
 
     have = start.colour_counts()
     for colour, need in Counter(b.colour for b in target.blocks).items():
         if need > have.get(colour, 0):
             raise StimulusError(f"{tid}-B: needs {need} {colour} blocks but {tid}-A has {have.get(colour, 0)}")
-    trial = Trial(tid, int(m.group(1)), m.group(2), str(data.get("dimension", "")), str(data.get("description", "")), start, target, data.get("provenance") or {}, path)
+    trial = Trial(tid, pair, level, str(data.get("dimension", "")), str(data.get("description", "")), start, target, data.get("provenance") or {}, path)
     # One draw proves the region can hold the scattered blocks and A is valid.
     sample = trial.sample_initial(np.random.default_rng(0))
     if colour_shortfall(sample, target):
@@ -267,12 +370,61 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     return trial
 
 
+def _list(where: str, value) -> list:
+    if not isinstance(value, list):
+        raise StimulusError(f"{where}: expected a list, got {value!r}")
+    return value
+
+
+class _TrialLoader(yaml.SafeLoader):
+    """YAML's safe loader without anchors and aliases: a trial file never needs
+    them, and aliases let a few lines expand into gigabytes ("billion laughs")."""
+
+    def compose_node(self, parent, index):
+        _refuse_anchors(self.name, self.peek_event())
+        return super().compose_node(parent, index)
+
+
+def _refuse_anchors(where: str, event) -> None:
+    if isinstance(event, yaml.AliasEvent) or getattr(event, "anchor", None) is not None:
+        raise StimulusError(f"{where}: line {event.start_mark.line + 1}: YAML anchors and aliases (&name, *name) "
+                            "are not allowed in trial files")
+
+
+def _safe_load(text: str, where: str):
+    """yaml.safe_load without anchors and aliases; libyaml's C parser when present
+    (a first pass over the parse events refuses anchors before anything is built)."""
+    if getattr(yaml, "__with_libyaml__", False):
+        for event in yaml.parse(text, Loader=yaml.CSafeLoader):
+            _refuse_anchors(where, event)
+        return yaml.load(text, Loader=yaml.CSafeLoader)
+    loader = _TrialLoader(text)
+    loader.name = where
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
+
+
 def load_file(path: str | Path) -> Trial:
+    """Read, parse and validate one trial file (at most MAX_TRIAL_BYTES)."""
     path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text())
+        size = path.stat().st_size
+    except OSError as e:
+        raise StimulusError(f"{path}: cannot read the trial file ({e.strerror})") from None
+    if size > MAX_TRIAL_BYTES:
+        raise StimulusError(f"{path}: trial file is {size} bytes, more than the {MAX_TRIAL_BYTES} allowed (MAX_TRIAL_BYTES)")
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as e:
+        raise StimulusError(f"{path}: cannot read the trial file as UTF-8 text ({e})") from None
+    try:
+        data = _safe_load(text, str(path))
     except yaml.YAMLError as e:
         raise StimulusError(f"{path}: not valid YAML: {e}") from None
+    if not isinstance(data, dict):
+        raise StimulusError(f"{path}: a trial file is a mapping of fields (id, pair, level, initial, target, ...), got {type(data).__name__}")
     return parse_trial(data, path)
 
 

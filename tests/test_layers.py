@@ -19,7 +19,7 @@ from lgp.cache import PACKAGES, ROOT, module_imports
 #: (layer, module-name patterns, layers it may import besides its own; None = all lower)
 LAYERS = [
     # lgp.cli (argument checks, one-line errors) is used by CLIs on every floor, so it sits here
-    ("ground", ["lgp.paper", "lgp.scene", "lgp.geometry", "lgp.executor", "lgp.cli"], None),
+    ("ground", ["lgp.paper", "lgp.scene", "lgp.geometry", "lgp.executor", "lgp.cli", "lgp.progress"], None),
     ("stimuli and logic", ["stimuli", "lgp.assignment", "lgp.symbolic"], None),
     ("arm", ["lgp.arm"], None),
     ("KOMO", ["lgp.komo", "lgp.komo.*"], None),
@@ -29,8 +29,8 @@ LAYERS = [
     # analysis imports nothing of the physics: no stimuli, scene, planner or models
     ("analysis", ["analysis", "analysis.*"], ["ground"]),
     # CLIs, caches and report or page writers
-    ("application", ["lgp.reproduce", "lgp.show", "lgp.cache", "lgp.manifest", "lgp.view", "lgp.komo.view", "lgp.report", "lgp.build_stage", "lgp.page", "lgp.sensitivity",
-                     "stimuli.sheet", "*.__main__"], None),
+    ("application", ["lgp.reproduce", "lgp.show", "lgp.cache", "lgp.manifest", "lgp.view", "lgp.komo.view", "lgp.report",
+                     "lgp.build_stage", "lgp.page", "lgp.sensitivity", "stimuli.sheet", "stimuli.generate", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]
 RANK = {name: k for k, (name, _, _) in enumerate(LAYERS)}

@@ -1,0 +1,173 @@
+"""Random construction trials, for scaling runs and for users who want more stimuli.
+
+    python -m stimuli.generate --out DIR --count N --seed S
+
+writes N trial files (format: stimuli/README.md) named ``G0001.yaml`` ... : every
+block of A scattered on the table, B one of the structures below, built at the
+build site S. Trial i draws its kind and size from ``default_rng([S, i])``, so the
+same seed gives the same files, and the first N of a larger set are the same
+N files.
+
+| kind | B |
+|---|---|
+| tower | 2-12 blocks stacked |
+| line | 2-10 blocks side by side |
+| wall | 2-4 wide x 2-4 high |
+| staircase | 2-4 columns of 1, 2, ... blocks |
+| bridge | two pillars of 1-3 blocks 0.5 d apart, a block spanning them, maybe one on top |
+| pyramid | rows of 2-4, 1-3, ... blocks, each block on the seam of two below |
+| stack | 1-3 columns of 1-4 blocks, each block shifted at random by up to d/6 |
+
+Each file is loaded back with the loader's checks (`stimuli.load_file`) and its B
+is checked stable without noise by the risk model's own check
+(`models.risk.check_stable`, a physics run at sigma = 0); a draw that fails
+either is drawn again. That check needs the models, so this CLI is an
+application-level module (like stimuli.sheet): the stimuli package itself
+imports nothing above the ground floor.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from lgp.paper import BLOCK_SIZE as d
+from lgp.paper import BUILD_SITE
+
+KINDS = ("tower", "line", "wall", "staircase", "bridge", "pyramid", "stack")
+#: Scatter region of A (m), the same as the paper's trial files use.
+REGION = {"x": [0.2, 0.55], "y": [-0.25, 0.25]}
+#: Draws of one trial before giving up (a random stack can come out unstable).
+_ATTEMPTS = 20
+
+
+def _column(y: float, height: int, base: int = 0, x: float = 0.0) -> list[tuple[float, float, int]]:
+    return [(x, y, base + k) for k in range(height)]
+
+
+def structure(kind: str, rng: np.random.Generator) -> tuple[list[tuple[float, float, float]], str]:
+    """Block centres (x, y, z) relative to the build site (z absolute) and a description."""
+    cells: list[tuple[float, float, float]]  # (dx, dy, level)
+    if kind == "tower":
+        n = int(rng.integers(2, 13))
+        cells, text = _column(0.0, n), f"{n}-block tower"
+    elif kind == "line":
+        n = int(rng.integers(2, 11))
+        cells, text = [(0.0, (i - (n - 1) / 2) * d, 0) for i in range(n)], f"line of {n} blocks side by side"
+    elif kind == "wall":
+        w, h = int(rng.integers(2, 5)), int(rng.integers(2, 5))
+        cells, text = [(0.0, (i - (w - 1) / 2) * d, k) for k in range(h) for i in range(w)], f"wall {w} wide x {h} high"
+    elif kind == "staircase":
+        k = int(rng.integers(2, 5))
+        cells = [c for i in range(k) for c in _column((i - (k - 1) / 2) * d, i + 1)]
+        text = f"staircase of {k} steps"
+    elif kind == "bridge":
+        h = int(rng.integers(1, 4))
+        offset = 0.75 * d  # pillars 0.5 d apart, the lintel resting 0.25 d on each
+        cells = _column(-offset, h) + _column(offset, h) + [(0.0, 0.0, h)]
+        top = bool(rng.integers(0, 2))
+        if top:
+            cells.append((0.0, 0.0, h + 1))
+        text = f"bridge on pillars of {h}" + (" with a block on top" if top else "")
+    elif kind == "pyramid":
+        base = int(rng.integers(2, 5))
+        cells = [(0.0, (i - (base - k - 1) / 2) * d, k) for k in range(base) for i in range(base - k)]
+        text = f"pyramid on a row of {base}"
+    elif kind == "stack":
+        cols = int(rng.integers(1, 4))
+        cells = []
+        for c in range(cols):
+            y0 = (c - (cols - 1) / 2) * 2 * d  # one block's gap between columns
+            dx = dy = 0.0
+            for k in range(int(rng.integers(1, 5))):
+                cells.append((dx, y0 + dy, k))
+                dx += rng.uniform(-d / 6, d / 6)
+                dy += rng.uniform(-d / 6, d / 6)
+        text = f"random stack of {len(cells)} blocks in {cols} column{'s' if cols > 1 else ''}"
+    else:
+        raise ValueError(f"unknown structure kind {kind!r} (known: {', '.join(KINDS)})")
+    return [(x, y, d / 2 + level * d) for x, y, level in cells], text
+
+
+def trial_data(index: int, seed: int, kind: str | None = None) -> dict:
+    """The mapping of generated trial `index` (as written to its YAML file)."""
+    rng = np.random.default_rng([seed, index])
+    kind = kind or KINDS[int(rng.integers(len(KINDS)))]
+    cells, text = structure(kind, rng)
+    sx, sy = BUILD_SITE
+    tid = f"G{index + 1:04d}"
+    return {
+        "id": tid,
+        "dimension": f"generated: {kind}",
+        "description": f"{len(cells)} scattered blocks -> {text}",
+        "build_site": [float(sx), float(sy)],
+        "provenance": {"generated": [f"python -m stimuli.generate --seed {seed}: trial {index + 1}, kind {kind}; "
+                                     "B checked stable without noise (models.risk.check_stable)"]},
+        "initial": {"scattered": {"count": len(cells), "region": REGION, "min_gap": 0.01, "clearance": 0.02}},
+        "target": {"blocks": [{"name": f"b{k + 1}", "p_WB": [round(sx + x, 5), round(sy + y, 5), round(z, 5)]}
+                              for k, (x, y, z) in enumerate(cells)]},
+    }
+
+
+def write_trial(data: dict, directory: Path) -> Path:
+    path = directory / f"{data['id']}.yaml"
+    tmp = path.with_suffix(".yaml.tmp")
+    tmp.write_text(f"# Generated trial {data['id']}: {data['description']}\n"
+                   + yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+    tmp.replace(path)
+    return path
+
+
+def generate(directory: str | Path, count: int, seed: int = 0, engine: str | None = None) -> list[Path]:
+    """Write `count` valid, statically stable random trials into `directory`."""
+    import stimuli
+    from models.risk import check_stable
+    from models.risk.core import UnstableSceneError
+
+    if count < 1:
+        raise ValueError(f"count must be >= 1, got {count}")
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i in range(count):
+        for attempt in range(_ATTEMPTS):
+            # a redraw uses its own stream: trial i's first draw does not depend on the attempts of others
+            data = trial_data(i, seed if attempt == 0 else seed + 1_000_003 * attempt)
+            data["id"] = f"G{i + 1:04d}"
+            path = write_trial(data, directory)
+            try:
+                trial = stimuli.load_file(path)
+                check_stable(trial.target, engine)
+            except (stimuli.StimulusError, UnstableSceneError):
+                path.unlink()
+                continue
+            paths.append(path)
+            break
+        else:
+            raise RuntimeError(f"trial {i + 1}: no valid, stable draw in {_ATTEMPTS} attempts")
+    return paths
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m stimuli.generate", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", required=True, help="directory for the trial files (created if missing)")
+    p.add_argument("--count", type=int, required=True, help="number of trials")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--engine", help="engine of the stability check (default: the risk model's)")
+    args = p.parse_args(argv)
+    if args.count < 1:
+        p.error(f"--count must be >= 1, got {args.count}")
+    try:
+        paths = generate(args.out, args.count, args.seed, args.engine)
+    except (OSError, RuntimeError, ValueError) as e:
+        p.exit(1, f"{p.prog}: error: {e}\n")
+    print(f"wrote {len(paths)} trials to {Path(args.out).resolve()} (python -m lgp.reproduce --stimuli {args.out})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
