@@ -31,7 +31,7 @@ from lgp import cli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
 from lgp.progress import Progress
-from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
+from lgp.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 from lgp.page import Stopwatch, write_index, write_replays
 from lgp import sensitivity
@@ -61,8 +61,10 @@ def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_thre
     from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
 
     name = DEFAULT_ENGINE if engine is None else engine
-    return {"code": modules_digest("models.risk", ENGINES[name].target.split(":")[0], "stimuli"),
-            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(),
+    spec = ENGINES[name]
+    extra = (spec.requires,) if spec.requires else ()  # e.g. sapien for PhysX
+    return {"code": modules_digest("models.risk", spec.target.split(":")[0], "stimuli"),
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra),
             "fall_rule": fall_rule, "fall_threshold": float(fall_threshold)}
 
 
@@ -287,7 +289,8 @@ def engine_description(engine: str | None, settings: dict | None = None) -> str:
     version = settings.pop("version", None)
     text = ", ".join(f"{k} {v}" for k, v in settings.items())
     return f"{name}" + (f" {version}" if version else "") + (f" ({text})" if text else "") + \
-        ("" if engine else " [the default engine]")
+        ("" if engine else " [the default engine]") + \
+        (" [UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md]" if settings.get("faithful") is False else "")
 
 
 def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -536,7 +539,8 @@ def run(args, argv=None) -> int:
 
             stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
                                                    args.samples, args.seed, args.engine, executor, cache,
-                                                   fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
+                                                   fall_rule=args.fall_rule, fall_threshold=args.fall_threshold,
+                                                   approach_height=args.approach_height)
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,

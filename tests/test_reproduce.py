@@ -136,6 +136,7 @@ def _fake_physics(monkeypatch):
     monkeypatch.setattr(reproduce, "write_replays", lambda *a, **k: None)  # nor 3-D replays (they plan)
 
 
+@pytest.mark.slow
 def test_an_extra_trial_file_does_not_break_the_paper_run(tmp_path, monkeypatch, capsys):
     """A valid 13E.yaml beside the paper's 24 (as stimuli/README.md invites): the
     default run is the paper's 24 and names 13E; `--trials all` runs 13E too, in
