@@ -338,28 +338,41 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
         try:
             table = ctx.effort_tables(ctx.trials, samples, args.seed, ctx.executor, ctx.cache,
                                       approach_height=h, slices_per_phase=S)
-        except Exception as e:  # a design the planner cannot do for some trial: said in the report, not hidden
-            notes.append(f"{label}: {type(e).__name__}: {e}")
-            ctx.log(f"[sensitivity] effort, {label}: failed ({type(e).__name__})")
-            continue
+        except Exception:  # a trial the planner cannot do with this design: the others, one by one (cached ones at once)
+            parts = []
+            for t in ctx.trials:
+                try:
+                    parts.append(ctx.effort_tables([t], samples, args.seed, ctx.executor, ctx.cache,
+                                                   approach_height=h, slices_per_phase=S))
+                except Exception as e:  # said in the report and the table (effort NaN), not hidden
+                    notes.append(f"{label}, {t.id}: {type(e).__name__}: {e}")
+                    ctx.log(f"[sensitivity] effort, {label}, {t.id}: failed ({type(e).__name__})")
+                    parts.append(pd.DataFrame([{"trial": t.id, "sample": 0, "effort": np.nan, "status": "failed"}]))
+            table = pd.concat(parts, ignore_index=True)
         ctx.log(f"[sensitivity] effort, {label}: {len(table)} layouts in {time.perf_counter() - t0:.1f} s")
         g = table.groupby("trial", sort=False)
         for trial, df in g:
             rows.append({"design": label, "approach_height": h, "slices_per_phase": S, "trial": trial,
                          "effort": float(df["effort"].mean()), "samples": len(df),
-                         "not_converged": int((~df["status"].astype(str).str.contains("SolutionFound")).sum())})
+                         "not_converged": int((~df["status"].astype(str).str.contains("SolutionFound|failed")).sum())})
     table = pd.DataFrame(rows, columns=["design", "approach_height", "slices_per_phase", "trial", "effort", "samples",
                                         "not_converged"])
     pairs = []
     base = None
     if {t.id for t in ctx.trials} >= set(TRIAL_IDS):
         for label, d in table.groupby("design", sort=False):
-            pt = pair_table(d.set_index("trial")["effort"])
+            effort = d.set_index("trial")["effort"]
+            failed = set(effort.index[~np.isfinite(effort)])
+            pt = pair_table(effort.fillna(1.0))  # failed trials: no ratio, no order (below)
+            bad = [f"{p}E" in failed or f"{p}H" in failed for p in pt["pair"]]
+            pt.loc[bad, ["cost_E", "cost_H"]] = np.nan
+            pt.loc[bad, "order"] = "failed"
+            pt.loc[bad, "E_lt_H"] = False
             pt.insert(0, "design", label)
             pt["ratio_H_over_E"] = pt["cost_H"] / pt["cost_E"]
             if base is None:
                 base = dict(zip(pt["pair"], pt["order"]))
-            pt["order_changes"] = [o != base[p] for p, o in zip(pt["pair"], pt["order"])]
+            pt["order_changes"] = [o != base[p] and o != "failed" for p, o in zip(pt["pair"], pt["order"])]
             pairs.append(pt.rename(columns={"cost_E": "effort_E", "cost_H": "effort_H"}))
     pairs = pd.concat(pairs, ignore_index=True) if pairs else pd.DataFrame()
     return table, pairs, notes

@@ -148,6 +148,10 @@ def test_effort_sensitivity_section_ratios_and_order_changes(tmp_path):
 
     def effort_tables(trials, samples, seed, executor, cache, approach_height, slices_per_phase):
         calls.append((samples, approach_height, slices_per_phase))
+        if approach_height == 0 and any(t.id == "3E" for t in trials):
+            from lgp.planner import PlanningError
+
+            raise PlanningError("3E: no plan")  # a design one trial cannot be planned with
         # pair 2's easy trial gets cheaper without legs; pair 4's order flips at 0.02 m
         rows = []
         for t in trials:
@@ -163,11 +167,15 @@ def test_effort_sensitivity_section_ratios_and_order_changes(tmp_path):
     ctx = sensitivity.Context(args, trials, SerialExecutor(), Cache(tmp_path / "c"), tmp_path, None, lambda m: None,
                               effort_tables=effort_tables)
     section = sensitivity.effort_section(ctx)
-    assert calls == [(1, 0.05, 20), (1, 0.02, 20), (1, 0.0, 20), (1, 0.05, 40)]
+    assert calls[:3] == [(1, 0.05, 20), (1, 0.02, 20), (1, 0.0, 20)] and calls[-1] == (1, 0.05, 40)
+    assert len(calls) == 4 + 24  # the failing design again, trial by trial
     pairs = pd.read_csv(tmp_path / "effort_sensitivity_pairs.csv")
     clearance = pairs[pairs["design"].str.startswith("clearance")].set_index("pair")
     assert clearance.loc[2, "ratio_H_over_E"] == pytest.approx((1.2 + 0.5) / 0.1)
     changed = pairs.groupby("pair")["order_changes"].any()
     assert changed[4] and not changed[2] and changed.sum() == 1
-    assert len(pd.read_csv(tmp_path / "effort_sensitivity.csv")) == 4 * 24
+    assert clearance.loc[3, "order"] == "failed" and np.isnan(clearance.loc[3, "ratio_H_over_E"])
+    table = pd.read_csv(tmp_path / "effort_sensitivity.csv")
+    assert len(table) == 4 * 24 and table["effort"].isna().sum() == 1
+    assert any("3E" in line and "PlanningError" in line for line in section.lines)
     assert section.lines[0].startswith("## Sensitivity of effort")
