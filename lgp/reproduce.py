@@ -289,7 +289,8 @@ def engine_description(engine: str | None, settings: dict | None = None) -> str:
     version = settings.pop("version", None)
     text = ", ".join(f"{k} {v}" for k, v in settings.items())
     return f"{name}" + (f" {version}" if version else "") + (f" ({text})" if text else "") + \
-        ("" if engine else " [the default engine]")
+        ("" if engine else " [the default engine]") + \
+        (" [UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md]" if settings.get("faithful") is False else "")
 
 
 def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -537,7 +538,8 @@ def run(args, argv=None) -> int:
 
             stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
                                                    args.samples, args.seed, args.engine, executor, cache,
-                                                   fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
+                                                   fall_rule=args.fall_rule, fall_threshold=args.fall_threshold,
+                                                   approach_height=args.approach_height)
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,
