@@ -66,6 +66,8 @@ class Progress:
         if self._closed:
             return
         self._closed = True
+        if self.total == 0:  # nothing to do (all cached): nothing to report
+            return
         if self.tty:
             self.stream.write("\r\033[K" + self.line() + "\n")
         else:
