@@ -174,7 +174,8 @@ def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
               (f"physical risk R at sigma = {sigma:g} d", "R (fraction\nof runs that fall)", R)]
     if betas is not None:
         named = betas if isinstance(betas, Mapping) else {"": betas}
-        for name, b in named.items():
+        order = ordered_datasets(named) if isinstance(betas, Mapping) else [""]  # the paper's order in every figure
+        for name, b in ((n, named[n]) for n in order):
             label = f", {dataset_label(name)} fit" if name else ""
             b_text = ", ".join(f"{v:.3g}" for v in b)
             panels.append((f"Eq. 1 cost{label}, b = ({b_text})", "predicted\nresponse (z)", full_model_cost(E, R, b)))

@@ -595,7 +595,7 @@ th{background:#eceae4}table.sortable th{cursor:pointer;user-select:none}table.so
 th.asc:after{content:" \\2191"!important;color:#333}th.desc:after{content:" \\2193"!important;color:#333}
 tr.differs td{background:#fde8e6}tr.differs td:last-child{color:#b3261e;font-weight:700;font-size:15px}.differs-key{color:#b3261e;font-weight:700}
 .grid4{display:grid;grid-template-columns:repeat(auto-fit,minmax(240px,max-content));gap:24px}
-#figures{display:block}figure{display:inline-block;vertical-align:top;margin:6px 12px 12px 0;max-width:680px;background:#fff;padding:8px;border:1px solid #ddd}
+#figures{display:block}figure{display:inline-block;vertical-align:top;margin:6px 12px 12px 0;max-width:calc(50% - 36px);background:#fff;padding:8px;border:1px solid #ddd}
 figure img{max-width:100%;height:auto}figcaption{font-size:12.5px;color:#333}.file{color:#888}
 .trialnav a{display:inline-block;margin:0 4px 4px 0;padding:1px 6px;background:#fff;border:1px solid #ccc;border-radius:3px;text-decoration:none}
 .cards{display:grid;grid-template-columns:repeat(auto-fill,minmax(380px,1fr));gap:12px}.params code{display:inline-block;margin:0 4px 4px 0}

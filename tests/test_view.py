@@ -94,3 +94,29 @@ def test_a_page_without_a_trials_rows_names_the_trial(tmp_path):
     with pytest.raises(ValueError, match="1E"):
         write_page(tmp_path, run={}, trials=[trial], effort_samples=samples,
                    risk=pd.DataFrame(columns=["trial", "sigma", "risk"]), sigma=0.065)
+
+
+def test_the_page_shows_fits_profile_bootstrap_and_every_participant(tmp_path):
+    """With (here SIMULATED) responses the page carries the Results section, labelled."""
+    from analysis.run import run_analysis
+    from analysis.simulate import simulate_participants
+    from lgp.page import write_page
+    from lgp.paper import TRIAL_IDS
+
+    trials = stimuli.load_all()
+    rng = np.random.default_rng(1)
+    effort = pd.DataFrame([{"trial": t, "sample": s, "effort": 0.2 + 0.05 * k + 0.01 * s, "n_actions": 8}
+                           for k, t in enumerate(TRIAL_IDS) for s in range(2)])
+    risk = pd.DataFrame([{"trial": t, "sigma": sg, "risk": float(rng.uniform(0, sg * 3))}
+                         for t in TRIAL_IDS for sg in (0.05, 0.065, 0.08)])
+    people = simulate_participants(effort, risk, (0.0, 1.0, 4.0), 0.065, {"difficulty": 7, "time": 5}, 0.1,
+                                   np.random.default_rng(0), datasets=["difficulty", "time"])
+    analysis = run_analysis(people, effort, risk, tmp_path / "analysis", seed=0, n_boot=20, jobs=1, figures=False)
+    page = write_page(tmp_path, run={}, trials=trials, effort_samples=effort, risk=risk, sigma=0.065,
+                      analysis=analysis).read_text()
+    human = page[page.index('<section id="human">'):]
+    assert "SIMULATED participants, not human data" in human
+    for title in ("Fits of Eq. 1", "RMSE profile over sigma", "Bootstrap over participants", "Direct bootstrap tests", "Participants"):
+        assert title in human
+    participants = human[human.index("<h3>Participants</h3>"):]
+    assert participants.count("<tr>") - 1 == 12  # one row per participant, plus the header
