@@ -29,3 +29,20 @@ def test_an_empty_stage_says_nothing():
     out = io.StringIO()
     Progress("effort", 0, "plans", stream=out).close()
     assert out.getvalue() == ""
+
+
+def test_log_lines_go_above_the_bar_on_a_terminal(monkeypatch):
+    import sys
+
+    from lgp.progress import log
+
+    out = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", out)
+    bar = Progress("effort", 4, "plans", stream=out, tty=True, interval=0.0)
+    bar.advance()
+    log("[effort  1/2] 1E: done")
+    text = out.getvalue()
+    # the bar's line is cleared, the message printed on its own line, then the bar drawn again
+    assert "\r\033[K[effort  1/2] 1E: done\n\r\033[K[effort] |" in text
+    bar.close()
+    assert Progress.active is None
