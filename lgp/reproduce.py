@@ -538,7 +538,8 @@ def run(args, argv=None) -> int:
 
             stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
                                                    args.samples, args.seed, args.engine, executor, cache,
-                                                   fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
+                                                   fall_rule=args.fall_rule, fall_threshold=args.fall_threshold,
+                                                   approach_height=args.approach_height)
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,
