@@ -529,7 +529,8 @@ def run(args, argv=None) -> int:
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
                            fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
         clock.lap("risk")
-        sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log)) \
+        sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log,
+                                                                     effort_tables=effort_tables)) \
             if args.sensitivity else []
         if args.sensitivity:
             clock.lap("sensitivity")
