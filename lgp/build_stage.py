@@ -39,14 +39,16 @@ def build_key_inputs(engine: str | None) -> dict:
 
 
 def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, engine: str | None, executor,
-                      cache: Cache, *, fall_rule: str | None = None, fall_threshold: float | None = None) -> pd.DataFrame:
+                      cache: Cache, *, fall_rule: str | None = None, fall_threshold: float | None = None,
+                      approach_height: float | None = None) -> pd.DataFrame:
     """The stage table of every trial (models.risk.build_risk), one cached file per
     trial keyed by the trial file, the parameters and the code it depends on."""
     from models.risk.build import build_risk
     from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
 
     rule = {"fall_rule": fall_rule or DEFAULT_FALL_RULE,
-            "fall_threshold": FALL_THRESHOLD if fall_threshold is None else float(fall_threshold)}
+            "fall_threshold": FALL_THRESHOLD if fall_threshold is None else float(fall_threshold),
+            "approach_height": approach_height}
     depends = build_key_inputs(engine)
     out = []
     for k, trial in enumerate(trials, 1):

@@ -78,6 +78,17 @@ def sigma(text: str) -> float:
     return value
 
 
+def approach_height(text: str) -> float:
+    """A length in metres >= 0 and < 0.5 (the planner's approach leg; 0 = none)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a height in metres >= 0, got {text!r}") from None
+    if not (math.isfinite(value) and 0 <= value < 0.5):
+        raise argparse.ArgumentTypeError(f"an approach height must be in [0, 0.5) m, got {text!r}")
+    return value
+
+
 def trial_id(text: str) -> str:
     """A trial id, case-insensitive, returned in its canonical spelling: the paper's
     1E ... 12H, or another <pair><E|H> (a trial file the loader then looks for)."""

@@ -219,10 +219,10 @@ def _replay_job(item) -> float:
     from lgp.view import replay_html
     from models.effort import plan_of_sample
 
-    trial, seed, path = item
+    trial, seed, path, *options = item
     logging.getLogger("drake").setLevel(logging.WARNING)  # not a line per replay about Meshcat's port
     t0 = time.perf_counter()
-    plan = plan_of_sample(trial, seed, 0)
+    plan = plan_of_sample(trial, seed, 0, **(options[0] if options else {}))
     title = f"{trial.id}: {trial.description} (sample 0 of seed {seed})"
     page, library = split_library(replay_html(plan, title))
     path = Path(path)
@@ -232,8 +232,10 @@ def _replay_job(item) -> float:
     return time.perf_counter() - t0
 
 
-def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, executor=None, log=None) -> dict[str, Path]:
-    """``<out_dir>/<trial>.html`` for every trial: the replay of layout sample 0 of `seed`.
+def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, executor=None, log=None,
+                  planner_options: dict | None = None) -> dict[str, Path]:
+    """``<out_dir>/<trial>.html`` for every trial: the replay of layout sample 0 of `seed`
+    (planned with `planner_options`, e.g. approach_height and slices_per_phase).
 
     One plan per trial (the one behind row (trial, 0) of effort_samples.csv); a replay
     made before with the same trial, seed and code is copied from `cache`.
@@ -250,7 +252,8 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
     for trial in trials:
         paths[trial.id] = out_dir / f"{trial.id}.html"
         if cache is not None and cache.enabled:
-            cached[trial.id] = cache.root / f"replay-{input_key(trial=trial.id, digest=trial.digest, seed=seed, code=version)}.html"
+            key = input_key(trial=trial.id, digest=trial.digest, seed=seed, code=version, **(planner_options or {}))
+            cached[trial.id] = cache.root / f"replay-{key}.html"
     lib = out_dir / REPLAY_LIBRARY
     lib_cache = cache.root / f"meshcat-{drake}.min.js" if cache is not None and cache.enabled else None
     if lib_cache is not None and lib_cache.exists():
@@ -265,7 +268,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
         else:
             todo.append(trial)
     if todo:
-        times = (executor or SerialExecutor()).map(_replay_job, [(t, seed, str(paths[t.id])) for t in todo])
+        times = (executor or SerialExecutor()).map(_replay_job, [(t, seed, str(paths[t.id]), dict(planner_options or {})) for t in todo])
         if log:
             log(f"[replays] {len(todo)} trials planned (sample 0) and recorded: {sum(times):.1f} s of work, "
                 f"{max(times):.1f} s the longest")
@@ -412,7 +415,8 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
     for title, df in extras.items():
         rows = df[df["trial"] == trial.id]
         if len(rows):
-            more += f'<details><summary>{_e(title.replace("_", " "))} ({len(rows)} rows)</summary>{table_html(rows.drop(columns=["trial"]), max_rows=40)}</details>'
+            shown = f"{len(rows)} rows" if len(rows) <= 40 else f"first 40 of {len(rows)} rows, all in {title}.csv"
+            more += f'<details><summary>{_e(title.replace("_", " "))} ({_e(shown)})</summary>{table_html(rows.drop(columns=["trial"]), max_rows=40)}</details>'
     return f"""
 <article class="card" id="trial-{_e(trial.id)}">
 <h3><a href="#trial-{_e(trial.id)}">{_e(trial.id)}</a> <span class="dim">{_e(trial.dimension)}</span></h3>
@@ -561,12 +565,14 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         settings = {"error": str(e)}
     if argv is None and Path(sys.argv[0]).name == "reproduce.py":
         argv = sys.argv[1:]
-    command = ("python -m lgp.reproduce " + shlex.join(str(a) for a in argv) if argv is not None
-               else f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below")
+    if argv is not None:
+        command = "python -m lgp.reproduce " + shlex.join(str(a) for a in argv)
+    else:  # as recorded by the caller (lgp.reproduce sets args.command), or said so
+        command = getattr(args, "command", None) or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below"
     run = {
         "command": command,
         "parameters": {k: (", ".join(f"{x:g}" for x in v) if isinstance(v, tuple) else ("(default)" if v is None else str(v)))
-                       for k, v in vars(args).items()},
+                       for k, v in vars(args).items() if k != "command"},
         "engine": engine,
         "engine_settings": settings,
         "stages": dict(clock.laps),

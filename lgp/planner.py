@@ -25,6 +25,16 @@ Which of the four quarter-turn grasps, which elbow swivel and which IK branch ar
 discrete choices KOMO cannot make by gradient; they are chosen first, globally, by
 dynamic programming over closed-form IK solutions of every waypoint (minimising
 sum |dq|^2 / dt^3, the cost of rest-to-rest cubics), and the solutions seed KOMO.
+
+The approach legs are a modelling choice the paper does not make (docs/effort.md):
+`plan(..., approach_height=h)` moves the waypoints h m above the poses, and
+`approach_height=0` drops them: each carry is then planned with a clearance
+constraint instead. The carried block's centre stays at least half its height
+above the table top at every held slice (lazy inequalities, imposed where the
+solution violates them), and wherever the solved motion takes it into another
+block or a fixed box (lgp.scene.penetration > OVERLAP_TOLERANCE), its centre is
+held above that solid's top by half its height at that slice and the program is
+re-solved (at most CLEARANCE_ROUNDS times).
 """
 from __future__ import annotations
 
@@ -37,16 +47,19 @@ from pydrake.math import RigidTransform, RotationMatrix
 from lgp.arm import Arm, X_WG_from_above
 from lgp.assignment import assign_blocks
 from lgp.komo import Komo, KomoResult
-from lgp.scene import Scene
+from lgp.scene import OVERLAP_TOLERANCE, Block, Scene, penetration
 from lgp.symbolic import Grasp, SymbolicPlan, symbolic_plan
 
 #: Duration of one phase (one action) in seconds: a reach-and-place of a block in
 #: about a second is human-like, and every phase has the same length, as in KOMO.
 PHASE_DURATION = 1.0
-#: Slices per phase: 20, i.e. 50 ms; effort changes by < 1 % when they double
-#: (docs/effort.md).
+#: Slices per phase: 20, i.e. 50 ms. Not converged for short carries: a layout's
+#: effort at 20 is +4.75 % (2E), +3.27 % (10E), typically +0.5..2 % above 80 slices;
+#: 40 is within 0.7 % of 80 for every trial (docs/effort.md, "Time discretisation").
+#: A parameter of `plan` and of `python -m lgp.reproduce --slices`.
 SLICES_PER_PHASE = 20
-#: Vertical approach/retreat distance (m) above every grasp and place pose.
+#: Vertical approach/retreat distance (m) above every grasp and place pose: the
+#: default `approach_height` of `plan` (0 plans with a clearance constraint instead).
 APPROACH = 0.05
 #: Phases between the approach waypoint and the action (and the action and the
 #: retreat waypoint): 0.2 s of each 1 s phase.
@@ -57,6 +70,14 @@ SWIVELS = 16
 TURN_RESOLVES = 3
 #: Joint-limit margin (rad) asked of seeds, so KOMO starts strictly inside.
 SEED_MARGIN = 0.02
+#: approach_height = 0: at most this many re-solves with clearance constraints
+#: added where the carried block entered another solid.
+CLEARANCE_ROUNDS = 12
+#: approach_height = 0: the carried block's bottom stays this far (m) above the
+#: table top and above the top of every solid it passes over. With a bound of
+#: exactly 0 the block slides on the table right after the grasp's rest and SNOPT
+#: stalls 6e-8 m short of it (info 41, 2E); 10 um is far below OVERLAP_TOLERANCE.
+CLEARANCE = 1e-5
 
 _ARM: Arm | None = None
 
@@ -127,29 +148,50 @@ class Plan:
 # ----------------------------------------------------------------------------- planning
 
 
+def check_design(approach_height: float, slices_per_phase: int) -> tuple[float, int]:
+    """(approach_height, slices_per_phase) as float and int; ValueError naming the
+    rule when the height is not a finite number >= 0 or the slices not an integer >= 1."""
+    try:
+        h = float(approach_height)
+    except (TypeError, ValueError):
+        raise ValueError(f"approach_height must be a number of metres >= 0, got {approach_height!r}") from None
+    if not np.isfinite(h) or h < 0:
+        raise ValueError(f"approach_height must be a finite number of metres >= 0, got {approach_height!r}")
+    if isinstance(slices_per_phase, bool) or not float(slices_per_phase).is_integer() or int(slices_per_phase) < 1:
+        raise ValueError(f"slices_per_phase must be an integer >= 1, got {slices_per_phase!r}")
+    return h, int(slices_per_phase)
+
+
 def plan(initial: Scene, target: Scene, rng_or_seed=0, *, formulation: str = "reduced", solver: str = "snopt",
-         slices_per_phase: int = SLICES_PER_PHASE, arm: Arm | None = None) -> Plan:
+         slices_per_phase: int = SLICES_PER_PHASE, approach_height: float = APPROACH, arm: Arm | None = None) -> Plan:
     """Plan the construction of `target` from `initial`: assignment, symbolic plan, KOMO.
 
     `rng_or_seed` (a numpy Generator or seed) jitters the swivel grid of the IK
     seeding only; the optimum does not depend on it (tests/test_planner.py).
+    `slices_per_phase` (default SLICES_PER_PHASE = 20) sets the time step, 1 s /
+    slices_per_phase; `approach_height` (m, default APPROACH = 0.05) is the
+    vertical approach and retreat leg at every grasp and place, and 0 replaces the
+    legs by a clearance constraint on every carry (module docstring).
     Raises PlanningError (naming the action) when a waypoint is out of reach or
-    KOMO fails to satisfy a constraint.
+    KOMO fails to satisfy a constraint; ValueError for a bad height or slice count.
     """
     start = time.perf_counter()
+    approach_height, slices_per_phase = check_design(approach_height, slices_per_phase)
     arm = arm or default_arm()
     rng = rng_or_seed if isinstance(rng_or_seed, np.random.Generator) else np.random.default_rng(rng_or_seed)
     assignment = assign_blocks(initial, target)
     symbolic = symbolic_plan(initial, target, assignment)
-    result = plan_symbolic(symbolic, rng, formulation=formulation, solver=solver, slices_per_phase=slices_per_phase, arm=arm)
+    result = plan_symbolic(symbolic, rng, formulation=formulation, solver=solver, slices_per_phase=slices_per_phase,
+                           approach_height=approach_height, arm=arm)
     result.planning_time = time.perf_counter() - start
     return result
 
 
 def plan_symbolic(symbolic: SymbolicPlan, rng=0, *, formulation: str = "reduced", solver: str = "snopt",
-                  slices_per_phase: int = SLICES_PER_PHASE, arm: Arm | None = None) -> Plan:
+                  slices_per_phase: int = SLICES_PER_PHASE, approach_height: float = APPROACH, arm: Arm | None = None) -> Plan:
     """KOMO for a given symbolic plan (see `plan`)."""
     start = time.perf_counter()
+    approach_height, slices_per_phase = check_design(approach_height, slices_per_phase)
     arm = arm or default_arm()
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     initial = symbolic.initial
@@ -160,11 +202,13 @@ def plan_symbolic(symbolic: SymbolicPlan, rng=0, *, formulation: str = "reduced"
                     {b.name: b.p_WB[None].copy() for b in initial}, {b.name: b.X_WB.rotation().matrix()[None] for b in initial} if n else {},
                     None, arm)
     try:
-        komo, seeds, turns = declare(symbolic, arm, rng, slices_per_phase)
+        komo, seeds, turns = declare(symbolic, arm, rng, slices_per_phase, approach_height)
     except PlanningError as e:
         raise PlanningError(f"{initial.label} -> {symbolic.target.label}: {e}", e.action) from None
-    result = _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase)
-    if not result.success or result.max_violation > 1e-6:
+    komo, result = _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase, approach_height)
+    if approach_height == 0 and _usable(result, approach_height):
+        komo, result = _clear_carries(symbolic, komo, result, formulation, solver)
+    if not _usable(result, approach_height):
         o = result.worst_objective
         k = int(round(o.time[0])) if o is not None and o.time else None
         action = symbolic.actions[k - 1] if k and 1 <= k <= len(symbolic.actions) else None
@@ -186,7 +230,9 @@ class _Waypoint:
     what: str  # e.g. "approach to Place(b1, table)"
 
 
-def _waypoints(symbolic: SymbolicPlan) -> list[_Waypoint]:
+def _waypoints(symbolic: SymbolicPlan, approach_height: float = APPROACH) -> list[_Waypoint]:
+    """Per action: approach, action and retreat waypoints; the action's alone when
+    approach_height is 0 (no legs)."""
     out = []
     state = symbolic.initial
     for k, (phase, action) in enumerate(symbolic.skeleton()):
@@ -196,13 +242,14 @@ def _waypoints(symbolic: SymbolicPlan) -> list[_Waypoint]:
         else:
             p, yaw = np.asarray(action.p_WB, float), float(action.yaw)
             state = state.with_blocks(b.moved_to(p, yaw) if b.name == action.block else b for b in state.blocks)
-        up = np.array([0.0, 0.0, APPROACH])
-        for dt, offset, what in ((-APPROACH_TIME, up, "approach to"), (0.0, 0.0 * up, "pose of"), (APPROACH_TIME, up, "retreat from")):
+        up = np.array([0.0, 0.0, approach_height])
+        legs = ((-APPROACH_TIME, up, "approach to"), (0.0, 0.0 * up, "pose of"), (APPROACH_TIME, up, "retreat from"))
+        for dt, offset, what in (legs if approach_height > 0 else legs[1:2]):
             out.append(_Waypoint(phase + dt, k, p + offset, yaw, f"{what} action {k + 1} {action}"))
     return out
 
 
-def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, actions=()):
+def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, actions=(), approach_height: float = APPROACH):
     """Quarter turn per action and an IK solution per waypoint, by dynamic programming.
 
     Candidates per action: closed-form IK solutions of its three waypoints (approach,
@@ -210,19 +257,21 @@ def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, acti
     rad) and quarter turn, all within the joint limits. Path cost, as for
     rest-to-rest cubics: sum over consecutive waypoints of |q_b - q_a|^2 / dt^3, home
     at both ends; Viterbi over the actions. Returns ({phase: q}, {action: turn}).
+    Without legs (one waypoint per action) the three are the same waypoint.
     """
     swivels = np.linspace(-np.pi, np.pi, SWIVELS, endpoint=False) + offset
     triples = _triples(waypoints)
     nodes = []  # per action: (pre, at, post) solutions (m, 7) each, quarter turn (m,), internal cost (m,)
     for pre, at, post in triples:
-        grids = [arm.ik_grid_from_above(w.p_WG, w.yaw, swivels, margin=SEED_MARGIN) for w in (pre, at, post)]
+        grid = {id(w): arm.ik_grid_from_above(w.p_WG, w.yaw, swivels, margin=SEED_MARGIN) for w in (pre, at, post)}
+        grids = [grid[id(w)] for w in (pre, at, post)]
         for w, (_, ok) in zip((pre, at, post), grids):
             if not ok.any():
                 raise PlanningError(f"{w.what} at phase {w.time:g}: gripper at {np.round(w.p_WG, 4).tolist()} is out of the arm's "
                                     "reach from above", actions[w.action] if actions else None)
         ok = grids[0][1] & grids[1][1] & grids[2][1]
         if not ok.any():
-            raise PlanningError(f"{at.what}: no arm posture reaches it and the point {APPROACH} m above it alike",
+            raise PlanningError(f"{at.what}: no arm posture reaches it and the point {approach_height:g} m above it alike",
                                 actions[at.action] if actions else None)
         q_pre, q_at, q_post = (grid[ok] for grid, _ in grids)
         internal = (np.sum((q_at - q_pre) ** 2, axis=1) + np.sum((q_post - q_at) ** 2, axis=1)) / APPROACH_TIME**3
@@ -251,18 +300,19 @@ def _squared_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.maximum(sq, 0.0)
 
 
-def declare(symbolic: SymbolicPlan, arm: Arm, rng: np.random.Generator, slices_per_phase: int = SLICES_PER_PHASE):
+def declare(symbolic: SymbolicPlan, arm: Arm, rng: np.random.Generator, slices_per_phase: int = SLICES_PER_PHASE,
+            approach_height: float = APPROACH):
     """The KOMO declaration of a symbolic plan, IK seeds {phase: q}, and the quarter turns.
 
     The seeding swivel grid is shifted by a random fraction of its step drawn from `rng`.
     """
-    waypoints = _waypoints(symbolic)
+    waypoints = _waypoints(symbolic, approach_height)
     phases = len(symbolic.actions) + 1
-    seeds, turns = _seed(arm, waypoints, phases, rng.uniform(0, 2 * np.pi / SWIVELS), symbolic.actions)
-    return _declare(symbolic, arm, waypoints, turns, phases, slices_per_phase), seeds, turns
+    seeds, turns = _seed(arm, waypoints, phases, rng.uniform(0, 2 * np.pi / SWIVELS), symbolic.actions, approach_height)
+    return _declare(symbolic, arm, waypoints, turns, phases, slices_per_phase, approach_height), seeds, turns
 
 
-def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase):
+def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase, approach_height=APPROACH):
     """Solve, then change quarter turns while a closed-form model predicts a lower cost.
 
     A quarter turn of the hand at an action changes joint 7 by 90 deg at that
@@ -274,11 +324,11 @@ def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_ph
     {+-90, 180 deg} is ranked this way; KOMO re-solves from the turned (feasible)
     trajectory for the best one predicted to lower the cost, up to TURN_RESOLVES
     times, keeping it when it does. Near-ties between such turn families were what
-    made different IK seeds end in different optima.
+    made different IK seeds end in different optima. Returns (komo, result).
     """
     result = komo.solve(formulation=formulation, solver=solver, seeds=seeds)
     elapsed = result.solve_time
-    waypoints = _waypoints(symbolic)
+    waypoints = _waypoints(symbolic, approach_height)
     phases = len(symbolic.actions) + 1
     tried = {tuple(sorted(turns.items()))}
     for _ in range(TURN_RESOLVES):
@@ -303,7 +353,7 @@ def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_ph
                 break
         if not found:
             break
-        new_komo = _declare(symbolic, arm, waypoints, new_turns, phases, slices_per_phase)
+        new_komo = _declare(symbolic, arm, waypoints, new_turns, phases, slices_per_phase, approach_height)
         X_K[:, 6] += B @ d
         candidate = new_komo.solve(formulation=formulation, solver=solver, initial_guess=new_komo.interpolate(dict(zip(K, X_K))))
         elapsed += candidate.solve_time
@@ -311,7 +361,7 @@ def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_ph
             break
         komo, result, turns = new_komo, candidate, new_turns
     result.solve_time = elapsed
-    return result
+    return komo, result
 
 
 def _predicted_turn_changes(arm, G, g, X_K, B, slots) -> list[tuple[float, np.ndarray]]:
@@ -377,35 +427,175 @@ def _predicted_turn_changes(arm, G, g, X_K, B, slots) -> list[tuple[float, np.nd
     return [(float(change[m]), D[:, m]) for m in order]
 
 
-def _declare(symbolic, arm, waypoints, turns, phases, slices_per_phase) -> Komo:
+def _declare(symbolic, arm, waypoints, turns, phases, slices_per_phase, approach_height=APPROACH) -> Komo:
     komo = Komo(arm, phases, slices_per_phase, k_order=2, phase_duration=PHASE_DURATION, q_home=arm.q_home,
                 objects={b.name: b.X_WB for b in symbolic.initial})
-    up = np.array([0.0, 0.0, APPROACH])
+    up = np.array([0.0, 0.0, approach_height])
+    legs = approach_height > 0
     X_GB = {}
+    grasped = {}  # block -> phase of its grasp
     for (phase, action), (pre, at, post) in zip(symbolic.skeleton(), _triples(waypoints)):
         k = at.action
         X_WG = X_WG_from_above(at.p_WG, at.yaw + turns[k] * np.pi / 2)
         X_WG_up = RigidTransform(X_WG.rotation(), X_WG.translation() + up)
-        komo.add_objective([pre.time], "pose", ("G",), "eq", target=X_WG_up)
-        # The hand stops above (rest at both waypoints): the 5 cm leg is then a
-        # rest-to-rest move and stays within 1 mm of the vertical line (passing
-        # through the waypoint at speed, it strayed by 5 mm and grazed neighbours).
-        komo.add_rest(pre.time)
-        komo.add_rest(post.time)
+        if legs:
+            komo.add_objective([pre.time], "pose", ("G",), "eq", target=X_WG_up)
+            # The hand stops above (rest at both waypoints): the 5 cm leg is then a
+            # rest-to-rest move and stays within 1 mm of the vertical line (passing
+            # through the waypoint at speed, it strayed by 5 mm and grazed neighbours).
+            komo.add_rest(pre.time)
+            komo.add_rest(post.time)
         if isinstance(action, Grasp):
             X_WB = RigidTransform(RotationMatrix.MakeZRotation(at.yaw), at.p_WG)
             X_GB[action.block] = X_WG.inverse().multiply(X_WB)
             komo.add_mode_switch(phase, "grasp", "G", action.block, X_GB=X_GB[action.block])
+            grasped[action.block] = phase
         else:
             # The block's target pose up to the cube's quarter-turn symmetry: the one
             # that the chosen hand yaw and the grasp give (same p_WB exactly).
             komo.add_mode_switch(phase, "place", "G", action.block, X_WB=X_WG.multiply(X_GB[action.block]))
+            if not legs:
+                _add_table_clearance(komo, symbolic.initial.block(action.block), grasped.pop(action.block), phase)
         komo.add_rest(phase)  # at rest when grasping/placing
-        komo.add_objective([post.time], "pose", ("G",), "eq", target=X_WG_up)
+        if legs:
+            komo.add_objective([post.time], "pose", ("G",), "eq", target=X_WG_up)
     komo.add_objective([float(phases)], "qItself", type="eq", target=arm.q_home)
     komo.add_rest(float(phases), after=False)
     return komo
 
 
 def _triples(waypoints):
-    return [waypoints[i:i + 3] for i in range(0, len(waypoints), 3)]
+    """(approach, action, retreat) waypoints per action; (w, w, w) without legs."""
+    by_action: dict[int, list[_Waypoint]] = {}
+    for w in waypoints:
+        by_action.setdefault(w.action, []).append(w)
+    return [(ws[0], ws[len(ws) // 2], ws[-1]) for ws in by_action.values()]
+
+
+# ----------------------------------------------------------------------------- clearance (approach_height = 0)
+
+
+def _add_table_clearance(komo: Komo, block: Block, grasp: float, place: float) -> None:
+    """Lazy inequalities: the carried block's centre at least half its height (plus
+    CLEARANCE) above the table top (z = 0) at every slice strictly between its
+    grasp and its place."""
+    S = komo.slices_per_phase
+    first, last = grasp + 1.0 / S, place - 1.0 / S
+    if last < first - 1e-12:
+        return
+    half = float(block.size[2]) / 2
+    komo.add_objective([first, last], "position", (block.name,), "ineq", scale=(0.0, 0.0, -1.0),
+                       target=[0.0, 0.0, half + CLEARANCE], lazy=True)
+
+
+def carried_slices(symbolic: SymbolicPlan, slices_per_phase: int) -> list[tuple[str, int]]:
+    """(block, row) of every trajectory row at which a block is carried, strictly
+    between its grasp and its place (row i is time i / slices_per_phase phases)."""
+    out, grasped = [], {}
+    for phase, action in symbolic.skeleton():
+        if isinstance(action, Grasp):
+            grasped[action.block] = phase
+        else:
+            g = grasped.pop(action.block)
+            first, last = int(round(g * slices_per_phase)) + 1, int(round(phase * slices_per_phase)) - 1
+            out += [(action.block, i) for i in range(first, last + 1)]
+    return out
+
+
+def _blocks_at(initial: Scene, X_WB: dict[str, np.ndarray], i: int) -> dict[str, Block]:
+    """Every block of the scene at trajectory row i, as lgp.scene Blocks (yaw from R_WB)."""
+    out = {}
+    for b in initial.blocks:
+        X = X_WB[b.name][i]
+        out[b.name] = b.moved_to(X[:3, 3], float(np.arctan2(X[1, 0], X[0, 0])))
+    return out
+
+
+def _separation(moving: Block, other, vertical: bool = False):
+    """(scale, target) of the position inequality on the carried block's centre that
+    separates it from `other` with the smallest move: over its top (z >= top + h/2
+    + CLEARANCE), or beside it along world x or y, past its outline's bounding box
+    by the carried block's half extent at its current yaw (touching allowed). Beside is
+    what a block leaving or joining touching neighbours needs; over, what a block
+    passing a structure needs."""
+    p = np.asarray(moving.p_WB, float)
+    options = [((0.0, 0.0, -1.0), 2, float(other.top) + float(moving.size[2]) / 2 + CLEARANCE)]
+    if not vertical:
+        mine, theirs = np.asarray(moving.footprint(), float), np.asarray(other.footprint(), float)
+        half = (mine.max(axis=0) - mine.min(axis=0)) / 2
+        lo, hi = theirs.min(axis=0), theirs.max(axis=0)
+        for axis in (0, 1):
+            unit = np.zeros(3)
+            unit[axis] = 1.0
+            # Touching is allowed (half the overlap tolerance): a block packed between
+            # two neighbours must fit back between them.
+            options.append((tuple(unit), axis, float(lo[axis] - half[axis] + OVERLAP_TOLERANCE / 2)))  # p <= target
+            options.append((tuple(-unit), axis, float(hi[axis] + half[axis] - OVERLAP_TOLERANCE / 2)))  # p >= target
+    scale, axis, bound = min(options, key=lambda o: (o[2] - p[o[1]]) * (-1 if sum(o[0]) > 0 else 1))
+    target = np.zeros(3)
+    target[axis] = bound
+    return scale, target
+
+
+def _usable(result: KomoResult, approach_height: float) -> bool:
+    """Solved, every constraint within 1e-6. Without legs SNOPT may also end with
+    info 41 ("cannot be improved") at a feasible point: a carried block sliding on
+    the table or a top right after a grasp's rest is a degenerate active set; the
+    status stays in the effort table (column status)."""
+    if result.max_violation > 1e-6:
+        return False
+    return result.success or (approach_height == 0 and "snopt info 41" in result.status)
+
+
+def _clear_carries(symbolic: SymbolicPlan, komo: Komo, result: KomoResult, formulation: str, solver: str):
+    """Hold each carried block above every solid it entered, then re-solve.
+
+    At every row where the carried block interpenetrates another block or a fixed
+    box by more than OVERLAP_TOLERANCE, an inequality "centre z >= top of that
+    solid + half the block's height + CLEARANCE" is added at that slice, and KOMO re-solves
+    from the current motion; up to CLEARANCE_ROUNDS times, then PlanningError
+    naming the action and the block it still enters.
+    """
+    initial = symbolic.initial
+    S = komo.slices_per_phase
+    carried = carried_slices(symbolic, S)
+    elapsed = result.solve_time
+    declared: dict[tuple[str, int], float] = {}
+    for round_ in range(CLEARANCE_ROUNDS + 1):
+        entered = []
+        for name, i in carried:
+            blocks = _blocks_at(initial, result.X_WB, i)
+            moving = blocks[name]
+            for other in [*(b for n, b in blocks.items() if n != name), *initial.fixed]:
+                depth = penetration(moving, other)
+                if depth > OVERLAP_TOLERANCE:
+                    entered.append((name, i, other, depth))
+        if not entered:
+            break
+        if round_ == CLEARANCE_ROUNDS:
+            name, i, other, depth = max(entered, key=lambda e: e[3])
+            k = int(np.ceil(i / S))
+            action = symbolic.actions[k - 1] if 1 <= k <= len(symbolic.actions) else None
+            raise PlanningError(
+                f"{initial.label} -> {symbolic.target.label}: action {k} {action}: carried block {name} still enters "
+                f"{other.name} by {depth * 1000:.1f} mm at t = {i / S:g} s after {CLEARANCE_ROUNDS} clearance re-solves",
+                action)
+        before, previous = len(komo.objectives), result
+        for over in (False, True):
+            # The cheapest way out first; a solid entered again at that slice, or a
+            # program these make infeasible (beside one solid, beside another): over it.
+            del komo.objectives[before:]
+            for name, i, other, _ in entered:
+                moving = _blocks_at(initial, previous.X_WB, i)[name]
+                key = (name, i, other.name, tuple(np.round(getattr(other, "p_WB", getattr(other, "p_WO", None)), 6)))
+                scale, target = _separation(moving, other, vertical=over or key in declared)
+                declared[key] = True
+                komo.add_objective([i / S], "position", (name,), "ineq", scale=scale, target=target)
+            result = komo.solve(formulation=formulation, solver=solver, initial_guess=previous.q[1:])
+            elapsed += result.solve_time
+            if _usable(result, 0.0):
+                break
+        if not _usable(result, 0.0):
+            break
+    result.solve_time = elapsed
+    return komo, result

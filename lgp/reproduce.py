@@ -6,6 +6,7 @@
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
     python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/sensitivity.py)
     python -m lgp.reproduce --fall-rule 3d --fall-threshold 0.1   # the risk model with another fall rule
+    python -m lgp.reproduce --approach-height 0 --slices 40       # effort with another motion design (docs/effort.md)
 
 Every expensive result (effort of one trial, risk curve of one trial) is cached
 under ``<out>/cache`` by a hash of the trial file, the parameters and the code that
@@ -30,7 +31,8 @@ from lgp import cli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
 from lgp.progress import Progress
-from lgp.cache import Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
+from lgp.progress import log as progress_log
+from lgp.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 from lgp.page import Stopwatch, write_index, write_replays
 from lgp import sensitivity
@@ -41,7 +43,7 @@ QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot
 
 
 def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
+    progress_log(msg)  # stderr; above the progress bar on a terminal
 
 
 def effort_key_inputs() -> dict:
@@ -60,13 +62,29 @@ def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_thre
     from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
 
     name = DEFAULT_ENGINE if engine is None else engine
-    return {"code": modules_digest("models.risk", ENGINES[name].target.split(":")[0], "stimuli"),
-            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(),
+    spec = ENGINES[name]
+    extra = (spec.requires,) if spec.requires else ()  # e.g. sapien for PhysX
+    return {"code": modules_digest("models.risk", spec.target.split(":")[0], "stimuli"),
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra),
             "fall_rule": fall_rule, "fall_threshold": float(fall_threshold)}
 
 
-def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd.DataFrame:
-    """Per (trial, sample) effort, one cached file per trial.
+def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
+               slices_per_phase: int | None = None) -> str:
+    """The cache key of one trial's effort table: the trial file, M, the seed, the
+    planner's design (approach height, slices per phase) and effort_key_inputs()."""
+    from lgp.planner import APPROACH, SLICES_PER_PHASE, check_design
+
+    h, S = check_design(APPROACH if approach_height is None else approach_height,
+                        SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase)
+    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=h,
+                     slices_per_phase=S, **effort_key_inputs())
+
+
+def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
+                  slices_per_phase: int | None = None, log: bool = True) -> pd.DataFrame:
+    """Per (trial, sample) effort, one cached file per trial (and design: the
+    planner's `approach_height` and `slices_per_phase`, defaults when None).
 
     The layouts of every uncached trial are one stream of work units on the run's
     one executor (warm workers plan across trial boundaries); a trial's file is
@@ -75,17 +93,20 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
     """
     from models.effort import effort_of_unit, effort_table, effort_units
 
-    depends = effort_key_inputs()
-    keys = {t.id: input_key(trial=t.id, digest=t.digest, samples=samples, seed=seed, **depends) for t in trials}
+    from lgp.planner import APPROACH, SLICES_PER_PHASE
+
+    design = {"approach_height": APPROACH if approach_height is None else approach_height,
+              "slices_per_phase": SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase}
+    keys = {t.id: effort_key(t, samples, seed, **design) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
         cached = cache.get("effort", keys[t.id])
         if cached is not None:
             tables[t.id] = cached
     todo = [t for t in trials if t.id not in tables]
-    units = [u for t in todo for u in effort_units(t, samples, seed)]
+    units = [u for t in todo for u in effort_units(t, samples, seed, **design)]
     owner = [u[0] for u in units]
-    pending = {t.id: len(effort_units(t, samples, seed)) for t in todo}
+    pending = {t.id: len(effort_units(t, samples, seed, **design)) for t in todo}
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
     started = {t.id: None for t in todo}
     t0 = time.perf_counter()
@@ -99,11 +120,12 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache) -> pd
         if pending[trial.id] == 0:
             tables[trial.id] = cache.put("effort", keys[trial.id], effort_table(trial, samples, rows[trial.id]))
             df = tables[trial.id]
-            _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
-                 f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
+            if log:
+                _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
+                     f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
 
     for t in trials:
-        if t.id in tables and t.id not in rows:
+        if log and t.id in tables and t.id not in rows:
             _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
                  f" over {len(tables[t.id])} layouts  (cached)")
     with bar:
@@ -268,7 +290,8 @@ def engine_description(engine: str | None, settings: dict | None = None) -> str:
     version = settings.pop("version", None)
     text = ", ".join(f"{k} {v}" for k, v in settings.items())
     return f"{name}" + (f" {version}" if version else "") + (f" ({text})" if text else "") + \
-        ("" if engine else " [the default engine]")
+        ("" if engine else " [the default engine]") + \
+        (" [UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md]" if settings.get("faithful") is False else "")
 
 
 def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -278,6 +301,15 @@ def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
         cells = [format(v, floatfmt) if isinstance(v, (float, np.floating)) else str(v) for v in row]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _design_text(approach_height: float | None, slices: int | None) -> str:
+    """'5 cm approach legs, 20 slices per phase' (or the clearance design at height 0)."""
+    from lgp.planner import APPROACH, SLICES_PER_PHASE
+
+    h = APPROACH if approach_height is None else approach_height
+    legs = f"{h * 100:g} cm approach legs" if h > 0 else "no approach legs (clearance constraint)"
+    return f"{legs}, {SLICES_PER_PHASE if slices is None else slices} slices per phase"
 
 
 def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None,
@@ -298,7 +330,8 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         "",
         f"Settings: trials {len(effort)}, M = {args.samples} layouts, N = {args.n_sims} runs per sigma, "
         f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), "
-        f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}"
+        f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}, "
+        f"effort planned with {_design_text(getattr(args, 'approach_height', None), getattr(args, 'slices', None))}"
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
         f"Risk engine: {engine or args.engine or 'default'}.",
         compute_text,
@@ -370,6 +403,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
     p.add_argument("--fall-rule", default="horizontal", help="a run falls by horizontal (default) or 3d displacement")
     p.add_argument("--fall-threshold", type=float, default=0.25, help="fall threshold in units of d (default %(default)s)")
+    p.add_argument("--approach-height", type=cli.approach_height, default=None,
+                   help="effort: vertical approach/retreat leg (m) at every grasp and place; 0 = a clearance constraint "
+                        "instead (default 0.05; docs/effort.md)")
+    p.add_argument("--slices", type=cli.positive_int, default=None,
+                   help="effort: KOMO slices per 1 s phase (default 20; docs/effort.md, time discretisation)")
     p.add_argument("--jobs", type=cli.positive_int, default=default_jobs(),
                    help="processes, or LocalCluster workers with --scheduler local-dask, >= 1 (default: all cores, %(default)s here)")
     p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
@@ -409,6 +447,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.n_sims = args.n_sims if args.n_sims is not None else q.get("n_sims", N_SIMS)
     args.sigmas = tuple(dict.fromkeys(args.sigmas or q.get("sigmas", SIGMA_GRID)))
     args.n_boot = args.n_boot if args.n_boot is not None else q.get("n_boot", N_BOOT)
+    from lgp.planner import APPROACH, SLICES_PER_PHASE
+
+    args.approach_height = APPROACH if args.approach_height is None else args.approach_height
+    args.slices = SLICES_PER_PHASE if args.slices is None else args.slices
     if args.trials:
         args.trials = list(dict.fromkeys(args.trials))  # 7h and 7H are one trial
         if "all" in args.trials and len(args.trials) > 1:
@@ -481,13 +523,15 @@ def run(args, argv=None) -> int:
             import models.effort  # noqa: F401
             import models.risk  # noqa: F401
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
-        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache)
+        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache,
+                                       approach_height=args.approach_height, slices_per_phase=args.slices)
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
                            fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
         clock.lap("risk")
-        sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log)) \
+        sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log,
+                                                                     effort_tables=effort_tables)) \
             if args.sensitivity else []
         if args.sensitivity:
             clock.lap("sensitivity")
@@ -496,9 +540,12 @@ def run(args, argv=None) -> int:
 
             stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
                                                    args.samples, args.seed, args.engine, executor, cache,
-                                                   fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
+                                                   fall_rule=args.fall_rule, fall_threshold=args.fall_threshold,
+                                                   approach_height=args.approach_height)
             clock.lap("build risk")
-        replays = None if args.no_replays else write_replays(trials, args.seed, out / "replays", cache, executor, _log)
+        replays = None if args.no_replays else write_replays(
+            trials, args.seed, out / "replays", cache, executor, _log,
+            planner_options={"approach_height": args.approach_height, "slices_per_phase": args.slices})
         clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
@@ -565,7 +612,8 @@ def run(args, argv=None) -> int:
                   "no_cache": args.no_cache, "build_risk": args.build_risk, "build_sigmas": args.build_sigmas,
                   "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
                   "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
-                  "sensitivity": getattr(args, "sensitivity", None)}
+                  "sensitivity": getattr(args, "sensitivity", None), "approach_height": args.approach_height,
+                  "slices_per_phase": args.slices}
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
     files = list(dict.fromkeys(expand(written)))

@@ -15,9 +15,16 @@ Each action takes one phase of 1 s (lgp.planner.PHASE_DURATION). The measure is
 `kinetic_energy_by_action`), computed here from the Plan's block trajectories
 p_WB; the planner only produces trajectories.
 
+Two modelling choices the paper leaves open are parameters of every function
+here (and of the planner): `approach_height` (m; default lgp.planner.APPROACH =
+0.05, the vertical leg at every grasp and place; 0 plans each carry with a
+clearance constraint instead) and `slices_per_phase` (default
+lgp.planner.SLICES_PER_PHASE = 20). docs/effort.md says how much each moves effort.
+
 Command line, the table of docs/effort.md::
 
     python -m models.effort --samples 30 --jobs 2 --out effort_samples.csv
+    python -m models.effort 2E 2H --approach-height 0 --slices 40
 """
 from __future__ import annotations
 
@@ -30,7 +37,7 @@ import pandas as pd
 from lgp import cli
 from lgp.paper import SAMPLES
 from lgp.executor import borrowed
-from lgp.planner import PHASE_DURATION, PlanningError, plan
+from lgp.planner import APPROACH, PHASE_DURATION, SLICES_PER_PHASE, PlanningError, check_design, plan
 
 COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "status"]
 #: Mass of a unit block [paper: "a unit mass to a unit block"], kg.
@@ -100,12 +107,14 @@ def plan_of_sample(trial, seed: int, sample: int, **planner_options):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): {e}", e.action) from e
 
 
-def effort_of_sample(trial, seed: int, sample: int) -> dict:
+def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float = APPROACH,
+                     slices_per_phase: int = SLICES_PER_PHASE) -> dict:
     """One row of the effort table: plan the sample's layout, integrate kinetic energy.
 
+    `approach_height` (m) and `slices_per_phase` are the planner's (lgp.planner.plan).
     Raises PlanningError naming the trial, the sample and the failing action.
     """
-    result = plan_of_sample(trial, seed, sample)
+    result = plan_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase)
     effort = kinetic_energy(result)
     if not np.isfinite(effort):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): effort is {effort}")
@@ -133,16 +142,22 @@ class EffortResult(NamedTuple):
         return f"EffortResult(mean={self.mean:.6g} J*s over {len(self.table)} layouts)"
 
 
-def effort_units(trial, samples: int, seed: int) -> list[tuple]:
-    """The work units of a trial's effort, (trial, seed, sample), one per layout
-    that needs planning: every sample, or only sample 0 when A is not random."""
-    return [(trial, seed, i) for i in (range(samples) if trial.initial.is_random else [0])]
+def effort_units(trial, samples: int, seed: int, *, approach_height: float = APPROACH,
+                 slices_per_phase: int = SLICES_PER_PHASE) -> list[tuple]:
+    """The work units of a trial's effort, (trial, seed, sample, design), one per
+    layout that needs planning: every sample, or only sample 0 when A is not
+    random. `design` = (approach_height, slices_per_phase), carried in the unit so
+    an executor's workers plan with the same choices."""
+    design = check_design(approach_height, slices_per_phase)
+    return [(trial, seed, i, design) for i in (range(samples) if trial.initial.is_random else [0])]
 
 
 def effort_of_unit(unit) -> dict:
-    """effort_of_sample for one unit of `effort_units` (what executors map)."""
-    trial, seed, sample = unit
-    return effort_of_sample(trial, seed, sample)
+    """effort_of_sample for one unit of `effort_units` (what executors map); a
+    3-tuple (trial, seed, sample) plans with the default design."""
+    trial, seed, sample, *rest = unit
+    approach_height, slices_per_phase = rest[0] if rest else (APPROACH, SLICES_PER_PHASE)
+    return effort_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase)
 
 
 def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
@@ -154,7 +169,8 @@ def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
 
 
 def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
-                    progress: Callable[[int, int], None] | None = None, executor=None) -> EffortResult:
+                    progress: Callable[[int, int], None] | None = None, executor=None, *,
+                    approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE) -> EffortResult:
     """Physical effort of `trial` over `samples` random layouts: an `EffortResult`
     with ``.mean`` (J s) and ``.table`` (one row per layout: trial, sample, effort,
     n_actions, solve_time, solver, status).
@@ -165,6 +181,9 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
     warm workers across trials). `progress(done, total)` is called after each
     sample. A trial whose layout is not random (a fixed structure in A) is planned
     once and its row repeated: every sample would draw the same layout.
+    `approach_height` (m; 0.05 default, 0 = clearance constraint instead of the
+    legs) and `slices_per_phase` (20 default) are passed to the planner
+    (lgp.planner.plan; docs/effort.md, "Modelling choices").
     """
     if isinstance(trial, str):
         import stimuli
@@ -172,7 +191,7 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
         trial = stimuli.load_trial(trial)
     if samples < 1:
         raise ValueError(f"physical_effort needs samples >= 1, got {samples}")
-    units = effort_units(trial, samples, seed)
+    units = effort_units(trial, samples, seed, approach_height=approach_height, slices_per_phase=slices_per_phase)
     done = 0
 
     def record(_, row):
@@ -197,6 +216,11 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=cli.seed, default=0)
     parser.add_argument("--jobs", type=cli.positive_int, default=1)
     parser.add_argument("--out", type=cli.output_file, help="write the per-sample table (CSV) here")
+    parser.add_argument("--approach-height", type=cli.approach_height, default=APPROACH,
+                        help="vertical approach/retreat leg (m) at every grasp and place; 0 = clearance constraint "
+                             "instead (default %(default)s)")
+    parser.add_argument("--slices", type=cli.positive_int, default=SLICES_PER_PHASE,
+                        help="KOMO slices per 1 s phase (default %(default)s)")
     args = parser.parse_args(argv)
 
     import stimuli
@@ -204,7 +228,8 @@ def main(argv=None) -> int:
     trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
     tables = []
     for trial in trials:
-        mean, table = physical_effort(trial, samples=args.samples, seed=args.seed, jobs=args.jobs)
+        mean, table = physical_effort(trial, samples=args.samples, seed=args.seed, jobs=args.jobs,
+                                      approach_height=args.approach_height, slices_per_phase=args.slices)
         tables.append(table)
         print(f"{trial.id:>4}  effort {mean:8.4f} J s  sd {table['effort'].std(ddof=1) if len(table) > 1 else 0.0:7.4f}  "
               f"actions {table['n_actions'].iloc[0]:3d}  {table['solve_time'].mean():6.3f} s/plan", flush=True)

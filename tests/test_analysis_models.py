@@ -10,20 +10,6 @@ from analysis import (SIGMA_GRID, TRIAL_IDS, ModelInputError, bootstrap_model_co
                       pair_table, risk_at_sigma, sigma_profile, summarize_bootstrap)
 
 
-def synthetic_effort(seed=0):
-    """24 positive efforts, keyed by trial id (stand-in for the planner's output)."""
-    return pd.Series(np.random.default_rng(seed).uniform(1, 10, 24), index=list(TRIAL_IDS))
-
-
-def synthetic_risk(seed=0, sigmas=SIGMA_GRID):
-    """Risk per trial and sigma: a logistic in sigma around a per-trial threshold, so
-    each trial's risk increases with sigma and the ranking of trials changes with it."""
-    threshold = np.random.default_rng(seed + 100).uniform(0.04, 0.12, 24)
-    return pd.DataFrame([(t, s, 1 / (1 + np.exp(-(s - threshold[i]) / 0.01)))
-                         for s in sigmas for i, t in enumerate(TRIAL_IDS)],
-                        columns=["trial", "sigma", "risk"])
-
-
 def means_table(values_by_dataset):
     return pd.DataFrame([(d, t, v) for d, values in values_by_dataset.items()
                          for t, v in zip(TRIAL_IDS, values)], columns=["dataset", "trial", "mean_z"])
@@ -31,9 +17,9 @@ def means_table(values_by_dataset):
 
 # ---- the three models ---------------------------------------------------------------
 
-def test_full_model_matches_lstsq():
+def test_full_model_matches_lstsq(make_effort, make_risk):
     rng = np.random.default_rng(0)
-    E, R = synthetic_effort(), risk_at_sigma(synthetic_risk(), 0.07)
+    E, R = make_effort(), risk_at_sigma(make_risk(), 0.07)
     y = pd.Series(rng.normal(size=24), index=list(TRIAL_IDS))
     fit = fit_model("full", y, E, R)
     e, r = E.to_numpy(), R.to_numpy()
@@ -45,17 +31,17 @@ def test_full_model_matches_lstsq():
     assert fit.r == pytest.approx(stats.pearsonr(X @ beta, y.to_numpy())[0], rel=1e-10)
 
 
-def test_full_model_recovers_coefficients_of_noise_free_data():
-    E, R = synthetic_effort(1), risk_at_sigma(synthetic_risk(1), 0.08)
+def test_full_model_recovers_coefficients_of_noise_free_data(make_effort, make_risk):
+    E, R = make_effort(1), risk_at_sigma(make_risk(1), 0.08)
     y = 0.3 + 0.2 * E * (1 - R) + 1.7 * E * R
     fit = fit_model("full", y, E, R)
     np.testing.assert_allclose(fit.coefficients, [0.3, 0.2, 1.7], atol=1e-10)
     assert fit.rmse < 1e-10 and fit.r == pytest.approx(1.0)
 
 
-def test_effort_only_model_is_the_simple_regression_on_effort():
+def test_effort_only_model_is_the_simple_regression_on_effort(make_effort):
     rng = np.random.default_rng(2)
-    E = synthetic_effort(2)
+    E = make_effort(2)
     y = rng.normal(size=24)
     fit = fit_model("effort", y, E)
     e = E.to_numpy()
@@ -63,18 +49,18 @@ def test_effort_only_model_is_the_simple_regression_on_effort():
     np.testing.assert_allclose(fit.coefficients, [y.mean() - slope * e.mean(), slope], rtol=1e-10)
 
 
-def test_risk_only_correlation_is_the_size_of_the_risk_data_correlation():
+def test_risk_only_correlation_is_the_size_of_the_risk_data_correlation(make_effort, make_risk):
     # A slope and intercept do not change |r| (Model section of the paper).
     rng = np.random.default_rng(3)
-    R = risk_at_sigma(synthetic_risk(3), 0.06)
+    R = risk_at_sigma(make_risk(3), 0.06)
     y = -2 * R.to_numpy() + rng.normal(size=24)
-    fit = fit_model("risk", y, synthetic_effort(3), R)
+    fit = fit_model("risk", y, make_effort(3), R)
     assert fit.r == pytest.approx(abs(stats.pearsonr(R.to_numpy(), y)[0]), rel=1e-10)
 
 
-def test_fit_models_table_has_each_dataset_and_model():
+def test_fit_models_table_has_each_dataset_and_model(make_effort, make_risk):
     rng = np.random.default_rng(4)
-    E, R = synthetic_effort(4), risk_at_sigma(synthetic_risk(4), 0.065)
+    E, R = make_effort(4), risk_at_sigma(make_risk(4), 0.065)
     means = means_table({"time": rng.normal(size=24), "build": rng.normal(size=24)})
     fits, predictions = fit_models(means, E, R, 0.065)
     assert sorted(zip(fits["dataset"], fits["model"])) == sorted(
@@ -85,8 +71,8 @@ def test_fit_models_table_has_each_dataset_and_model():
     assert len(predictions) == 2 * 3 * 24 and (fits["sigma"] == 0.065).all()
 
 
-def test_constant_risk_gives_undefined_risk_only_correlation_with_a_warning():
-    E = synthetic_effort(5)
+def test_constant_risk_gives_undefined_risk_only_correlation_with_a_warning(make_effort):
+    E = make_effort(5)
     R = pd.Series(0.0, index=list(TRIAL_IDS))
     with pytest.warns(RuntimeWarning, match="risk model"):
         fit = fit_model("risk", np.arange(24.0), E, R)
@@ -99,18 +85,18 @@ def test_effort_samples_are_averaged_per_trial():
     np.testing.assert_allclose(E.to_numpy(), 2.0 * np.arange(24) + 1.0)  # mean of s = 0, 1, 2
 
 
-def test_effort_table_missing_a_trial_is_named():
+def test_effort_table_missing_a_trial_is_named(make_effort):
     with pytest.raises(ModelInputError, match="missing trial\\(s\\) 9H"):
-        effort_per_trial(synthetic_effort().drop("9H"))
+        effort_per_trial(make_effort().drop("9H"))
 
 
-def test_risk_at_absent_sigma_is_named():
+def test_risk_at_absent_sigma_is_named(make_risk):
     with pytest.raises(ModelInputError, match="no rows at sigma 0.2"):
-        risk_at_sigma(synthetic_risk(), 0.2)
+        risk_at_sigma(make_risk(), 0.2)
 
 
-def test_risk_above_one_is_rejected_naming_the_trial():
-    risk = synthetic_risk()
+def test_risk_above_one_is_rejected_naming_the_trial(make_risk):
+    risk = make_risk()
     risk.loc[(risk["trial"] == "4E") & np.isclose(risk["sigma"], 0.05), "risk"] = 1.5
     with pytest.raises(ModelInputError, match="risk of trial 4E at sigma 0.05 is 1.5"):
         risk_at_sigma(risk, 0.05)
@@ -118,9 +104,9 @@ def test_risk_above_one_is_rejected_naming_the_trial():
 
 # ---- sigma fit ----------------------------------------------------------------------
 
-def test_sigma_profile_rmse_is_the_eq1_fit_error_at_each_sigma():
+def test_sigma_profile_rmse_is_the_eq1_fit_error_at_each_sigma(make_effort, make_risk):
     rng = np.random.default_rng(6)
-    E, risk = synthetic_effort(6), synthetic_risk(6)
+    E, risk = make_effort(6), make_risk(6)
     means = means_table({"difficulty": rng.normal(size=24), "time": rng.normal(size=24)})
     profile = sigma_profile(means, E, risk)
     assert len(profile) == 2 * 11 and sorted(profile["sigma"].unique()) == pytest.approx(SIGMA_GRID)
@@ -150,16 +136,20 @@ def test_sigma_ties_go_to_the_smallest_sigma():
 
 # ---- model bootstrap and direct tests ------------------------------------------------------
 
-def boot_inputs(seed=7, n_boot=40):
-    rng = np.random.default_rng(seed)
-    E, R = synthetic_effort(seed), risk_at_sigma(synthetic_risk(seed), 0.07)
-    signal = (E * (1 - R) + 3 * E * R).to_numpy()
-    boot_means = {d: signal / signal.std() + rng.normal(scale=s, size=(n_boot, 24))
-                  for d, s in (("difficulty", 0.5), ("time", 1.0), ("build", 2.0))}
-    return E, R, boot_means
+@pytest.fixture
+def boot_inputs(make_effort, make_risk):
+    def boot_inputs(seed=7, n_boot=40):
+        rng = np.random.default_rng(seed)
+        E, R = make_effort(seed), risk_at_sigma(make_risk(seed), 0.07)
+        signal = (E * (1 - R) + 3 * E * R).to_numpy()
+        boot_means = {d: signal / signal.std() + rng.normal(scale=s, size=(n_boot, 24))
+                      for d, s in (("difficulty", 0.5), ("time", 1.0), ("build", 2.0))}
+        return E, R, boot_means
+
+    return boot_inputs
 
 
-def test_bootstrap_correlations_match_explicit_refits():
+def test_bootstrap_correlations_match_explicit_refits(boot_inputs):
     E, R, boot_means = boot_inputs()
     boot = bootstrap_model_correlations(boot_means, E, R)
     e, r = E.to_numpy(), R.to_numpy()
@@ -173,14 +163,14 @@ def test_bootstrap_correlations_match_explicit_refits():
             np.testing.assert_allclose(got["r"], expected, rtol=1e-10)
 
 
-def test_parallel_bootstrap_equals_serial():
+def test_parallel_bootstrap_equals_serial(boot_inputs):
     E, R, boot_means = boot_inputs(n_boot=300)
     serial = bootstrap_model_correlations(boot_means, E, R, jobs=1)
     parallel = bootstrap_model_correlations(boot_means, E, R, jobs=2)
     pd.testing.assert_frame_equal(serial, parallel, check_exact=True)
 
 
-def test_bootstrap_summary_reports_median_and_percentiles():
+def test_bootstrap_summary_reports_median_and_percentiles(boot_inputs):
     E, R, boot_means = boot_inputs()
     boot = bootstrap_model_correlations(boot_means, E, R)
     summary = summarize_bootstrap(boot).set_index(["dataset", "model"])
@@ -237,6 +227,6 @@ def test_pair_with_equal_costs_is_not_correctly_ordered():
     assert not pair_table(cost)["E_lt_H"].any()
 
 
-def test_pair_table_names_a_missing_trial():
+def test_pair_table_names_a_missing_trial(make_effort):
     with pytest.raises(ModelInputError, match="missing trial\\(s\\) 3H"):
-        pair_table(synthetic_effort().drop("3H"))
+        pair_table(make_effort().drop("3H"))

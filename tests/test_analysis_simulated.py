@@ -15,30 +15,26 @@ from analysis.figures import SIMULATED_TITLE, plot_effort_risk
 BETAS = (0.0, 1.0, 4.0)  # risky effort costs four times safe effort
 
 
-def synthetic_effort(seed=0):
-    """24 positive efforts, keyed by trial id (stand-in for the planner's output)."""
-    return pd.Series(np.random.default_rng(seed).uniform(1, 10, 24), index=list(TRIAL_IDS))
+@pytest.fixture(scope="module")
+def E(make_effort):
+    return make_effort()
 
 
-def synthetic_risk(seed=0, sigmas=SIGMA_GRID):
-    """Risk per trial and sigma: a logistic in sigma around a per-trial threshold, so
-    each trial's risk increases with sigma and the ranking of trials changes with it
-    (if R(sigma) were c(sigma) R0, Eq. 1 would fit every sigma equally well)."""
-    threshold = np.random.default_rng(seed + 100).uniform(0.04, 0.12, 24)
-    return pd.DataFrame([(t, s, 1 / (1 + np.exp(-(s - threshold[i]) / 0.01)))
-                         for s in sigmas for i, t in enumerate(TRIAL_IDS)],
-                        columns=["trial", "sigma", "risk"])
+@pytest.fixture(scope="module")
+def RISK(make_risk):
+    return make_risk()
 
 
-E, RISK = synthetic_effort(), synthetic_risk()
+@pytest.fixture
+def simulate(E, RISK):
+    def simulate(sigma, n, noise_sd, seed, datasets=("difficulty", "time", "build")):
+        return simulate_participants(E, RISK, BETAS, sigma, n, noise_sd, np.random.default_rng(seed),
+                                     datasets=datasets)
+
+    return simulate
 
 
-def simulate(sigma, n, noise_sd, seed, datasets=("difficulty", "time", "build")):
-    return simulate_participants(E, RISK, BETAS, sigma, n, noise_sd, np.random.default_rng(seed),
-                                 datasets=datasets)
-
-
-def test_simulated_participants_are_labelled_and_refused_as_human_data(tmp_path):
+def test_simulated_participants_are_labelled_and_refused_as_human_data(tmp_path, simulate):
     sim = simulate(0.075, 3, 1.0, seed=0)
     assert sorted(sim["dataset"].unique()) == ["simulated-build", "simulated-difficulty",
                                                "simulated-time"]
@@ -50,7 +46,7 @@ def test_simulated_participants_are_labelled_and_refused_as_human_data(tmp_path)
         load_human_data(path)
 
 
-def test_noise_free_simulation_recovers_betas_up_to_the_zscore_map():
+def test_noise_free_simulation_recovers_betas_up_to_the_zscore_map(E, RISK, simulate):
     # Z-scoring maps the latent cost y to (y - mean y)/sd y whatever each participant's
     # scale and offset, so Eq. 1 fit to z-scored means has b1/sd, b2/sd, (b0 - mean)/sd.
     means = trial_means(zscore_responses(simulate(0.075, 5, 0.0, seed=1, datasets=("time",))))
@@ -63,7 +59,7 @@ def test_noise_free_simulation_recovers_betas_up_to_the_zscore_map():
     assert fit.rmse < 1e-10
 
 
-def test_noisy_simulation_recovers_the_ratio_of_risky_to_safe_effort_cost():
+def test_noisy_simulation_recovers_the_ratio_of_risky_to_safe_effort_cost(E, RISK, simulate):
     # With noise only the shape of y is identifiable: b2/b1 and the predictions up
     # to a positive affine map (z-scoring divides by a noise-inflated SD).
     R = risk_at_sigma(RISK, 0.075)
@@ -77,7 +73,7 @@ def test_noisy_simulation_recovers_the_ratio_of_risky_to_safe_effort_cost():
 
 
 @pytest.mark.parametrize("true_sigma", [0.06, 0.075, 0.09])
-def test_sigma_fit_recovers_true_sigma(true_sigma):
+def test_sigma_fit_recovers_true_sigma(true_sigma, E, RISK, simulate):
     for seed in range(2):
         sim = simulate(true_sigma, 40, 2.0, seed)
         profile = sigma_profile(trial_means(zscore_responses(sim)), E, RISK)
@@ -87,7 +83,7 @@ def test_sigma_fit_recovers_true_sigma(true_sigma):
         assert (abs(choice - true_sigma) <= step).all(), choice.to_dict()
 
 
-def test_bootstrap_intervals_cover_truth():
+def test_bootstrap_intervals_cover_truth(simulate):
     # The estimand is the expected mean z-score of a trial over the population of
     # simulated participants. With response noise this is not exactly z(y): each
     # participant divides by the SD of their own noisy responses. So the truth is
@@ -110,7 +106,8 @@ def test_bootstrap_intervals_cover_truth():
     assert 0.8 <= np.mean(width_ratio) <= 1.2
 
 
-def test_run_analysis_on_simulated_participants_writes_labelled_tables_and_figures(tmp_path):
+@pytest.mark.slow
+def test_run_analysis_on_simulated_participants_writes_labelled_tables_and_figures(tmp_path, E, RISK, simulate):
     sim = simulate(0.075, 25, 2.0, seed=5)
     out = run_analysis(sim, E, RISK, tmp_path, seed=1, n_boot=200, jobs=1)
     settings = out["settings"].iloc[0]
@@ -133,7 +130,7 @@ def test_run_analysis_on_simulated_participants_writes_labelled_tables_and_figur
         assert Image.open(png).text["Title"].startswith(SIMULATED_TITLE)
 
 
-def test_run_analysis_without_human_data_writes_pairs_and_effort_risk_figure(tmp_path):
+def test_run_analysis_without_human_data_writes_pairs_and_effort_risk_figure(tmp_path, E, RISK):
     out = run_analysis(None, E, RISK, tmp_path, seed=0)
     assert out["settings"].iloc[0]["sigma"] == pytest.approx(0.065)
     assert out["orderings"]["source"].value_counts().to_dict() == {"effort": 12, "risk": 12}
@@ -143,20 +140,21 @@ def test_run_analysis_without_human_data_writes_pairs_and_effort_risk_figure(tmp
     assert not any("simulated" in p for p in out["files"]["path"])
 
 
-def test_effort_risk_figure_with_fitted_betas_is_written_as_png_and_pdf(tmp_path):
+def test_effort_risk_figure_with_fitted_betas_is_written_as_png_and_pdf(tmp_path, E, RISK):
     paths = plot_effort_risk(E, RISK, 0.07, tmp_path, betas=BETAS, stem="er")
     assert [p.name for p in paths] == ["er.png", "er.pdf"]
     with Image.open(paths[0]) as image:
         assert image.size[0] > 600 and image.size[1] > 600
 
 
-def test_run_analysis_refuses_a_csv_of_simulated_participants_as_human_data(tmp_path):
+def test_run_analysis_refuses_a_csv_of_simulated_participants_as_human_data(tmp_path, E, RISK, simulate):
     path = tmp_path / "responses.csv"
     simulate(0.075, 3, 1.0, seed=6).to_csv(path, index=False)
     with pytest.raises(HumanDataError, match="simulated participants are not human data"):
         run_analysis(path, E, RISK, tmp_path / "out", seed=0, n_boot=10, jobs=1)
 
 
+@pytest.mark.slow
 def test_demo_labels_every_output_as_simulated(tmp_path):
     from analysis import demo
     from lgp import reproduce

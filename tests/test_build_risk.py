@@ -140,3 +140,11 @@ def test_parallel_build_risk_equals_serial():
     serial = build_risk("5H", [0.065], n_sims=10, samples=2, seed=0, jobs=1)
     parallel = build_risk("5H", [0.065], n_sims=10, samples=2, seed=0, jobs=2)
     assert serial.equals(parallel)
+
+
+def test_work_shares_follow_the_effort_runs_approach_height():
+    trial = stimuli.load_trial("6H")
+    default = [st.work_share for st in plan_stages(trial, 0, 0)]
+    flat = [st.work_share for st in plan_stages(trial, 0, 0, approach_height=0.0)]
+    assert default[-1] == pytest.approx(1.0) and flat[-1] == pytest.approx(1.0)
+    assert not np.allclose(default[:-1], flat[:-1])

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import stimuli
+from lgp.paper import TRIAL_IDS
 from lgp.planner import PlanningError
 from models.effort import COLUMNS, physical_effort
 
@@ -60,7 +61,8 @@ def test_parallel_jobs_give_identical_numbers():
     np.testing.assert_array_equal(serial["effort"].to_numpy(), parallel["effort"].to_numpy())
 
 
-@pytest.mark.parametrize("trial_id", [t.id for t in stimuli.load_all()])
+@pytest.mark.slow  # plans all 24 trials
+@pytest.mark.parametrize("trial_id", TRIAL_IDS)
 def test_every_trial_plans_without_error(trial_id):
     mean, table = physical_effort(trial_id, samples=2)
     assert np.isfinite(mean) and mean > 0

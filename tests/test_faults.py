@@ -95,6 +95,7 @@ _POOL_SCRIPT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("start_method", ["fork", "spawn"])
 def test_workers_die_with_a_killed_parent_quietly(tmp_path, start_method):
     """kill -9 cannot be handled by the parent: the kernel must end the workers
@@ -111,6 +112,7 @@ def test_workers_die_with_a_killed_parent_quietly(tmp_path, start_method):
     assert "Traceback" not in err, err
 
 
+@pytest.mark.slow
 def test_sigterm_stops_the_pool_like_ctrl_c(tmp_path):
     script = tmp_path / "pool.py"
     script.write_text(_POOL_SCRIPT)

@@ -114,7 +114,7 @@ def tower5_plans():
     return plan(A, B, 0, formulation="reduced"), plan(A, B, 0, formulation="full")
 
 
-@pytest.mark.parametrize("n", [2, 5])
+@pytest.mark.parametrize("n", [2, pytest.param(5, marks=pytest.mark.slow)])
 def test_reduced_program_reaches_the_full_programs_optimum(n, request):
     if n == 5:
         reduced, full = request.getfixturevalue("tower5_plans")

@@ -29,8 +29,8 @@ LAYERS = [
     # analysis imports nothing of the physics: no stimuli, scene, planner or models
     ("analysis", ["analysis", "analysis.*"], ["ground"]),
     # CLIs, caches and report or page writers
-    ("application", ["lgp.reproduce", "lgp.show", "lgp.cache", "lgp.manifest", "lgp.view", "lgp.komo.view", "lgp.report", "lgp.build_stage", "lgp.page", "lgp.sensitivity",
-                     "stimuli.sheet", "stimuli.generate", "*.__main__"], None),
+    ("application", ["lgp.reproduce", "lgp.show", "lgp.cache", "lgp.manifest", "lgp.view", "lgp.komo.view", "lgp.report",
+                     "lgp.build_stage", "lgp.page", "lgp.sensitivity", "stimuli.sheet", "stimuli.generate", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]
 RANK = {name: k for k, (name, _, _) in enumerate(LAYERS)}

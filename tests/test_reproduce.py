@@ -123,7 +123,7 @@ def test_no_cache_simulates_each_trial_once(tmp_path, monkeypatch):
 def _fake_physics(monkeypatch):
     """Effort and risk tables without planning or simulating: this checks which
     trials reach which stage, not model numbers (those have their own tests)."""
-    def effort(trials, samples, seed, executor, cache):
+    def effort(trials, samples, seed, executor, cache, **design):
         return pd.DataFrame([{"trial": t.id, "sample": s, "effort": 1.0 + t.pair / 10 + (t.level == "H") + s / 100}
                              for t in trials for s in range(samples)])
 
@@ -136,6 +136,7 @@ def _fake_physics(monkeypatch):
     monkeypatch.setattr(reproduce, "write_replays", lambda *a, **k: None)  # nor 3-D replays (they plan)
 
 
+@pytest.mark.slow
 def test_an_extra_trial_file_does_not_break_the_paper_run(tmp_path, monkeypatch, capsys):
     """A valid 13E.yaml beside the paper's 24 (as stimuli/README.md invites): the
     default run is the paper's 24 and names 13E; `--trials all` runs 13E too, in

@@ -8,6 +8,7 @@ from lgp.scene import BLOCK_SIZE, Block, Scene
 from models.risk import (
     DEFAULT_ENGINE,
     SIGMA_GRID,
+    available_engines,
     UnstableSceneError,
     check_stable,
     physical_risk,
@@ -73,7 +74,8 @@ def test_risk_table_is_tidy_in_input_order_and_matches_physical_risk():
     assert set(runs["trial"]) == {"staircase4 0.2d"}
 
 
-@pytest.mark.parametrize("engine,scenes,n", [("mujoco", 2, 12), ("drake", 1, 2)])
+@pytest.mark.parametrize("engine,scenes,n", [("mujoco", 2, 12), ("drake", 1, 2)]
+                         + [("physx", 2, 6)] * ("physx" in available_engines()))
 def test_parallel_grid_gives_identical_numbers_to_serial(engine, scenes, n):
     scenes = [staircase(4), harmonic(4, 0.8)][:scenes]
     progress = []

@@ -145,6 +145,7 @@ def noisy_scenes():
     return out
 
 
+@pytest.mark.slow  # every noisy scene in two engines
 @pytest.mark.parametrize("other", engines(["drake", "physx", GAME], failure="agree"))
 def test_engines_agree_on_the_same_noisy_scenes(other):
     scenes = noisy_scenes()
@@ -158,7 +159,8 @@ def test_engines_agree_on_the_same_noisy_scenes(other):
 EARLY_STOP_SCENES = {"mujoco": 40, "drake": 3, "physx": 40, GAME: 40}
 
 
-@pytest.mark.parametrize("engine", engines(list(EARLY_STOP_SCENES), failure="early"))
+@pytest.mark.parametrize("engine", [pytest.param(*p.values, marks=[*p.marks, pytest.mark.slow] if p.values[0] == "physx" else p.marks,
+                                                 id=p.id) for p in engines(list(EARLY_STOP_SCENES), failure="early")])  # physx: ~15 s
 def test_early_termination_gives_the_verdict_of_the_full_four_seconds(engine):
     count = EARLY_STOP_SCENES[engine]
     scenes = noisy_scenes()[::max(1, len(noisy_scenes()) // count)][:count]

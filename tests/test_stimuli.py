@@ -144,6 +144,7 @@ def test_unknown_field_is_rejected():
     _bad(lambda t: t.__setitem__("colour_scheme", "x"), r"unknown field\(s\) colour_scheme")
 
 
+@pytest.mark.slow
 def test_region_too_small_is_rejected():
     _bad(lambda t: t["initial"]["scattered"].__setitem__("region", {"x": [0.6, 0.61], "y": [0.3, 0.31]}), r"4E-A: cannot scatter 4 blocks")
 

@@ -5,11 +5,10 @@ import pytest
 
 import stimuli
 from lgp.assignment import assign_blocks
+from lgp.paper import TRIAL_IDS as IDS
 from lgp.scene import BLOCK_SIZE as d
 from lgp.scene import Block, Scene, support_graph, supported_by
 from lgp.symbolic import Grasp, IllegalActionError, Place, PlanState, apply, same_pose, symbolic_plan
-
-IDS = [t.id for t in stimuli.load_all()]
 
 
 def _plan(tid, seed=0):

@@ -85,7 +85,8 @@ def main(argv=None) -> int:
         runs.to_csv(args.runs, index=False)
     wide = table.pivot(index="trial", columns="sigma", values="risk").reindex([t.id for t in trials])
     print(wide.to_string(float_format=lambda x: f"{x:.2f}"))
-    print(f"{len(runs)} runs with {args.engine}, {args.fall_rule} fall rule at {args.fall_threshold:g} d, "
+    label = args.engine if ENGINES[args.engine].faithful else f"{args.engine} (UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md)"
+    print(f"{len(runs)} runs with {label}, {args.fall_rule} fall rule at {args.fall_threshold:g} d, "
           f"in {time.perf_counter() - t0:.1f} s -> {args.table}", file=sys.stderr)
     return 0
 

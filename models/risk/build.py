@@ -97,11 +97,12 @@ class Stage:
     key: str
 
 
-def plan_stages(trial, seed: int = 0, sample: int = 0):
+def plan_stages(trial, seed: int = 0, sample: int = 0, approach_height: float | None = None):
     """The stages of the plan of effort row (trial, sample): list of Stage.
 
     Draws the layout exactly as `models.effort.plan_of_sample` does; only the
-    assignment and the symbolic plan are computed (no KOMO).
+    assignment and the symbolic plan are computed (no KOMO). `approach_height`
+    (m; None: lgp.planner.APPROACH) is the effort run's, for the work shares.
     """
     from lgp.assignment import assign_blocks
     from lgp.symbolic import Place, symbolic_plan
@@ -117,7 +118,7 @@ def plan_stages(trial, seed: int = 0, sample: int = 0):
     moved = set(plan.moved)
     stays = {a for a in plan.assignment if a not in moved}
     a_index = {name: i for i, name in enumerate(initial.names)}
-    weights = _carry_weights(initial, target, plan)
+    weights = _carry_weights(initial, target, plan, approach_height)
     total = sum(weights.values())
     placed: set[str] = set()
     grasped: set[str] = set()
@@ -142,14 +143,15 @@ def plan_stages(trial, seed: int = 0, sample: int = 0):
     return stages
 
 
-def _carry_weights(initial: Scene, target: Scene, plan) -> dict[str, float]:
+def _carry_weights(initial: Scene, target: Scene, plan, approach_height: float | None = None) -> dict[str, float]:
     """Effort proxy per moved block: L^2, L = |p_B - p_A| + 2 APPROACH (module docstring)."""
     from lgp.planner import APPROACH
 
+    h = APPROACH if approach_height is None else float(approach_height)
     out = {}
     for a in plan.moved:
         d = np.linalg.norm(target.block(plan.assignment[a]).p_WB - initial.block(a).p_WB)
-        out[a] = float((d + 2 * APPROACH) ** 2)
+        out[a] = float((d + 2 * h) ** 2)
     return out
 
 
@@ -165,7 +167,8 @@ def _stage_key(scene: Scene, sources) -> str:
 def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed: int = 0,
                engine: str | None = None, jobs: int | None = 1, executor=None,
                progress: Callable[[int, int], None] | None = None, *, profile: str | None = None,
-               fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD) -> pd.DataFrame:
+               fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD,
+               approach_height: float | None = None) -> pd.DataFrame:
     """Risk of every stage of the plans of `samples` layouts of `trial`.
 
     `trial` is a stimuli.Trial or its id; `sigma` one noise level or several
@@ -175,7 +178,8 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
     the plan, `blocks_in_structure` the blocks at their B pose, `blocks_simulated`
     those plus the stack blocks not yet moved, `work_share` the effort-proxy
     share w_k. `engine`, `profile`, `fall_rule` and `fall_threshold` are those of
-    `physical_risk`. Raises BuildStageError naming trial, sample and stage when a stage
+    `physical_risk`; `approach_height` that of the effort run (work shares only).
+    Raises BuildStageError naming trial, sample and stage when a stage
     falls without noise.
     """
     if isinstance(trial, str):
@@ -193,7 +197,7 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
     name = _engine_name(engine, profile)
     fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
     drawn = range(samples) if trial.initial.is_random else [0]
-    plans = {s: plan_stages(trial, seed, s) for s in drawn}
+    plans = {s: plan_stages(trial, seed, s, approach_height) for s in drawn}
     unique: dict[str, Stage] = {}
     for stages in plans.values():
         for st in stages:
