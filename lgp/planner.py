@@ -53,10 +53,10 @@ from lgp.symbolic import Grasp, SymbolicPlan, symbolic_plan
 #: Duration of one phase (one action) in seconds: a reach-and-place of a block in
 #: about a second is human-like, and every phase has the same length, as in KOMO.
 PHASE_DURATION = 1.0
-#: Slices per phase: 20, i.e. 50 ms. Not converged for short carries: 40 slices
-#: change one layout's effort by -0.1 % to -3.9 % (2E), 80 by at most 0.7 % more
-#: (docs/effort.md, "Time discretisation"); a parameter of `plan` and of
-#: `python -m lgp.reproduce --slices`.
+#: Slices per phase: 20, i.e. 50 ms. Not converged for short carries: a layout's
+#: effort at 20 is +4.75 % (2E), +3.27 % (10E), typically +0.5..2 % above 80 slices;
+#: 40 is within 0.7 % of 80 for every trial (docs/effort.md, "Time discretisation").
+#: A parameter of `plan` and of `python -m lgp.reproduce --slices`.
 SLICES_PER_PHASE = 20
 #: Vertical approach/retreat distance (m) above every grasp and place pose: the
 #: default `approach_height` of `plan` (0 plans with a clearance constraint instead).
@@ -72,7 +72,7 @@ TURN_RESOLVES = 3
 SEED_MARGIN = 0.02
 #: approach_height = 0: at most this many re-solves with clearance constraints
 #: added where the carried block entered another solid.
-CLEARANCE_ROUNDS = 6
+CLEARANCE_ROUNDS = 12
 #: approach_height = 0: the carried block's bottom stays this far (m) above the
 #: table top and above the top of every solid it passes over. With a bound of
 #: exactly 0 the block slides on the table right after the grasp's rest and SNOPT
@@ -206,9 +206,9 @@ def plan_symbolic(symbolic: SymbolicPlan, rng=0, *, formulation: str = "reduced"
     except PlanningError as e:
         raise PlanningError(f"{initial.label} -> {symbolic.target.label}: {e}", e.action) from None
     komo, result = _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase, approach_height)
-    if approach_height == 0 and result.success and result.max_violation <= 1e-6:
+    if approach_height == 0 and _usable(result, approach_height):
         komo, result = _clear_carries(symbolic, komo, result, formulation, solver)
-    if not result.success or result.max_violation > 1e-6:
+    if not _usable(result, approach_height):
         o = result.worst_objective
         k = int(round(o.time[0])) if o is not None and o.time else None
         action = symbolic.actions[k - 1] if k and 1 <= k <= len(symbolic.actions) else None
@@ -511,6 +511,42 @@ def _blocks_at(initial: Scene, X_WB: dict[str, np.ndarray], i: int) -> dict[str,
     return out
 
 
+def _separation(moving: Block, other, vertical: bool = False):
+    """(scale, target) of the position inequality on the carried block's centre that
+    separates it from `other` with the smallest move: over its top (z >= top + h/2
+    + CLEARANCE), or beside it along world x or y, past its outline's bounding box
+    by the carried block's half extent at its current yaw (touching allowed). Beside is
+    what a block leaving or joining touching neighbours needs; over, what a block
+    passing a structure needs."""
+    p = np.asarray(moving.p_WB, float)
+    options = [((0.0, 0.0, -1.0), 2, float(other.top) + float(moving.size[2]) / 2 + CLEARANCE)]
+    if not vertical:
+        mine, theirs = np.asarray(moving.footprint(), float), np.asarray(other.footprint(), float)
+        half = (mine.max(axis=0) - mine.min(axis=0)) / 2
+        lo, hi = theirs.min(axis=0), theirs.max(axis=0)
+        for axis in (0, 1):
+            unit = np.zeros(3)
+            unit[axis] = 1.0
+            # Touching is allowed (half the overlap tolerance): a block packed between
+            # two neighbours must fit back between them.
+            options.append((tuple(unit), axis, float(lo[axis] - half[axis] + OVERLAP_TOLERANCE / 2)))  # p <= target
+            options.append((tuple(-unit), axis, float(hi[axis] + half[axis] - OVERLAP_TOLERANCE / 2)))  # p >= target
+    scale, axis, bound = min(options, key=lambda o: (o[2] - p[o[1]]) * (-1 if sum(o[0]) > 0 else 1))
+    target = np.zeros(3)
+    target[axis] = bound
+    return scale, target
+
+
+def _usable(result: KomoResult, approach_height: float) -> bool:
+    """Solved, every constraint within 1e-6. Without legs SNOPT may also end with
+    info 41 ("cannot be improved") at a feasible point: a carried block sliding on
+    the table or a top right after a grasp's rest is a degenerate active set; the
+    status stays in the effort table (column status)."""
+    if result.max_violation > 1e-6:
+        return False
+    return result.success or (approach_height == 0 and "snopt info 41" in result.status)
+
+
 def _clear_carries(symbolic: SymbolicPlan, komo: Komo, result: KomoResult, formulation: str, solver: str):
     """Hold each carried block above every solid it entered, then re-solve.
 
@@ -544,15 +580,22 @@ def _clear_carries(symbolic: SymbolicPlan, komo: Komo, result: KomoResult, formu
                 f"{initial.label} -> {symbolic.target.label}: action {k} {action}: carried block {name} still enters "
                 f"{other.name} by {depth * 1000:.1f} mm at t = {i / S:g} s after {CLEARANCE_ROUNDS} clearance re-solves",
                 action)
-        for name, i, other, _ in entered:
-            z_min = float(other.top) + float(initial.block(name).size[2]) / 2 + CLEARANCE
-            if declared.get((name, i), -np.inf) >= z_min - 1e-12:
-                continue
-            declared[(name, i)] = z_min
-            komo.add_objective([i / S], "position", (name,), "ineq", scale=(0.0, 0.0, -1.0), target=[0.0, 0.0, z_min])
-        result = komo.solve(formulation=formulation, solver=solver, initial_guess=result.q[1:])
-        elapsed += result.solve_time
-        if not result.success or result.max_violation > 1e-6:
+        before, previous = len(komo.objectives), result
+        for over in (False, True):
+            # The cheapest way out first; a solid entered again at that slice, or a
+            # program these make infeasible (beside one solid, beside another): over it.
+            del komo.objectives[before:]
+            for name, i, other, _ in entered:
+                moving = _blocks_at(initial, previous.X_WB, i)[name]
+                key = (name, i, other.name, tuple(np.round(getattr(other, "p_WB", getattr(other, "p_WO", None)), 6)))
+                scale, target = _separation(moving, other, vertical=over or key in declared)
+                declared[key] = True
+                komo.add_objective([i / S], "position", (name,), "ineq", scale=scale, target=target)
+            result = komo.solve(formulation=formulation, solver=solver, initial_guess=previous.q[1:])
+            elapsed += result.solve_time
+            if _usable(result, 0.0):
+                break
+        if not _usable(result, 0.0):
             break
     result.solve_time = elapsed
     return komo, result

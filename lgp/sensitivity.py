@@ -15,6 +15,16 @@ trials have risk > 0 and which of the paper's four risk contrasts (4H > 4E, 5H >
 runs with its own fixed settings (docs/risk.md). Writes risk_sensitivity.csv
 (tidy: one row per engine, rule, trial, sigma), risk_sensitivity_summary.csv and
 figures/risk_sensitivity.png (one panel per engine and rule).
+
+The effort section (`effort_sensitivity`): the effort of every trial for each
+motion design of EFFORT_HEIGHTS (approach legs of 5 cm and 2 cm; 0 = no legs,
+a clearance constraint instead) at the run's slices per phase, and for the run's
+design at twice its slices (the next-finer setting of docs/effort.md), with the
+H/E ratio of every pair under each design and whether the pair's order (tie rule
+of analysis.pairs) differs from the run's design. Planned through the run's
+effort stage, so cached per trial and design. With --quick, one layout per trial.
+Writes effort_sensitivity.csv (one row per design and trial) and
+effort_sensitivity_pairs.csv (one row per design and pair).
 """
 from __future__ import annotations
 
@@ -36,6 +46,13 @@ RISK_SIGMAS = (PAPER_SIGMA, 0.10)
 #: simulated once per engine and judged by each rule (exact: every threshold
 #: here has the same early-stop distance, models.risk.engine.fall_certain).
 RISK_RULES = (("horizontal", 0.25), ("3d", 0.25), ("3d", 0.1))
+#: Approach heights (m) of the effort section: the default legs, shorter legs, and
+#: none (the clearance design of lgp.planner).
+EFFORT_HEIGHTS = (0.05, 0.02, 0.0)
+#: Layouts per trial of the effort section with --quick (the clearance design
+#: re-solves its carries and is the slow one).
+EFFORT_QUICK_SAMPLES = 1
+
 #: Engines of the risk section when none are named: every installed one but Drake
 #: (about 100x slower; add it with --sensitivity-engines ... drake or --engine drake).
 DEFAULT_RISK_ENGINES = ("mujoco", "physx", "physx:game-defaults")
@@ -56,6 +73,8 @@ class Context:
     out: Path
     risk_key: Callable[..., dict]
     log: Callable[[str], None] = field(default=lambda m: print(m, file=sys.stderr, flush=True))
+    #: lgp.reproduce.effort_tables (trials, samples, seed, executor, cache, approach_height=, slices_per_phase=)
+    effort_tables: Callable[..., pd.DataFrame] | None = None
 
 
 @dataclass
@@ -282,8 +301,113 @@ def risk_section(ctx: Context) -> Section:
     return Section("risk", lines, files)
 
 
+# ----------------------------------------------------------------------------- effort by motion design
+
+
+def effort_designs(args) -> list[tuple[str, float, int]]:
+    """(label, approach_height, slices_per_phase) of the effort section; the run's
+    design first."""
+    from lgp.planner import APPROACH, SLICES_PER_PHASE
+
+    h = getattr(args, "approach_height", None)
+    h = APPROACH if h is None else float(h)
+    S = getattr(args, "slices", None) or SLICES_PER_PHASE
+
+    def label(height, slices):
+        legs = f"legs {height * 100:g} cm" if height > 0 else "clearance (no legs)"
+        return f"{legs}, {slices} slices"
+
+    designs = [(label(h, S), h, S)]
+    for height in EFFORT_HEIGHTS:
+        if height != h:
+            designs.append((label(height, S), height, S))
+    designs.append((label(h, 2 * S), h, 2 * S))
+    return designs
+
+
+def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
+    """(per design and trial, per design and pair, notes on designs that failed)."""
+    from analysis import pair_table
+    from lgp.paper import TRIAL_IDS
+
+    args = ctx.args
+    samples = EFFORT_QUICK_SAMPLES if getattr(args, "quick", False) else args.samples
+    rows, notes = [], []
+    for label, h, S in effort_designs(args):
+        t0 = time.perf_counter()
+        try:
+            table = ctx.effort_tables(ctx.trials, samples, args.seed, ctx.executor, ctx.cache,
+                                      approach_height=h, slices_per_phase=S)
+        except Exception as e:  # a design the planner cannot do for some trial: said in the report, not hidden
+            notes.append(f"{label}: {type(e).__name__}: {e}")
+            ctx.log(f"[sensitivity] effort, {label}: failed ({type(e).__name__})")
+            continue
+        ctx.log(f"[sensitivity] effort, {label}: {len(table)} layouts in {time.perf_counter() - t0:.1f} s")
+        g = table.groupby("trial", sort=False)
+        for trial, df in g:
+            rows.append({"design": label, "approach_height": h, "slices_per_phase": S, "trial": trial,
+                         "effort": float(df["effort"].mean()), "samples": len(df),
+                         "not_converged": int((~df["status"].astype(str).str.contains("SolutionFound")).sum())})
+    table = pd.DataFrame(rows, columns=["design", "approach_height", "slices_per_phase", "trial", "effort", "samples",
+                                        "not_converged"])
+    pairs = []
+    base = None
+    if {t.id for t in ctx.trials} >= set(TRIAL_IDS):
+        for label, d in table.groupby("design", sort=False):
+            pt = pair_table(d.set_index("trial")["effort"])
+            pt.insert(0, "design", label)
+            pt["ratio_H_over_E"] = pt["cost_H"] / pt["cost_E"]
+            if base is None:
+                base = dict(zip(pt["pair"], pt["order"]))
+            pt["order_changes"] = [o != base[p] for p, o in zip(pt["pair"], pt["order"])]
+            pairs.append(pt.rename(columns={"cost_E": "effort_E", "cost_H": "effort_H"}))
+    pairs = pd.concat(pairs, ignore_index=True) if pairs else pd.DataFrame()
+    return table, pairs, notes
+
+
+def effort_section(ctx: Context) -> Section:
+    if ctx.effort_tables is None:
+        return Section("effort", [], [])
+    table, pairs, notes = effort_sensitivity_tables(ctx)
+    files = [write_csv_atomic(table, ctx.out / "effort_sensitivity.csv")]
+    designs = list(dict.fromkeys(table["design"]))
+    lines = ["## Sensitivity of effort to the motion design", "",
+             f"Effort (J s, mean over {int(table['samples'].max()) if len(table) else 0} layout(s) per trial, seed "
+             f"{ctx.args.seed}) for each design: approach legs of 5 and 2 cm at every grasp and place, none (a "
+             "clearance constraint keeps the carried block above the table and every block it passes; "
+             "docs/effort.md), and the run's design at twice its slices per phase. The first design is the run's.",
+             ""]
+    if len(table):
+        wide = table.pivot(index="trial", columns="design", values="effort").reindex([t.id for t in ctx.trials])[designs]
+        lines += _markdown(wide.reset_index())
+        lines.append("")
+    if len(pairs):
+        files.append(write_csv_atomic(pairs, ctx.out / "effort_sensitivity_pairs.csv"))
+        ratio = pairs.pivot(index="pair", columns="design", values="ratio_H_over_E")[designs]
+        order = pairs.pivot(index="pair", columns="design", values="order")[designs]
+        changes = pairs.groupby("pair")["order_changes"].any()
+        shown = pd.DataFrame({"pair": ratio.index})
+        for d in designs:
+            shown[f"H/E {d}"] = [f"{r:.3g} ({o})" for r, o in zip(ratio[d], order[d])]
+        shown["order changes"] = ["yes" if changes[p] else "no" for p in ratio.index]
+        lines += ["H/E effort ratio of every pair and its order under the tie rule (analysis.pairs.TIE_REL); "
+                  "'order changes': some design orders the pair differently from the run's.", "",
+                  *_markdown(shown), ""]
+    bad = table[table["not_converged"] > 0] if len(table) else table
+    if len(bad):
+        lines += ["Layouts whose KOMO solve ended feasible but without SNOPT's optimality certificate (info 41; "
+                  "docs/effort.md): " + ", ".join(f"{r.trial} {r.design} ({r.not_converged})" for r in bad.itertuples())
+                  + ".", ""]
+    for note in notes:
+        lines += [f"Failed: {note}", ""]
+    lines += ["Tables: `effort_sensitivity.csv` (one row per design and trial), `effort_sensitivity_pairs.csv` "
+              "(one row per design and pair).", ""]
+    return Section("effort", lines, files)
+
+
 #: The report's sensitivity sections, in order (append new ones here).
-SECTIONS: list[Callable[[Context], Section]] = [risk_section]
+SECTIONS: list[Callable[[Context], Section]] = [risk_section, effort_section]
 
 __all__ = ["SECTIONS", "Context", "Section", "add_arguments", "check_arguments", "run_sections", "risk_section",
+           "effort_section", "effort_designs", "effort_sensitivity_tables", "EFFORT_HEIGHTS",
            "risk_sensitivity_table", "risk_sensitivity_summary", "RISK_RULES", "RISK_SIGMAS"]
