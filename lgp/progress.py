@@ -22,8 +22,21 @@ def _duration(seconds: float) -> str:
     return f"{seconds // 3600:.0f} h {seconds % 3600 // 60:02.0f} min"
 
 
+def log(msg: str) -> None:
+    """Print a line to stderr; on a terminal with a bar drawn, above the bar (which is redrawn)."""
+    bar = Progress.active
+    if bar is not None and bar.tty and bar.stream is sys.stderr:
+        sys.stderr.write("\r\033[K" + msg + "\n")
+        bar._draw()
+    else:
+        print(msg, file=sys.stderr, flush=True)
+
+
 class Progress:
     """``Progress(stage, total, unit)``; ``advance(n)`` as work finishes; ``close()`` at the end."""
+
+    #: The bar being drawn on a terminal now (lines from `log` go above it).
+    active: "Progress | None" = None
 
     def __init__(self, stage: str, total: int, unit: str = "tasks", stream: TextIO | None = None,
                  tty: bool | None = None, interval: float = 0.2):
@@ -35,6 +48,8 @@ class Progress:
         self.t0 = time.perf_counter()
         self._drawn = 0.0
         self._closed = False
+        if self.tty and self.total:
+            Progress.active = self
 
     def advance(self, n: int = 1) -> None:
         self.done += n
@@ -66,6 +81,10 @@ class Progress:
         if self._closed:
             return
         self._closed = True
+        if Progress.active is self:
+            Progress.active = None
+        if self.total == 0:  # nothing to do (all cached): nothing to report
+            return
         if self.tty:
             self.stream.write("\r\033[K" + self.line() + "\n")
         else:

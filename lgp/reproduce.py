@@ -31,6 +31,7 @@ from lgp import cli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
 from lgp.progress import Progress
+from lgp.progress import log as progress_log
 from lgp.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 from lgp.page import Stopwatch, write_index, write_replays
@@ -42,7 +43,7 @@ QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot
 
 
 def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
+    progress_log(msg)  # stderr; above the progress bar on a terminal
 
 
 def effort_key_inputs() -> dict:

@@ -134,6 +134,7 @@ def test_interruption_cancels_the_queued_futures(tmp_path):
         assert len(list(tmp_path.glob("*.done"))) == finished < 10
 
 
+@pytest.mark.slow  # a subprocess that imports the pipeline: ~5 s on a loaded machine
 def test_refused_scheduler_address_fails_at_once_with_one_line():
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     t0 = time.perf_counter()

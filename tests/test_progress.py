@@ -1,0 +1,48 @@
+"""The progress line: counts, rate and ETA on a terminal; one line per stage otherwise."""
+import io
+
+from lgp.progress import Progress
+
+
+def test_not_a_terminal_prints_one_line_when_the_stage_ends():
+    out = io.StringIO()
+    with Progress("effort", 10, "plans", stream=out) as bar:
+        for _ in range(10):
+            bar.advance()
+        assert out.getvalue() == ""  # nothing while it runs
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("[effort] 10/10 plans in ")
+
+
+def test_a_terminal_sees_counts_and_an_eta_while_it_runs():
+    out = io.StringIO()
+    bar = Progress("risk", 100, "runs", stream=out, tty=True, interval=0.0)
+    bar.t0 -= 10.0  # 10 s ago
+    bar.advance(25)  # 2.5 runs/s: 75 left take 30 s
+    assert "25/100 runs" in out.getvalue() and "ETA 30 s" in out.getvalue()
+    bar.advance(75)
+    bar.close()
+    assert out.getvalue().endswith("\n") and "100/100 runs in" in out.getvalue().splitlines()[-1]
+
+
+def test_an_empty_stage_says_nothing():
+    out = io.StringIO()
+    Progress("effort", 0, "plans", stream=out).close()
+    assert out.getvalue() == ""
+
+
+def test_log_lines_go_above_the_bar_on_a_terminal(monkeypatch):
+    import sys
+
+    from lgp.progress import log
+
+    out = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", out)
+    bar = Progress("effort", 4, "plans", stream=out, tty=True, interval=0.0)
+    bar.advance()
+    log("[effort  1/2] 1E: done")
+    text = out.getvalue()
+    # the bar's line is cleared, the message printed on its own line, then the bar drawn again
+    assert "\r\033[K[effort  1/2] 1E: done\n\r\033[K[effort] |" in text
+    bar.close()
+    assert Progress.active is None
