@@ -41,7 +41,10 @@ def read_results(results: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
         if not path.is_file():
             raise ModelInputError(f"{path} does not exist: --results must be the output folder of a full "
                                   "`python -m lgp.reproduce` run")
-        table = pd.read_csv(path, dtype={"trial": str})
+        try:
+            table = pd.read_csv(path, dtype={"trial": str})
+        except (ValueError, UnicodeDecodeError) as e:  # pandas' ParserError is a ValueError
+            raise ModelInputError(f"{path}: not a readable CSV ({e})") from e
         missing = [c for c in columns if c not in table.columns]
         if missing:
             raise ModelInputError(f"{path}: missing column(s) {', '.join(missing)}")

@@ -13,6 +13,7 @@ ARGS = ["--trials", "6E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "
         "--no-replays"]
 
 
+@pytest.mark.slow
 def test_build_risk_flag_writes_stages_and_reuses_the_cache(tmp_path, monkeypatch):
     out = tmp_path / "r"
     assert reproduce.main([*ARGS, "--out", str(out)]) == 0

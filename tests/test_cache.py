@@ -139,6 +139,7 @@ def test_import_reader_sees_imports_inside_functions():
     assert dict(module_imports("lgp"))["lgp.planner"] is False  # lgp.plan, lazily
 
 
+@pytest.mark.slow
 def test_import_closure_holds_every_module_python_loads():
     """An independent answer: the project modules a fresh interpreter has loaded
     after importing the computation and running it are all in the closure."""

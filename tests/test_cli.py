@@ -92,6 +92,7 @@ BAD = [
     ("analysis.demo", ["--results", "/nonexistent", "--out", "{out}"], 2, "does not exist"),
     ("analysis.demo", ["--results", "{tmp}/empty", "--out", "{out}"], 1, "effort_samples.csv does not exist"),
     ("analysis.demo", ["--results", "{tmp}/empty", "--out", "{out}", "--n-boot", "0"], 2, "--n-boot"),
+    ("analysis.demo", ["--results", "{tmp}/garbage", "--out", "{out}"], 1, "not a readable CSV"),
     ("stimuli.sheet", ["--out", "/nodir/s.png"], 2, "does not exist"),
     ("stimuli.sheet", ["--out", "{tmp}/s.png", "--trials", "99X"], 2, "unknown trial id"),
     ("stimuli.sheet", ["--out", "{tmp}/s.png", "--trials"], 2, "--trials"),
@@ -102,6 +103,8 @@ BAD = [
 def test_bad_input_fails_in_one_line_before_any_work_and_writes_nothing(module, argv, code, words, tmp_path, capsys):
     out = tmp_path / "out"
     (tmp_path / "empty").mkdir()
+    (tmp_path / "garbage").mkdir()
+    (tmp_path / "garbage" / "effort_samples.csv").write_bytes(b"\xff\xfe\x00garbage\n\x00\x01")
     (tmp_path / "a_file").write_text("not a folder")
     human_csv(tmp_path / "good.csv")
     human_csv(tmp_path / "wrong_columns.csv", columns=("dataset", "participant", "trial", "answer"))

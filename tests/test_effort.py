@@ -55,6 +55,7 @@ def test_fixed_layout_is_planned_once_and_repeated():
     assert calls[-1] == (4, 4)
 
 
+@pytest.mark.slow
 def test_parallel_jobs_give_identical_numbers():
     _, serial = physical_effort("4E", samples=2, seed=1, jobs=1)
     _, parallel = physical_effort("4E", samples=2, seed=1, jobs=2)

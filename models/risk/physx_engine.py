@@ -172,7 +172,7 @@ class PhysxEngine(Engine):
         while the blocks move by microns, so speeds are measured from the poses:
         the mean speed over the interval since the last call."""
         L, k = self._L, self._L.scale
-        poses = [b.pose for b in L.bodies]
+        poses = [b.entity_pose for b in L.bodies]  # `.pose` is deprecated in sapien 3
         p = np.array([x.p for x in poses], dtype=float) / k
         q = np.array([x.q for x in poses], dtype=float)
         last, self._last = self._last, (self._steps, p, q)
