@@ -27,13 +27,18 @@ def main(argv=None) -> int:
     parser.add_argument("--png", type=cli.output_file, help="write a figure of block paths and speeds here (its folder must exist)")
     parser.add_argument("--formulation", default="reduced", choices=("reduced", "full"))
     parser.add_argument("--solver", default="snopt", choices=("snopt", "ipopt"))
+    parser.add_argument("--approach-height", type=cli.approach_height, default=None,
+                        help="approach leg (m) of the run, as `lgp.reproduce --approach-height` (default 0.05; 0 = none)")
+    parser.add_argument("--slices", type=cli.positive_int, default=None,
+                        help="slices per phase of the run, as `lgp.reproduce --slices` (default 20)")
     args = parser.parse_args(argv)
 
     import stimuli
     from models.effort import describe, kinetic_energy, plan_of_sample
 
     trial = stimuli.load_trial(args.trial)
-    result = plan_of_sample(trial, args.seed, args.sample, formulation=args.formulation, solver=args.solver)
+    design = {k: v for k, v in (("approach_height", args.approach_height), ("slices_per_phase", args.slices)) if v is not None}
+    result = plan_of_sample(trial, args.seed, args.sample, formulation=args.formulation, solver=args.solver, **design)
     komo = result.komo
     print(f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})")
     print(describe(result))

@@ -179,3 +179,13 @@ def test_effort_sensitivity_section_ratios_and_order_changes(tmp_path):
     assert len(table) == 4 * 24 and table["effort"].isna().sum() == 1
     assert any("3E" in line and "PlanningError" in line for line in section.lines)
     assert section.lines[0].startswith("## Sensitivity of effort")
+
+
+def test_show_replays_the_effort_of_a_run_with_another_design(capsys):
+    from lgp.show import main
+
+    trial = stimuli.load_trial("9E")
+    main(["9E", "--approach-height", "0.02", "--slices", "40"])
+    printed = capsys.readouterr().out
+    expected = kinetic_energy(plan_of_sample(trial, 0, 0, approach_height=0.02, slices_per_phase=40))
+    assert f"effort {expected:.12g} J*s" in printed
