@@ -108,7 +108,6 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
     owner = [u[0] for u in units]
     pending = {t.id: len(effort_units(t, samples, seed, **design)) for t in todo}
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
-    started = {t.id: None for t in todo}
     t0 = time.perf_counter()
     bar = Progress("effort", len(units), "plans")
 
@@ -232,7 +231,12 @@ def pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trial
     table.insert(1, "dimension", table["pair"].map(dims))
     table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
     table.insert(table.columns.get_loc("risk_E"), "sigma", sigma)
-    # Tied in effort and in risk (analysis.pairs.TIE_REL): Eq. 1 ties them for every b.
+    return _with_full_model_range(table)
+
+
+def _with_full_model_range(table: pd.DataFrame) -> pd.DataFrame:
+    """Add the ratios b2/b1 for which Eq. 1 orders each pair E < H; a pair tied in
+    effort and in risk (analysis.pairs.TIE_REL) is tied by Eq. 1 for every b."""
     table["full_E_lt_H_for_b2_over_b1"] = [
         "none (tie)" if (eo == "tie" and ro == "tie") else kappa_range(*row)
         for row, eo, ro in zip(table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy(),
@@ -261,11 +265,7 @@ def declared_pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: flo
     table.insert(1, "dimension", table["pair"].map({t.pair: t.dimension for t in trials}))
     table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
     table.insert(table.columns.get_loc("risk_E"), "sigma", sigma)
-    table["full_E_lt_H_for_b2_over_b1"] = [
-        "none (tie)" if (eo == "tie" and ro == "tie") else kappa_range(*row)
-        for row, eo, ro in zip(table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy(),
-                               table["effort_order"], table["risk_order"])]
-    return table
+    return _with_full_model_range(table)
 
 
 def _orders(pairs: pd.DataFrame, source: str) -> str:

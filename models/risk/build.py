@@ -56,10 +56,10 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 import pandas as pd
 
-from lgp.executor import borrowed, default_jobs
+from lgp.executor import default_jobs
 from lgp.paper import N_SIMS, SAMPLES
 from lgp.scene import Scene, support_graph, supported_by
-from models.risk.core import UnstableSceneError, _engine_name, _task_worker, check_fall_rule, check_stable
+from models.risk.core import UnstableSceneError, _engine_name, check_fall_rule, check_stable, map_runs
 from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
 from models.risk.noise import draw_normals
 
@@ -238,16 +238,7 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
             for a in range(0, n_sims, chunk):
                 tasks.append((key, s))
                 args.append((st.scene, s, z[a:min(a + chunk, n_sims)], a, name, fall_rule, fall_threshold))
-    done = 0
-
-    def arrived(k, res):
-        nonlocal done
-        done += len(res)
-        if progress:
-            progress(done, total)
-
-    with borrowed(executor, 1 if len(args) <= 1 else min(jobs, len(args))) as ex:
-        results = ex.map(_task_worker, args, arrived)
+    results = map_runs(args, total, executor, jobs, progress)
     falls: dict[tuple[str, float], int] = {}
     for (key, s), res in zip(tasks, results):
         falls[key, s] = falls.get((key, s), 0) + sum(bool(r["fell"]) for r in res)

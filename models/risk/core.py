@@ -28,7 +28,6 @@ from lgp.paper import N_SIMS, SIGMA_GRID
 from lgp.scene import Scene
 from models.risk.engine import (
     DEFAULT_FALL_RULE,
-    ENGINES,
     FALL_RULES,
     FALL_THRESHOLD,
     Rollout,
@@ -169,6 +168,21 @@ def _task_worker(args):
     return _simulate_runs(scene, sigma, z, range(start, start + len(z)), engine, *rule)
 
 
+def map_runs(args: list, total: int, executor, jobs: int, progress: Callable[[int, int], None] | None) -> list:
+    """Simulate chunks of runs (`_task_worker` arguments) on `executor` (or a pool
+    of `jobs`), results in input order; `progress(done, total)` counts runs."""
+    done = 0
+
+    def arrived(k, res):
+        nonlocal done
+        done += len(res)
+        if progress:
+            progress(done, total)
+
+    with borrowed(executor, 1 if len(args) <= 1 else min(jobs, len(args))) as ex:
+        return ex.map(_task_worker, args, arrived)
+
+
 def run_grid(
     scenes: Sequence[Scene],
     sigmas: Iterable[float],
@@ -212,16 +226,7 @@ def run_grid(
         _Task(i, s, a, min(a + chunk, n_sims)) for i in range(len(scenes)) for s in sigmas for a in range(0, n_sims, chunk)
     ]
     args = [(scenes[t.scene_index], t.sigma, normals[t.scene_index][t.start : t.stop], t.start, name, fall_rule, fall_threshold) for t in tasks]
-    done = 0
-
-    def arrived(k, res):
-        nonlocal done
-        done += len(res)
-        if progress:
-            progress(done, total)
-
-    with borrowed(executor, 1 if len(tasks) <= 1 else min(jobs, len(tasks))) as ex:
-        results = ex.map(_task_worker, args, arrived)
+    results = map_runs(args, total, executor, jobs, progress)
     rows = []
     for t, res in zip(tasks, results):
         for row in res:
