@@ -18,7 +18,7 @@ def machine() -> str:
 def write_section(out: Path, name: str, text: str) -> None:
     """Replace the '## name' section of `out` (up to the next '## ' heading) or append it."""
     old = out.read_text() if out.exists() else "# Benchmarks\n"
-    pattern = re.compile(rf"^## {re.escape(name)}\b.*?(?=^## |\Z)", re.S | re.M)
+    pattern = re.compile(rf"^## {re.escape(name)}[ \t]*$.*?(?=^## |\Z)", re.S | re.M)
     if pattern.search(old):
         new = pattern.sub(lambda _: text.rstrip("\n") + "\n\n", old, count=1)
     else:

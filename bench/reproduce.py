@@ -63,7 +63,7 @@ def main(argv=None) -> int:
     end = machine()
     what = "`python -m lgp.reproduce --quick`" if args.quick else "`python -m lgp.reproduce` (M = 30, N = 100, 11 sigmas, 24 trials)"
     lines = [
-        "## reproduce",
+        "## reproduce --quick" if args.quick else "## reproduce",
         "",
         f"The main job end to end, {what}; written by `python bench/reproduce.py{' --quick' if args.quick else ''}`. "
         "Each row is a fresh subprocess and a fresh output folder (cold: empty cache; warm: the same command again). "
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
         base = rows[0][1]["wall"]
         lines += ["", "Cold wall time relative to --jobs " + str(rows[0][0]) + ": "
                   + ", ".join(f"--jobs {j}: {c['wall'] / base:.2f}" for j, c, _ in rows) + "."]
-    write_section(args.out, "reproduce", "\n".join(lines))
+    write_section(args.out, "reproduce --quick" if args.quick else "reproduce", "\n".join(lines))
     print(f"wrote the reproduce section of {args.out}")
     return 0
 
