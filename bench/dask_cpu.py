@@ -56,14 +56,15 @@ def main() -> int:
         print(f"{name:26s} wall {wall:.2f} s, inside tasks {rows[-1][2]:.2f} s wall, {rows[-1][3]:.2f} s CPU", flush=True)
     lines = ["## dask overhead", "",
              f"`python bench/dask_cpu.py`: {len(units)} effort plans ({', '.join(TRIALS)}, {SAMPLES} layouts each) on one "
-             f"worker of each backend, on the same loaded shared machine (before: {before}; after: {machine()}).", "",
+             f"worker of each backend, one after the other (before: {before}; after: {machine()}).", "",
              "| backend | wall (s) | inside tasks, wall (s) | inside tasks, CPU (s) |", "|---|---|---|---|"]
     lines += [f"| {n} | {w:.2f} | {iw:.2f} | {ic:.2f} |" for n, w, iw, ic in rows]
     (p, d) = rows
     lines += ["", f"CPU time inside the tasks differs by {100 * (d[3] / p[3] - 1):+.0f} % and the scheduling around them "
-              f"costs {d[1] - d[2]:.2f} s against {p[1] - p[2]:.2f} s for the pool; the rest of the wall-time gap in the "
-              "scale section is the machine's load: a task's wall time here is several times its CPU time, and a Dask "
-              "worker brings a nanny process and the scheduler's thread that compete for the same two cores."]
+              f"costs {d[1] - d[2]:.2f} s against {p[1] - p[2]:.2f} s for the pool. A task's wall time was "
+              f"{d[2] / d[3]:.1f}x its CPU time under Dask and {p[2] / p[3]:.1f}x in the pool: where that ratio is well "
+              "above 1 the machine is loaded, and a Dask worker's nanny process and the scheduler's thread compete "
+              "for the same cores."]
     write_section(ROOT / "docs" / "benchmarks.md", "dask overhead", "\n".join(lines))
     print("\n".join(lines))
     return 0
