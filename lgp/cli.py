@@ -42,26 +42,24 @@ EXIT_DATA, EXIT_USAGE, EXIT_INTERRUPTED = 1, 2, 130
 # ----------------------------------------------------------------------------- validators (argparse type=)
 
 
-def positive_int(text: str) -> int:
-    """A whole number >= 1 (counts: --samples, --n-sims, --jobs, --n-boot ...)."""
+def _int_at_least(text: str, low: int) -> int:
     try:
         value = int(str(text).strip(), 10)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a whole number >= {low}, got {text!r}") from None
+    if value < low:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= {low}, got {text!r}")
     return value
+
+
+def positive_int(text: str) -> int:
+    """A whole number >= 1 (counts: --samples, --n-sims, --jobs, --n-boot ...)."""
+    return _int_at_least(text, 1)
 
 
 def nonnegative_int(text: str) -> int:
     """A whole number >= 0 (seeds: numpy Generators take no negative seed; indices)."""
-    try:
-        value = int(str(text).strip(), 10)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}")
-    return value
+    return _int_at_least(text, 0)
 
 
 seed = nonnegative_int

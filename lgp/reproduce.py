@@ -16,6 +16,7 @@ half way resumes with nothing lost.
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 import json
 import os
 import signal
@@ -106,7 +107,7 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
     todo = [t for t in trials if t.id not in tables]
     units = [u for t in todo for u in effort_units(t, samples, seed, **design)]
     owner = [u[0] for u in units]
-    pending = {t.id: len(effort_units(t, samples, seed, **design)) for t in todo}
+    pending = Counter(t.id for t in owner)
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
     t0 = time.perf_counter()
     bar = Progress("effort", len(units), "plans")
