@@ -261,10 +261,14 @@ def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, acti
     """
     swivels = np.linspace(-np.pi, np.pi, SWIVELS, endpoint=False) + offset
     triples = _triples(waypoints)
+    # One batched closed form for every distinct waypoint pose (approach and retreat share theirs).
+    poses: dict[tuple, int] = {}
+    for w in (w for triple in triples for w in triple):
+        poses.setdefault((np.asarray(w.p_WG, float).tobytes(), float(w.yaw)), len(poses))
+    q_all, ok_all = arm.ik_grids_from_above([(np.frombuffer(p), yaw) for p, yaw in poses], swivels, margin=SEED_MARGIN)
     nodes = []  # per action: (pre, at, post) solutions (m, 7) each, quarter turn (m,), internal cost (m,)
     for pre, at, post in triples:
-        grid = {id(w): arm.ik_grid_from_above(w.p_WG, w.yaw, swivels, margin=SEED_MARGIN) for w in (pre, at, post)}
-        grids = [grid[id(w)] for w in (pre, at, post)]
+        grids = [(q_all[i], ok_all[i]) for i in (poses[(np.asarray(w.p_WG, float).tobytes(), float(w.yaw))] for w in (pre, at, post))]
         for w, (_, ok) in zip((pre, at, post), grids):
             if not ok.any():
                 raise PlanningError(f"{w.what} at phase {w.time:g}: gripper at {np.round(w.p_WG, 4).tolist()} is out of the arm's "
@@ -278,9 +282,9 @@ def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, acti
         nodes.append((q_pre, q_at, q_post, np.broadcast_to(np.arange(4)[:, None], ok.shape)[ok], internal))
     cost, prev_q, prev_time, back = np.zeros(1), arm.q_home[None], 0.0, []
     for (pre, _, post), (q_pre, _, q_post, _, internal) in zip(triples, nodes):
-        d = _squared_distances(prev_q, q_pre) / (pre.time - prev_time) ** 3 + cost[:, None]
-        back.append(np.argmin(d, axis=0))
-        cost = d[back[-1], np.arange(len(q_pre))] + internal
+        best, value = _best_predecessors(prev_q, q_pre, (pre.time - prev_time) ** 3, cost)
+        back.append(best)
+        cost = value + internal
         prev_q, prev_time = q_post, post.time
     cost = cost + np.sum((prev_q - arm.q_home) ** 2, axis=1) / (phases - prev_time) ** 3
     picks = [int(np.argmin(cost))]
@@ -292,6 +296,53 @@ def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, acti
         seeds.update({pre.time: q_pre[i], at.time: q_at[i], post.time: q_post[i]})
         turns[at.action] = int(turn[i])
     return seeds, turns
+
+
+#: Relative width of the band of predecessors whose Viterbi cost `_best_predecessors`
+#: re-evaluates exactly: far above the ~1e-15 by which two roundings of it can differ.
+_VITERBI_BAND = 1e-11
+
+
+def _best_predecessors(a: np.ndarray, b: np.ndarray, dt3: float, cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For every b_j: the first i minimising d_ij = |a_i - b_j|^2 / dt3 + cost_i, and d_ij.
+
+    The same picks and values, to the bit, as `argmin` down the columns of
+    `_squared_distances(a, b) / dt3 + cost[:, None]`: a BLAS product (in row
+    blocks small enough for one thread) ranks the predecessors, and only those
+    within a relative _VITERBI_BAND of each column's best are evaluated as
+    `_squared_distances` rounds them (the einsum of a pair does not depend on
+    its neighbours), ties going to the first.
+    """
+    aa, bb = np.einsum("ik,ik->i", a, a), np.einsum("jk,jk->j", b, b)
+    m, n = len(a), len(b)
+    # Rank by d_ij - bb_j / dt3 = c_i - 2 a_i.b_j / dt3 (a column constant does not
+    # change the ranking): row j of rank = [b_j, 1] . [a_i (-2 / dt3), c_i] over i.
+    lhs = np.column_stack([b, np.ones(n)])
+    rhs = np.ascontiguousarray(np.column_stack([a * (-2.0 / dt3), aa / dt3 + cost]).T)
+    rank = np.empty((n, m))
+    rows = max(1, 200_000 // (8 * max(m, 1)))  # OpenBLAS stays on one thread below 262144 multiply-adds
+    for s in range(0, n, rows):
+        np.matmul(lhs[s:s + rows], rhs, out=rank[s:s + rows])
+    band = _VITERBI_BAND * ((aa.max() + bb) / dt3 + np.abs(cost).max())
+    columns = np.arange(n)
+    first = rank.argmin(axis=1)
+    limit = rank[columns, first] + band
+    rank[columns, first] = np.inf
+    close = np.flatnonzero(rank.min(axis=1) <= limit)  # columns with another candidate in the band
+    J, I = [columns], [first]
+    if len(close):
+        j, i = np.nonzero(rank[close] <= limit[close, None])
+        J.append(close[j])
+        I.append(i)
+    I, J = np.concatenate(I), np.concatenate(J)
+    sq = np.maximum(aa[I] + bb[J] - 2 * np.einsum("pk,pk->p", a[I], b[J]), 0.0)
+    d = sq / dt3 + cost[I]
+    order = np.lexsort((I, d, J))  # per column: smallest d, then first row
+    keep = order[np.r_[True, J[order][1:] != J[order][:-1]]]
+    best = np.empty(n, int)
+    value = np.empty(n)
+    best[J[keep]], value[J[keep]] = I[keep], d[keep]
+    return best, value
 
 
 def _squared_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:

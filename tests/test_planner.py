@@ -143,3 +143,25 @@ def test_viewer_replays_the_effort_table_row(capsys, trial_id, seed, sample):
     assert main([trial_id, "--seed", str(seed), "--sample", str(sample)]) == 0
     printed = float(re.search(r"^effort ([0-9.eE+-]+) J\*s$", capsys.readouterr().out, re.M).group(1))
     assert printed == pytest.approx(table.loc[table["sample"] == sample, "effort"].item(), rel=1e-9)
+
+
+def test_viterbi_step_picks_what_the_full_distance_matrix_picks():
+    # The seeding's dynamic programme ranks predecessors with a BLAS product and
+    # re-evaluates near-ties exactly: the picks and costs must be those of argmin
+    # down the full |a_i - b_j|^2 / dt^3 + cost_i matrix, to the bit, ties (equal
+    # and 1e-13-apart rows) going to the first row as argmin's do.
+    from lgp.planner import _best_predecessors, _squared_distances
+
+    rng = np.random.default_rng(5)
+    a = rng.uniform(-3, 3, (300, 7))
+    a[200:250] = a[:50]
+    a[250:260] = a[:10] + 1e-13
+    cost = rng.uniform(0, 50, 300)
+    cost[200:260] = np.concatenate([cost[:50], cost[:10]])
+    for m, n, dt3 in ((300, 280, 0.6**3), (1, 40, 0.8**3), (7, 1, 0.2**3), (300, 700, 1.0)):
+        b = np.vstack([a[:min(n, 60)], rng.uniform(-3, 3, (max(n - 60, 0), 7))])[:n]
+        d = _squared_distances(a[:m], b) / dt3 + cost[:m, None]
+        first = np.argmin(d, axis=0)
+        best, value = _best_predecessors(a[:m], b, dt3, cost[:m])
+        assert np.array_equal(best, first)
+        assert np.array_equal(value, d[first, np.arange(n)])
