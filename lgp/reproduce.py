@@ -65,7 +65,7 @@ def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_thre
     name = DEFAULT_ENGINE if engine is None else engine
     spec = ENGINES[name]
     extra = (spec.requires,) if spec.requires else ()  # e.g. sapien for PhysX
-    return {"code": modules_digest("models.risk", spec.target.split(":")[0], "stimuli"),
+    return {"code": modules_digest("models.risk.core", spec.target.split(":")[0], "stimuli"),
             "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra),
             "fall_rule": fall_rule, "fall_threshold": float(fall_threshold)}
 

@@ -155,6 +155,41 @@ def test_import_closure_holds_every_module_python_loads():
     assert loaded <= closure, loaded - closure
 
 
+@pytest.mark.slow
+def test_the_risk_key_covers_what_a_risk_run_loads_and_not_the_planner():
+    """Risk needs no plan: a fresh interpreter that computes a risk table loads only
+    modules of the risk key's closure, and neither holds the planner or KOMO, so
+    editing the motion planner keeps cached risks (build risk, which plans, is
+    re-exported by models.risk lazily)."""
+    from lgp import reproduce
+
+    code = ("import sys, stimuli\n"
+            "from models.risk import risk_table\n"
+            "risk_table([stimuli.load_trial('7H')], [0.065], n_sims=2, jobs=1)\n"
+            f"print(' '.join(m for m in sys.modules if m.split('.')[0] in {PACKAGES!r}))")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    loaded = set(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env,
+                                cwd=ROOT).stdout.split())
+    closure = set(import_closure("models.risk.core", "models.risk.mujoco_engine", "stimuli"))
+    assert {"models.risk.core", "models.risk.mujoco_engine", "stimuli"} <= loaded
+    assert loaded <= closure, loaded - closure
+    assert not {"lgp.planner", "lgp.komo", "models.effort", "models.risk.build"} & (loaded | closure)
+    assert reproduce.risk_key_inputs(None)["code"] == modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli")
+
+
+def test_editing_the_planner_keeps_the_risk_key(tmp_path):
+    root = _copy_project(tmp_path)
+    risk = modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli", root=root)
+    effort = modules_digest("models.effort", "stimuli", root=root)
+    for module in ("lgp/planner.py", "lgp/komo/solve.py", "models/risk/build.py"):
+        (root / module).write_text((root / module).read_text() + "\n# edited\n")
+    assert modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli", root=root) == risk
+    assert modules_digest("models.effort", "stimuli", root=root) != effort
+    noise = root / "models" / "risk" / "noise.py"
+    noise.write_text(noise.read_text() + "\n# edited\n")
+    assert modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli", root=root) != risk
+
+
 def test_a_packages_lazy_imports_count_only_when_the_package_is_imported_by_name(tmp_path):
     """`lgp/__init__` runs for `import lgp.scene`, but its lazy `lgp.plan` (an import
     inside a function) runs only if some module imports `lgp` itself."""

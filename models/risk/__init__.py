@@ -36,12 +36,20 @@ from models.risk.engine import (  # noqa: F401
 )
 from models.risk.noise import draw_normals, perturb, perturb_from_normals  # noqa: F401
 from models.risk.static import static_stable  # noqa: F401
-from models.risk.build import (  # noqa: F401  (risk through the build; beyond the paper)
-    MEASURES,
-    build_risk,
-    build_risk_aggregates,
-    build_risk_table,
-    measure_table,
-    plan_stages,
-    stage_curve,
-)
+#: Risk through the build (beyond the paper; models.risk.build), re-exported lazily:
+#: build risk plans stages with the logic layer, and importing it here would make
+#: every risk result depend on the planner's source (lgp.cache keys by imports).
+_BUILD = ("MEASURES", "build_risk", "build_risk_aggregates", "build_risk_table", "measure_table", "plan_stages",
+          "stage_curve")
+
+
+def __getattr__(name: str):
+    if name in _BUILD:
+        from models.risk import build
+
+        return getattr(build, name)
+    raise AttributeError(f"module 'models.risk' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + list(_BUILD))

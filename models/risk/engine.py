@@ -63,8 +63,9 @@ class Rollout:
 class Engine:
     """Base class: subclasses build a model for a layout and step it.
 
-    Subclass contract: `_load(scene)` (make the model for the scene's layout current
-    and place its blocks at rest), `_advance(t)` (step to simulated time t),
+    Subclass contract: `_load(scene, p_WB)` (make the model for the scene's layout
+    current and place its blocks at rest, centres at p_WB (n, 3), orientations as in
+    the scene), `_advance(t)` (step to simulated time t),
     `_state()` -> (p_WB (n, 3), fastest point speed per block (n,)), and
     `_asleep()` -> True when the engine has put every block to sleep.
     """
@@ -76,11 +77,13 @@ class Engine:
         return {}
 
     def simulate(self, scene: Scene, duration: float = DURATION, early_stop: bool = True,
-                 fall_threshold: float = FALL_THRESHOLD) -> Rollout:
+                 fall_threshold: float = FALL_THRESHOLD, p_WB: np.ndarray | None = None) -> Rollout:
         """Run `scene` from rest for `duration` s (less with early termination;
         `fall_threshold`, in units of d, sets how far a block must have moved for
-        the run to stop as a certain fall)."""
-        self._load(scene)
+        the run to stop as a certain fall). `p_WB` (n, 3): start the blocks at these
+        centres instead of the scene's (a noisy copy of the same layout, orientations
+        unchanged), the same as simulating the moved scene without building it."""
+        self._load(scene, scene.positions if p_WB is None else np.asarray(p_WB, float).reshape(len(scene), 3))
         p_start, _ = self._state()
         if not len(scene):
             return Rollout(p_start, p_start, 0.0, False)
@@ -110,7 +113,7 @@ class Engine:
         return Rollout(p_start, p, t, False)
 
     # subclass hooks
-    def _load(self, scene: Scene) -> None:  # pragma: no cover - abstract
+    def _load(self, scene: Scene, p_WB: np.ndarray) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
 
     def _advance(self, t: float) -> None:  # pragma: no cover - abstract

@@ -86,32 +86,39 @@ class MujocoEngine(Engine):
             "solref": SOLREF, "solimp": SOLIMP, "sleep": self.sleep,
         }
 
-    def _load(self, scene: Scene) -> None:
+    def _load(self, scene: Scene, p_WB: np.ndarray) -> None:
         mj = self._mj
         key = layout_key(scene)
         if key not in self._models:
             model = mj.MjModel.from_xml_string(mjcf(scene, self.sleep))
-            self._models[key] = (model, mj.MjData(model))
-        self.model, self.data = self._models[key]
-        m, d = self.model, self.data
+            data = mj.MjData(model)
+            n = len(scene)
+            # views into the state, made once per layout (the arrays live as long as data)
+            self._models[key] = (model, data, data.qpos.reshape(n, 7), data.qvel.reshape(n, 6),
+                                 np.array([b.size for b in scene.blocks]).reshape(n, 3))
+        m, d, self._qpos, self._qvel, self._sizes = self._models[key]
+        self.model, self.data = m, d
         mj.mj_resetData(m, d)
-        n = len(scene)
-        qpos = d.qpos.reshape(n, 7)
-        qpos[:, :3] = scene.positions
-        qpos[:, 3:] = quaternion_from_yaw([b.yaw for b in scene.blocks])
+        self._qpos[:, :3] = p_WB
+        self._qpos[:, 3:] = quaternion_from_yaw([b.yaw for b in scene.blocks])
         mj.mj_forward(m, d)
-        self._sizes = np.array([b.size for b in scene.blocks])
-        self._n = n
 
     def _advance(self, t: float) -> None:
-        m, d, step = self.model, self.data, self._mj.mj_step
-        while d.time < t - 0.5 * m.opt.timestep:
-            step(m, d)
+        # as many steps as a one-step-at-a-time loop `while d.time < t - dt / 2` takes
+        # (MuJoCo advances time by `time += timestep`, repeated here on the same
+        # doubles), in one call, so the loop runs in C
+        m, d = self.model, self.data
+        dt = m.opt.timestep
+        stop = t - 0.5 * dt
+        time, steps = d.time, 0
+        while time < stop:
+            time += dt
+            steps += 1
+        if steps:
+            self._mj.mj_step(m, d, steps)
 
     def _state(self):
-        qpos = self.data.qpos.reshape(self._n, 7)
-        qvel = self.data.qvel.reshape(self._n, 6)
-        return qpos[:, :3].copy(), block_speeds(qvel[:, :3], qvel[:, 3:], self._sizes)
+        return self._qpos[:, :3].copy(), block_speeds(self._qvel[:, :3], self._qvel[:, 3:], self._sizes)
 
     def _asleep(self) -> bool:
         return self.sleep and int(self.data.ntree_awake) == 0
