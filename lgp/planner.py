@@ -389,9 +389,9 @@ def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_ph
         slots = [K.index(komo.slice_of(w.time)) for w in waypoints]
         B = np.zeros((len(K), len(symbolic.actions)))  # which keyframes each action's turn moves
         B[slots, [w.action for w in waypoints]] = 1.0
-        G, g = komo.reduced_cost(K)
+        e = komo.elimination(K)
         X_K = result.q[1:][K]
-        candidates = [(change, d) for change, d in _predicted_turn_changes(arm, G, g, X_K, B, slots)
+        candidates = [(change, d) for change, d in _predicted_turn_changes(arm, e.G, e.g, X_K, B, slots, e.GtG)
                       if change < -1e-6 * result.cost]
         found = False
         for change, d in candidates:
@@ -415,7 +415,7 @@ def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_ph
     return komo, result
 
 
-def _predicted_turn_changes(arm, G, g, X_K, B, slots) -> list[tuple[float, np.ndarray]]:
+def _predicted_turn_changes(arm, G, g, X_K, B, slots, H=None) -> list[tuple[float, np.ndarray]]:
     """(predicted cost change, d) for joint-7 turns d over runs of actions, best first.
 
     Cost c(X_K) = sum_j |G X_K[:, j] + g[:, j]|^2 over joints j (X_K: (|K|, 7)
@@ -436,7 +436,7 @@ def _predicted_turn_changes(arm, G, g, X_K, B, slots) -> list[tuple[float, np.nd
     and the best alpha gives change(d) = turn_cost - (b_d' A^-1 b_d - b0' A^-1 b0),
     b_d = b0 + P d, measured against the best swivel step without a turn (zero at
     an exact optimum). Turns that take joint 7 within SEED_MARGIN of a limit are
-    left out.
+    left out. `H` is G'G when the caller has it (lgp.komo.Elimination.GtG).
     """
     from pydrake.multibody.tree import JacobianWrtVariable
 
@@ -446,7 +446,7 @@ def _predicted_turn_changes(arm, G, g, X_K, B, slots) -> list[tuple[float, np.nd
         plant.SetPositions(context, X_K[i])
         J = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kQDot, arm.G, np.zeros(3), plant.world_frame(), plant.world_frame())
         swivel[r] = np.linalg.svd(J)[2][-1]
-    H = G.T @ G  # half the Hessian of the cost, per joint, (|K|, |K|)
+    H = G.T @ G if H is None else H  # half the Hessian of the cost, per joint, (|K|, |K|)
     grad = G.T @ (G @ X_K + g)  # half the gradient, (|K|, 7)
     swivel_hessian = (swivel @ swivel.T) * H[np.ix_(slots, slots)]  # A
     swivel_gradient = np.einsum("rj,rj->r", swivel, grad[slots])  # b0
