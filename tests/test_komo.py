@@ -301,3 +301,24 @@ def test_bad_declarations_are_refused_with_the_reason():
         komo.add_mode_switch(1.0, "grasp", "point", "b1")
     with pytest.raises(KomoError, match="unknown solver"):
         komo.solve(solver="cplex")
+
+
+def test_object_poses_follow_the_holder_slice_by_slice():
+    # object_poses fills each held stretch at once; the definition is per row: X_WG X_GB
+    # while held (rows of slice s >= grasp, <= place), the last pose otherwise.
+    from lgp.komo.result import frame_poses, object_poses
+    from lgp.planner import declare
+
+    initial, target = tower_task(2)
+    result = plan(initial, target, 0)
+    komo, _, _ = declare(result.symbolic, default_arm(), np.random.default_rng(0))
+    poses = object_poses(komo, result.q)
+    X_WG = frame_poses(komo, result.q, "G")
+    for name, X0 in komo.objects.items():
+        current, held_rows = X0.GetAsMatrix4(), 0
+        for i in range(len(result.q)):
+            holder = komo.holder(name, i - 1) if i > 0 else None
+            if holder is not None:
+                current, held_rows = X_WG[i] @ holder[1].GetAsMatrix4(), held_rows + 1
+            assert np.array_equal(poses[name][i], current), (name, i)
+        assert held_rows == 20 + 1  # grasp at phase k to place at k + 1, both slices included
