@@ -468,13 +468,11 @@ def _predicted_turn_changes(arm, G, g, X_K, B, slots, H=None, fast: bool = False
         change = turn_cost - swivel_gain
         order = np.argsort(change)
         return [(float(change[m]), D[:, m]) for m in order]
-    from scipy.linalg import lu_factor, lu_solve
-    from scipy.linalg.lapack import dgecon
-
     r, m = swivel_turn_coupling.shape[0], D.shape[1]
-    lu = lu_factor(swivel_hessian, check_finite=False)
-    Ainv_b0 = lu_solve(lu, swivel_gradient, check_finite=False)
-    Ainv_P = lu_solve(lu, swivel_turn_coupling, check_finite=False)  # A^-1 b_d = A^-1 b0 + (A^-1 P) d
+    # A^-1 b_d = A^-1 b0 + (A^-1 P) d: one solve with 1 + n_actions right-hand sides.
+    # (numpy's LAPACK: scipy's lu_solve took 12 ms here on a busy machine, its BLAS threads waiting.)
+    solved = np.linalg.solve(swivel_hessian, np.column_stack([swivel_gradient, swivel_turn_coupling]))
+    Ainv_b0, Ainv_P = solved[:, 0], solved[:, 1:]
     b_d, Ainv_b_d = np.empty((r, m)), np.empty((r, m))
     cols = max(1, 200_000 // (r * swivel_turn_coupling.shape[1]))  # one BLAS thread below 262144 multiply-adds
     for s in range(0, m, cols):
@@ -485,12 +483,12 @@ def _predicted_turn_changes(arm, G, g, X_K, B, slots, H=None, fast: bool = False
     # The two ways round differently by ~ r cond(A) 1e-16 times |b_d| (|A^-1 b0| + |A^-1 P| |d|)
     # (backward-stable solves, no cancellation assumed): with cond(A) <= 1e4 the band
     # below is >= 1e3 times that; a worse A is left to the exact way.
-    rcond = dgecon(lu[0], np.abs(swivel_hessian).sum(axis=0).max(), norm="1")[0]
+    cond = np.linalg.cond(swivel_hessian, 1)
     x_size = np.linalg.norm(Ainv_b0) + np.linalg.norm(Ainv_P) * np.linalg.norm(D, axis=0)
     scale = np.linalg.norm(b_d, axis=0) * x_size + np.linalg.norm(swivel_gradient) * np.linalg.norm(Ainv_b0)
     band = 1e-6 * float(scale.max() + np.abs(turn_cost).max())
     order = np.argsort(change)
-    return [(float(change[m]), D[:, m]) for m in order], band, bool(rcond > 1e-4)
+    return [(float(change[m]), D[:, m]) for m in order], band, bool(cond < 1e4)
 
 
 def _turn_steps(X_K, B, lo: float, hi: float) -> np.ndarray:
