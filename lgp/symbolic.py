@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lgp.scene import OVERLAP_TOLERANCE, TABLE, Block, Scene, penetration, support_graph, supported_by
+from lgp.scene import (OVERLAP_TOLERANCE, TABLE, Block, Scene, penetration, support_graph, support_graph_after_move,
+                       supported_by)
 
 
 class IllegalActionError(ValueError):
@@ -130,13 +131,23 @@ def _near(block, solids) -> list:
 
 def _support_memo():
     """support_graph(scene) computed once per Scene object (symbolic_plan asks for
-    each state's graph up to three times: clear blocks, grasp, place)."""
+    each state's graph up to three times: clear blocks, grasp, place), and for a
+    scene one block away from the last one asked, updated from that one's graph."""
     graphs: dict[int, tuple[Scene, dict]] = {}
+    last: list = []
 
     def support(scene: Scene) -> dict[str, list[str]]:
         hit = graphs.get(id(scene))
         if hit is None or hit[0] is not scene:
-            hit = graphs[id(scene)] = (scene, support_graph(scene))
+            graph = None
+            if last:
+                before, previous = last[0]
+                changed = [a.name for a, b in zip(before.blocks, scene.blocks) if a is not b]
+                if (len(changed) == 1 and before.fixed is scene.fixed
+                        and [a.name for a in before.blocks] == [b.name for b in scene.blocks]):
+                    graph = support_graph_after_move(scene, previous, changed[0])
+            hit = graphs[id(scene)] = (scene, graph if graph is not None else support_graph(scene))
+        last[:] = [hit]
         return hit[1]
 
     return support
