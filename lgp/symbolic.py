@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lgp.geometry import rectangle_overlap
 from lgp.scene import (OVERLAP_TOLERANCE, TABLE, Block, Scene, penetration, support_graph, support_graph_after_move,
                        supported_by)
 
@@ -127,6 +128,25 @@ def _near(block, solids) -> list:
     radius = np.array([np.linalg.norm(s.size) / 2 for s in solids])
     near = np.linalg.norm(centres - block.p_WB, axis=1) <= radius + np.linalg.norm(block.size) / 2 + OVERLAP_TOLERANCE
     return [solids[i] for i in np.flatnonzero(near)]
+
+
+#: Pairs whose array depth lies this far (m) below OVERLAP_TOLERANCE are ruled out
+#: without the scalar test: far above the ~1e-17 m by which the two can round apart.
+_SLACK = 1e-7
+
+
+def _enters_any(block: Block, solids: list) -> bool:
+    """Whether `block` interpenetrates any of `solids` by more than OVERLAP_TOLERANCE
+    (lgp.scene.penetration). The depths of all pairs at once only rule out the pairs
+    well below the tolerance; the scalar test decides the rest."""
+    if not solids:
+        return False
+    c, half, u = (np.array(x) for x in zip(*(s.outline() for s in solids)))
+    mine = block.outline()
+    horizontal, _ = rectangle_overlap(*(np.broadcast_to(x, (len(solids), 2)) for x in mine), c, half, u)
+    vertical = np.minimum(block.top, [s.top for s in solids]) - np.maximum(block.bottom, [s.bottom for s in solids])
+    maybe = np.flatnonzero(np.minimum(vertical, horizontal) > OVERLAP_TOLERANCE - _SLACK)
+    return any(penetration(block, solids[i]) > OVERLAP_TOLERANCE for i in maybe)
 
 
 def _support_memo():
@@ -243,8 +263,7 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
                 continue
             goal_block = current.block(a).moved_to(goal.p_WB, goal.yaw)
             near = np.linalg.norm(p_W - goal_block.p_WB, axis=1) <= radius + np.linalg.norm(goal_block.size) / 2 + OVERLAP_TOLERANCE
-            if any(penetration(goal_block, current.blocks[i]) > OVERLAP_TOLERANCE
-                   for i in np.flatnonzero(near) if current.blocks[i].name != a):
+            if _enters_any(goal_block, [current.blocks[i] for i in np.flatnonzero(near) if current.blocks[i].name != a]):
                 continue
             ready.append((goal.p_WB[2], order, a))
         legal = [r for r in ready if r[2] in clear]
