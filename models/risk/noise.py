@@ -115,7 +115,7 @@ class NoiseRule:
             depth0, normal = _depth(c0_xy, outlines, si, sj)
             allowed = np.maximum(0.0, depth0)  # overlap already in B
             reach = _reach(outlines, si, sj, normal) - allowed  # least (c_j - c_i) . normal
-            self.side = (si, sj, normal[:, 0].copy(), normal[:, 1].copy(), reach)
+            self.side = list(zip(si.tolist(), sj.tolist(), normal[:, 0].tolist(), normal[:, 1].tolist(), reach.tolist()))
 
         # 2. stacked pairs: the solids beneath each block in B, bottom-up in B's height order
         self.order = sorted(range(n), key=lambda k: (bottom0[k], k))
@@ -152,13 +152,13 @@ class NoiseRule:
         p[:, :, 1] += s * delta_B[:, :, 0] + c * delta_B[:, :, 1]
         p[:, :, 2] += delta_B[:, :, 2]
 
-        # -- 1. side pairs: horizontal separation, all runs in lockstep ---------------------
+        # -- 1. side pairs: horizontal separation, run by run ------------------------------
         if self.side is not None:
-            fixed = self.fixed_xy
-            x = np.concatenate([p[:, :, 0], np.broadcast_to(fixed[:, 0], (runs, len(fixed)))], axis=1)
-            y = np.concatenate([p[:, :, 1], np.broadcast_to(fixed[:, 1], (runs, len(fixed)))], axis=1)
-            _separate_side_pairs(scene.label, x, y, *self.side, n)
-            p[:, :, 0], p[:, :, 1] = x[:, :n], y[:, :n]
+            fixed = self.fixed_xy.tolist()
+            for r in range(runs):
+                c_xy = p[r, :, :2].tolist() + fixed
+                _separate_side_pairs(scene.label, c_xy, self.side, n)
+                p[r, :, :2] = c_xy[:n]
 
         # -- 2. stacked pairs: vertical separation, bottom-up, all runs at once -----------
         L = len(self.below_i)
@@ -198,41 +198,39 @@ def _reach(outlines, i, j, normal):
     return r(i) + r(j)
 
 
-def _separate_side_pairs(label, x, y, si, sj, nx, ny, reach, n) -> None:
+def _separate_side_pairs(label, c_xy, pairs, n) -> None:
     """Cyclic projections (Gauss-Seidel, as in position-based dynamics) onto the
     half-planes (c_j - c_i) . normal >= reach: an offending pair is pushed apart
     along its normal, half each, a fixed box not moving. The constraints are linear
     and B satisfies all of them, so the sweeps converge.
 
-    x, y (R, m): outline centres of R runs, moved in place; the pairs (si, sj,
-    normal (nx, ny), reach) are arrays (P,). Each sweep finds a run's offending
-    pairs, then pushes them one after the other in pair order, so each push sees
-    the previous ones; the runs go in lockstep, one pair at a time for all runs
-    that must push it, which is the same arithmetic as run by run."""
-    active = np.arange(len(x))
+    c_xy: outline centres as a list of [x, y] lists, moved in place; pairs:
+    (i, j, normal x, normal y, reach) tuples. Plain floats, not numpy: a scene
+    has tens of pairs, and each push must see the previous ones (measured: numpy
+    over all runs of a chunk in lockstep is no faster at 100 runs a chunk, and
+    slower at 10 or 20, because a line of 10 takes ~400 sweeps)."""
     for _ in range(_MAX_SWEEPS):
-        xa, ya = x[active], y[active]
-        slack = ((xa[:, sj] - xa[:, si]) * nx + (ya[:, sj] - ya[:, si]) * ny) - reach
-        bad = slack < -_EPS
-        still = bad.any(axis=1)
-        if not still.any():
+        bad = []
+        for pair in pairs:
+            i, j, n0, n1, rk = pair
+            ci, cj = c_xy[i], c_xy[j]
+            if ((cj[0] - ci[0]) * n0 + (cj[1] - ci[1]) * n1) - rk < -_EPS:
+                bad.append(pair)
+        if not bad:
             return
-        active, bad = active[still], bad[still]  # a run with nothing to push has converged
-        for k in np.flatnonzero(bad.any(axis=0)):  # sequential, so each push sees the previous ones
-            rows = active[bad[:, k]]
-            i, j, n0, n1 = si[k], sj[k], nx[k], ny[k]
-            excess = reach[k] - ((x[rows, j] - x[rows, i]) * n0 + (y[rows, j] - y[rows, i]) * n1)
-            push = excess > _EPS
-            rows, step = rows[push], excess[push] + _EPS
-            if not len(rows):
+        for i, j, n0, n1, rk in bad:  # sequential, so each push sees the previous ones
+            ci, cj = c_xy[i], c_xy[j]
+            excess = rk - ((cj[0] - ci[0]) * n0 + (cj[1] - ci[1]) * n1)
+            if excess <= _EPS:
                 continue
+            step = excess + _EPS
             px, py = n0 * step, n1 * step
             if j < n:
-                x[rows, i] -= px / 2
-                y[rows, i] -= py / 2
-                x[rows, j] += px / 2
-                y[rows, j] += py / 2
+                ci[0] -= px / 2
+                ci[1] -= py / 2
+                cj[0] += px / 2
+                cj[1] += py / 2
             else:  # a fixed box does not move
-                x[rows, i] -= px
-                y[rows, i] -= py
+                ci[0] -= px
+                ci[1] -= py
     raise RuntimeError(f"{label}: could not separate overlapping neighbours after {_MAX_SWEEPS} sweeps")
