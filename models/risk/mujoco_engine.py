@@ -78,6 +78,7 @@ class MujocoEngine(Engine):
         quiet_log(mujoco)
         self.sleep = sleep
         self._models: dict[str, tuple] = {}
+        self._scene = None
 
     def settings(self) -> dict:
         return {
@@ -88,7 +89,10 @@ class MujocoEngine(Engine):
 
     def _load(self, scene: Scene, p_WB: np.ndarray) -> None:
         mj = self._mj
-        key = layout_key(scene)
+        if scene is not self._scene:  # the runs of a chunk share one (immutable) scene
+            self._scene, self._key = scene, layout_key(scene)
+            self._quat = quaternion_from_yaw([b.yaw for b in scene.blocks])
+        key = self._key
         if key not in self._models:
             model = mj.MjModel.from_xml_string(mjcf(scene, self.sleep))
             data = mj.MjData(model)
@@ -100,7 +104,7 @@ class MujocoEngine(Engine):
         self.model, self.data = m, d
         mj.mj_resetData(m, d)
         self._qpos[:, :3] = p_WB
-        self._qpos[:, 3:] = quaternion_from_yaw([b.yaw for b in scene.blocks])
+        self._qpos[:, 3:] = self._quat
         mj.mj_forward(m, d)
 
     def _advance(self, t: float) -> None:
