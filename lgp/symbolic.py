@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lgp.scene import CONTACT_TOLERANCE, OVERLAP_TOLERANCE, TABLE, Scene, penetration, support_graph, supported_by
+from lgp.scene import OVERLAP_TOLERANCE, TABLE, Block, Scene, penetration, support_graph, supported_by
 
 
 class IllegalActionError(ValueError):
@@ -77,12 +77,14 @@ def same_pose(p_a, yaw_a, p_b, yaw_b, size=None) -> bool:
     return bool(np.linalg.norm(np.asarray(p_a) - np.asarray(p_b)) <= POSITION_TOLERANCE and abs(d_yaw) <= YAW_TOLERANCE)
 
 
-def apply(action: Action, state: PlanState) -> PlanState:
+def apply(action: Action, state: PlanState, *, support=support_graph) -> PlanState:
     """The state after `action`; raises IllegalActionError if it is not allowed.
 
     Rules: one hand, so Grasp needs an empty hand and Place the block in hand; a
     block can be grasped only when nothing rests on it; a placed block must not
     overlap another block or obstacle and must rest on exactly what `onto` says.
+    `support(scene)` gives the support graph (lgp.scene.support_graph, or a
+    caller's memo of it).
     """
     scene = state.scene
     if action.block not in scene.names:
@@ -90,7 +92,7 @@ def apply(action: Action, state: PlanState) -> PlanState:
     if isinstance(action, Grasp):
         if state.held is not None:
             raise IllegalActionError(f"{action} in {scene.label}: the hand already holds {state.held}")
-        above = supported_by(support_graph(scene))[action.block]
+        above = supported_by(support(scene))[action.block]
         if above:
             raise IllegalActionError(f"{action} in {scene.label}: {', '.join(above)} rests on {action.block}")
         return PlanState(scene, held=action.block)
@@ -99,19 +101,45 @@ def apply(action: Action, state: PlanState) -> PlanState:
             raise IllegalActionError(f"{action} in {scene.label}: the hand holds {state.held}, not {action.block}")
         moved = scene.block(action.block).moved_to(action.p_WB, action.yaw)
         new = scene.with_blocks(moved if b.name == action.block else b for b in scene.blocks)
-        for other in (*new.blocks, *new.fixed):
+        for other in _near(moved, (*new.blocks, *new.fixed)):
             if other.name == moved.name:
                 continue
             depth = penetration(moved, other)
             if depth > OVERLAP_TOLERANCE:
                 raise IllegalActionError(f"{action} in {scene.label}: {moved.name} would overlap {other.name} by {depth * 1000:.1f} mm")
-        rests = set(support_graph(new, CONTACT_TOLERANCE)[moved.name])
+        rests = set(support(new)[moved.name])
         if rests != set(action.onto):
             raise IllegalActionError(
                 f"{action} in {scene.label}: {moved.name} would rest on {sorted(rests) or 'nothing'}, not {sorted(action.onto)}"
             )
         return PlanState(new, held=None)
     raise IllegalActionError(f"unknown action {action!r}")
+
+
+def _near(block, solids) -> list:
+    """The solids (in order) that `block` may interpenetrate by more than
+    OVERLAP_TOLERANCE: their centres lie within the sum of the half diagonals
+    (plus the tolerance). A superset; the exact test decides."""
+    if not solids:
+        return []
+    centres = np.array([s.p_WB if isinstance(s, Block) else s.p_WO for s in solids])
+    radius = np.array([np.linalg.norm(s.size) / 2 for s in solids])
+    near = np.linalg.norm(centres - block.p_WB, axis=1) <= radius + np.linalg.norm(block.size) / 2 + OVERLAP_TOLERANCE
+    return [solids[i] for i in np.flatnonzero(near)]
+
+
+def _support_memo():
+    """support_graph(scene) computed once per Scene object (symbolic_plan asks for
+    each state's graph up to three times: clear blocks, grasp, place)."""
+    graphs: dict[int, tuple[Scene, dict]] = {}
+
+    def support(scene: Scene) -> dict[str, list[str]]:
+        hit = graphs.get(id(scene))
+        if hit is None or hit[0] is not scene:
+            hit = graphs[id(scene)] = (scene, support_graph(scene))
+        return hit[1]
+
+    return support
 
 
 @dataclass(frozen=True)
@@ -188,9 +216,10 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
         return tuple(s if s in fixed_names else block_of_target[s] for s in support_B[target_of[a].name])
 
     state, actions = PlanState(initial), []
+    support = _support_memo()
     while to_move:
         current = state.scene
-        above = supported_by(support_graph(current))
+        above = supported_by(support(current))
         clear = [a for a in to_move if not above[a]]
         # Bounding spheres prune the exact overlap test: solids whose centres are
         # farther apart than the sum of their half diagonals cannot interpenetrate.
@@ -237,7 +266,7 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
             )
         goal = target_of[a]
         for action in (Grasp(a), Place(a, onto(a), goal.p_WB.copy(), goal.yaw)):
-            state = apply(action, state)
+            state = apply(action, state, support=support)
             actions.append(action)
         to_move.remove(a)
         in_place.add(a)
