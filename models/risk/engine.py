@@ -88,6 +88,7 @@ class Engine:
         if not len(scene):
             return Rollout(p_start, p_start, 0.0, False)
         certain = fall_certain(fall_threshold) * _smallest_width(scene)
+        xy_start = p_start[:, :2]
         t, rest_since, rest_speed = 0.0, 0.0, np.inf
         n_checks = int(round(duration / CHECK_INTERVAL))
         for k in range(1, n_checks + 1):
@@ -96,11 +97,11 @@ class Engine:
             if not early_stop:
                 continue
             p, speed = self._state()
-            if np.max(np.linalg.norm(p[:, :2] - p_start[:, :2], axis=1)) > certain:
+            if row_norms(p[:, :2] - xy_start).max() > certain:
                 return Rollout(p_start, p, t, t < duration)
             if self._asleep():
                 return Rollout(p_start, p, t, t < duration)
-            fastest = float(np.max(speed)) if len(speed) else 0.0
+            fastest = float(speed.max()) if len(speed) else 0.0
             if fastest >= REST_SPEED:
                 rest_since, rest_speed = t, np.inf
             elif rest_speed == np.inf:
@@ -149,7 +150,14 @@ def layout_key(scene: Scene) -> str:
 def block_speeds(v_WB: np.ndarray, w_WB: np.ndarray, sizes: np.ndarray) -> np.ndarray:
     """Upper bound of the speed of any point of each block: |v| + |w| * r, with r the
     half diagonal (v, w: (n, 3) linear and angular velocities)."""
-    return np.linalg.norm(v_WB, axis=1) + np.linalg.norm(w_WB, axis=1) * np.linalg.norm(sizes, axis=1) / 2
+    return row_norms(v_WB) + row_norms(w_WB) * row_norms(sizes) / 2
+
+
+def row_norms(x: np.ndarray) -> np.ndarray:
+    """Euclidean norm of each row: what np.linalg.norm(x, axis=1) computes for a
+    real array (the same ufuncs, so the same numbers), without its dispatch, which
+    costs more than the arithmetic on a few blocks at every check of every run."""
+    return np.sqrt(np.add.reduce(x * x, axis=1))
 
 
 @dataclass(frozen=True)

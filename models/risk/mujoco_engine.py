@@ -7,7 +7,7 @@ import numpy as np
 
 from lgp.geometry import quaternion_from_yaw
 from lgp.scene import Scene
-from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds, layout_key
+from models.risk.engine import DENSITY, FRICTION, Engine, layout_key, row_norms
 
 TIMESTEP = 0.002
 SOLREF = "0.004 1"
@@ -78,6 +78,7 @@ class MujocoEngine(Engine):
         quiet_log(mujoco)
         self.sleep = sleep
         self._models: dict[str, tuple] = {}
+        self._scene = None
 
     def settings(self) -> dict:
         return {
@@ -88,19 +89,22 @@ class MujocoEngine(Engine):
 
     def _load(self, scene: Scene, p_WB: np.ndarray) -> None:
         mj = self._mj
-        key = layout_key(scene)
+        if scene is not self._scene:  # the runs of a chunk share one (immutable) scene
+            self._scene, self._key = scene, layout_key(scene)
+            self._quat = quaternion_from_yaw([b.yaw for b in scene.blocks])
+        key = self._key
         if key not in self._models:
             model = mj.MjModel.from_xml_string(mjcf(scene, self.sleep))
             data = mj.MjData(model)
             n = len(scene)
             # views into the state, made once per layout (the arrays live as long as data)
-            self._models[key] = (model, data, data.qpos.reshape(n, 7), data.qvel.reshape(n, 6),
-                                 np.array([b.size for b in scene.blocks]).reshape(n, 3))
-        m, d, self._qpos, self._qvel, self._sizes = self._models[key]
+            diagonals = row_norms(np.array([b.size for b in scene.blocks]).reshape(n, 3))
+            self._models[key] = (model, data, data.qpos.reshape(n, 7), data.qvel.reshape(n, 6), diagonals)
+        m, d, self._qpos, self._qvel, self._diagonals = self._models[key]
         self.model, self.data = m, d
         mj.mj_resetData(m, d)
         self._qpos[:, :3] = p_WB
-        self._qpos[:, 3:] = quaternion_from_yaw([b.yaw for b in scene.blocks])
+        self._qpos[:, 3:] = self._quat
         mj.mj_forward(m, d)
 
     def _advance(self, t: float) -> None:
@@ -118,7 +122,9 @@ class MujocoEngine(Engine):
             self._mj.mj_step(m, d, steps)
 
     def _state(self):
-        return self._qpos[:, :3].copy(), block_speeds(self._qvel[:, :3], self._qvel[:, 3:], self._sizes)
+        # engine.block_speeds with the blocks' diagonals computed once per layout
+        qvel = self._qvel
+        return self._qpos[:, :3].copy(), row_norms(qvel[:, :3]) + row_norms(qvel[:, 3:]) * self._diagonals / 2
 
     def _asleep(self) -> bool:
         return self.sleep and int(self.data.ntree_awake) == 0
