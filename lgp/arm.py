@@ -132,12 +132,19 @@ class Arm:
         Row m is the quarter turn m; column i the same (branch, swivel) for every
         pose, so nearby poses give nearby solutions at the same index.
         """
+        q, ok = self.ik_grids_from_above([(p_WG, yaw)], swivels, margin)
+        return q[0], ok[0]
+
+    def ik_grids_from_above(self, poses, swivels, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """`ik_grid_from_above` for several (p_WG, yaw) at once: (P, 4, 8 * len(swivels), 7)
+        solutions and (P, 4, 8 * len(swivels)) within the limits (none for a pose out of
+        reach); one batched closed form (srs_ik_poses), the same numbers as pose by pose."""
         X_BW = self.X_WBase.inverse()
-        R_BG = np.array([X_BW.rotation().multiply(X_WG_from_above(p_WG, yaw + m * np.pi / 2).rotation()).matrix() for m in range(4)])
-        q = srs_ik(R_BG, X_BW.multiply(np.asarray(p_WG, float)), np.asarray(swivels, float))
-        if q.shape[1] == 0:
-            return np.zeros((4, 8 * len(swivels), 7)), np.zeros((4, 8 * len(swivels)), bool)
-        return q, self.within_limits(q, margin)
+        R_BG = np.array([[X_BW.rotation().multiply(X_WG_from_above(p_WG, yaw + m * np.pi / 2).rotation()).matrix() for m in range(4)]
+                         for p_WG, yaw in poses]).reshape(-1, 4, 3, 3)
+        p_BG = np.array([X_BW.multiply(np.asarray(p_WG, float)) for p_WG, _ in poses]).reshape(-1, 3)
+        q, reachable = srs_ik_poses(R_BG, p_BG, np.asarray(swivels, float))
+        return q, self.within_limits(q, margin) & reachable[:, None, None]
 
 
 # ----------------------------------------------------------------------------- closed-form IK
@@ -158,8 +165,10 @@ def _rot_y(a):
 
 
 def _axis_angle(u, a):
-    """Rotation matrices (n, 3, 3) by angles a (n,) about the unit axis u (3,)."""
-    K = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+    """Rotation matrices (p, n, 3, 3) by angles a (n,) about the unit axes u (p, 3)."""
+    u = np.asarray(u, float)
+    K = np.zeros((len(u), 1, 3, 3))
+    K[:, 0, 0, 1], K[:, 0, 0, 2], K[:, 0, 1, 0], K[:, 0, 1, 2], K[:, 0, 2, 0], K[:, 0, 2, 1] = -u[:, 2], u[:, 1], u[:, 2], -u[:, 0], -u[:, 1], u[:, 0]
     a = np.asarray(a)[..., None, None]
     return np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * (K @ K)
 
@@ -183,35 +192,72 @@ def srs_ik(R_BG: np.ndarray, p_BG: np.ndarray, swivels: np.ndarray) -> np.ndarra
     then common and only joints 5-7 differ. Returns (8 * len(swivels), 7) for one
     rotation, (m, 8 * len(swivels), 7) for several; no rows when out of reach.
     Joint axes of models/arm.sdf: z, y, z, -y, z, y, z; at q = 0 the arm is straight up.
+    (One pose of `srs_ik_poses`.)
     """
     R_BG = np.asarray(R_BG, float)
     single = R_BG.ndim == 2
     R_BG = R_BG.reshape(-1, 3, 3)
+    q, reachable = srs_ik_poses(R_BG[None], np.asarray(p_BG, float)[None], swivels)
+    out = q[0] if reachable[0] else np.zeros((len(R_BG), 0, 7))
+    return out[0] if single else out
+
+
+def srs_ik_poses(R_BG: np.ndarray, p_BG: np.ndarray, swivels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`srs_ik` for P poses at once: R_BG (P, m, 3, 3) (per pose, m rotations sharing
+    their z axis), p_BG (P, 3). Returns (q (P, m, 8 * len(swivels), 7), reachable (P,));
+    the rows of an unreachable pose are zeros.
+
+    The same arithmetic, operation by operation, as one pose at a time (the
+    per-pose scalars in a loop, the swivel arrays with a leading pose axis), so the
+    solutions are the same to the bit (tests/test_arm.py).
+    """
+    R_BG = np.asarray(R_BG, float)
+    p_BG = np.asarray(p_BG, float).reshape(-1, 3)
+    P, m = R_BG.shape[:2]
+    swivels = np.asarray(swivels, float)
+    n = len(swivels)
     a, b = UPPER_ARM, FOREARM
     p_BS = np.array([0.0, 0.0, SHOULDER_HEIGHT])
-    w = p_BG - WRIST_TO_G * R_BG[0, :, 2] - p_BS  # shoulder to wrist
-    d = np.linalg.norm(w)
-    cos4 = (d * d - a * a - b * b) / (2 * a * b)
-    n = len(swivels)
-    if abs(cos4) > 1.0:
-        out = np.zeros((len(R_BG), 0, 7))
-        return out[0] if single else out
-    out = []
-    for q4 in (np.arccos(cos4), -np.arccos(cos4)):
-        # Shoulder to wrist in frame 3 (joint 4 turns about -y): v4 = a e_z + b Ry(-q4) e_z.
-        v4 = np.array([-b * np.sin(q4), 0.0, a + b * np.cos(q4)])
-        # A reference shoulder rotation with joint 3 at zero: Rz(phi) Ry(theta) v4 = w.
-        phi = np.arctan2(w[1], w[0])
-        theta = np.arctan2(np.hypot(w[0], w[1]), w[2]) - np.arctan2(v4[0], v4[2])
-        R_03 = _axis_angle(w / d, swivels) @ (_rot_z(phi) @ _rot_y(theta))  # every elbow on the swivel circle
-        for q123 in _zyz(R_03):
-            R_04 = _rot_z(q123[:, 0]) @ _rot_y(q123[:, 1]) @ _rot_z(q123[:, 2]) @ _rot_y(-q4)
-            R_47 = np.swapaxes(R_04, -1, -2)[None] @ R_BG[:, None]  # (m, n, 3, 3)
+    out = np.zeros((P, m, 8 * n, 7))
+    reachable = np.zeros(P, bool)
+    scalars = []  # per reachable pose: (index, w / d, [(q4, phi, theta) for both elbows])
+    for i in range(P):
+        w = p_BG[i] - WRIST_TO_G * R_BG[i, 0, :, 2] - p_BS  # shoulder to wrist
+        d = np.linalg.norm(w)
+        cos4 = (d * d - a * a - b * b) / (2 * a * b)
+        if abs(cos4) > 1.0:
+            continue
+        reachable[i] = True
+        elbows = []
+        for q4 in (np.arccos(cos4), -np.arccos(cos4)):
+            # Shoulder to wrist in frame 3 (joint 4 turns about -y): v4 = a e_z + b Ry(-q4) e_z.
+            v4 = np.array([-b * np.sin(q4), 0.0, a + b * np.cos(q4)])
+            # A reference shoulder rotation with joint 3 at zero: Rz(phi) Ry(theta) v4 = w.
+            phi = np.arctan2(w[1], w[0])
+            theta = np.arctan2(np.hypot(w[0], w[1]), w[2]) - np.arctan2(v4[0], v4[2])
+            elbows.append((q4, phi, theta))
+        scalars.append((i, w / d, elbows))
+    if not scalars:
+        return out, reachable
+    index = np.array([s[0] for s in scalars])
+    R = R_BG[index]  # (p, m, 3, 3)
+    p = len(index)
+    swivel_circle = _axis_angle(np.array([s[1] for s in scalars]), swivels)  # (p, n, 3, 3)
+    columns = []
+    for e in range(2):
+        q4 = np.array([s[2][e][0] for s in scalars])
+        phi = np.array([s[2][e][1] for s in scalars])
+        theta = np.array([s[2][e][2] for s in scalars])
+        R_03 = swivel_circle @ (_rot_z(phi) @ _rot_y(theta))[:, None]  # every elbow on the swivel circle
+        for q123 in _zyz(R_03):  # (p, n, 3)
+            R_04 = _rot_z(q123[..., 0]) @ _rot_y(q123[..., 1]) @ _rot_z(q123[..., 2]) @ _rot_y(-q4)[:, None]
+            R_47 = np.swapaxes(R_04, -1, -2)[:, None] @ R[:, :, None]  # (p, m, n, 3, 3)
             for q567 in _zyz(R_47):
-                q = np.concatenate([np.broadcast_to(q123, (len(R_BG), n, 3)), np.full((len(R_BG), n, 1), q4), q567], axis=2)
-                out.append(q)
-    out = np.concatenate(out, axis=1)
-    return out[0] if single else out
+                q = np.concatenate([np.broadcast_to(q123[:, None], (p, m, n, 3)),
+                                    np.broadcast_to(q4[:, None, None, None], (p, m, n, 1)), q567], axis=3)
+                columns.append(q)
+    out[index] = np.concatenate(columns, axis=2)
+    return out, reachable
 
 
 def X_WG_from_above(p_WQ, yaw: float) -> RigidTransform:

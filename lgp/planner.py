@@ -277,10 +277,14 @@ def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, acti
     """
     swivels = np.linspace(-np.pi, np.pi, SWIVELS, endpoint=False) + offset
     triples = _triples(waypoints)
+    # One batched closed form for every distinct waypoint pose (approach and retreat share theirs).
+    poses: dict[tuple, int] = {}
+    for w in (w for triple in triples for w in triple):
+        poses.setdefault((np.asarray(w.p_WG, float).tobytes(), float(w.yaw)), len(poses))
+    q_all, ok_all = arm.ik_grids_from_above([(np.frombuffer(p), yaw) for p, yaw in poses], swivels, margin=SEED_MARGIN)
     nodes = []  # per action: (pre, at, post) solutions (m, 7) each, quarter turn (m,), internal cost (m,)
     for pre, at, post in triples:
-        grid = {id(w): arm.ik_grid_from_above(w.p_WG, w.yaw, swivels, margin=SEED_MARGIN) for w in (pre, at, post)}
-        grids = [grid[id(w)] for w in (pre, at, post)]
+        grids = [(q_all[i], ok_all[i]) for i in (poses[(np.asarray(w.p_WG, float).tobytes(), float(w.yaw))] for w in (pre, at, post))]
         for w, (_, ok) in zip((pre, at, post), grids):
             if not ok.any():
                 raise PlanningError(f"{w.what} at phase {w.time:g}: gripper at {np.round(w.p_WG, 4).tolist()} is out of the arm's "
@@ -294,9 +298,9 @@ def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, acti
         nodes.append((q_pre, q_at, q_post, np.broadcast_to(np.arange(4)[:, None], ok.shape)[ok], internal))
     cost, prev_q, prev_time, back = np.zeros(1), arm.q_home[None], 0.0, []
     for (pre, _, post), (q_pre, _, q_post, _, internal) in zip(triples, nodes):
-        d = _squared_distances(prev_q, q_pre) / (pre.time - prev_time) ** 3 + cost[:, None]
-        back.append(np.argmin(d, axis=0))
-        cost = d[back[-1], np.arange(len(q_pre))] + internal
+        best, value = _best_predecessors(prev_q, q_pre, (pre.time - prev_time) ** 3, cost)
+        back.append(best)
+        cost = value + internal
         prev_q, prev_time = q_post, post.time
     cost = cost + np.sum((prev_q - arm.q_home) ** 2, axis=1) / (phases - prev_time) ** 3
     picks = [int(np.argmin(cost))]
@@ -308,6 +312,53 @@ def _seed(arm: Arm, waypoints: list[_Waypoint], phases: int, offset: float, acti
         seeds.update({pre.time: q_pre[i], at.time: q_at[i], post.time: q_post[i]})
         turns[at.action] = int(turn[i])
     return seeds, turns
+
+
+#: Relative width of the band of predecessors whose Viterbi cost `_best_predecessors`
+#: re-evaluates exactly: far above the ~1e-15 by which two roundings of it can differ.
+_VITERBI_BAND = 1e-11
+
+
+def _best_predecessors(a: np.ndarray, b: np.ndarray, dt3: float, cost: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For every b_j: the first i minimising d_ij = |a_i - b_j|^2 / dt3 + cost_i, and d_ij.
+
+    The same picks and values, to the bit, as `argmin` down the columns of
+    `_squared_distances(a, b) / dt3 + cost[:, None]`: a BLAS product (in row
+    blocks small enough for one thread) ranks the predecessors, and only those
+    within a relative _VITERBI_BAND of each column's best are evaluated as
+    `_squared_distances` rounds them (the einsum of a pair does not depend on
+    its neighbours), ties going to the first.
+    """
+    aa, bb = np.einsum("ik,ik->i", a, a), np.einsum("jk,jk->j", b, b)
+    m, n = len(a), len(b)
+    # Rank by d_ij - bb_j / dt3 = c_i - 2 a_i.b_j / dt3 (a column constant does not
+    # change the ranking): row j of rank = [b_j, 1] . [a_i (-2 / dt3), c_i] over i.
+    lhs = np.column_stack([b, np.ones(n)])
+    rhs = np.ascontiguousarray(np.column_stack([a * (-2.0 / dt3), aa / dt3 + cost]).T)
+    rank = np.empty((n, m))
+    rows = max(1, 200_000 // (8 * max(m, 1)))  # OpenBLAS stays on one thread below 262144 multiply-adds
+    for s in range(0, n, rows):
+        np.matmul(lhs[s:s + rows], rhs, out=rank[s:s + rows])
+    band = _VITERBI_BAND * ((aa.max() + bb) / dt3 + np.abs(cost).max())
+    columns = np.arange(n)
+    first = rank.argmin(axis=1)
+    limit = rank[columns, first] + band
+    rank[columns, first] = np.inf
+    close = np.flatnonzero(rank.min(axis=1) <= limit)  # columns with another candidate in the band
+    J, I = [columns], [first]
+    if len(close):
+        j, i = np.nonzero(rank[close] <= limit[close, None])
+        J.append(close[j])
+        I.append(i)
+    I, J = np.concatenate(I), np.concatenate(J)
+    sq = np.maximum(aa[I] + bb[J] - 2 * np.einsum("pk,pk->p", a[I], b[J]), 0.0)
+    d = sq / dt3 + cost[I]
+    order = np.lexsort((I, d, J))  # per column: smallest d, then first row
+    keep = order[np.r_[True, J[order][1:] != J[order][:-1]]]
+    best = np.empty(n, int)
+    value = np.empty(n)
+    best[J[keep]], value[J[keep]] = I[keep], d[keep]
+    return best, value
 
 
 def _squared_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -354,21 +405,18 @@ def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_ph
         slots = [K.index(komo.slice_of(w.time)) for w in waypoints]
         B = np.zeros((len(K), len(symbolic.actions)))  # which keyframes each action's turn moves
         B[slots, [w.action for w in waypoints]] = 1.0
-        G, g = komo.reduced_cost(K)
+        e = komo.elimination(K)
         X_K = result.q[1:][K]
-        candidates = [(change, d) for change, d in _predicted_turn_changes(arm, G, g, X_K, B, slots)
-                      if change < -1e-6 * result.cost]
-        found = False
-        for change, d in candidates:
+
+        def turned(d, turns=turns):
             # Joint 7 turns about G's z axis, which points down: +d on joint 7 is -d of hand yaw.
-            new_turns = {k: (t - int(round(d[k] / (np.pi / 2)))) % 4 for k, t in turns.items()}
-            key = tuple(sorted(new_turns.items()))
-            if key not in tried:
-                tried.add(key)
-                found = True
-                break
-        if not found:
+            return {k: (t - int(round(d[k] / (np.pi / 2)))) % 4 for k, t in turns.items()}
+
+        d = _best_untried_turn(arm, e, X_K, B, slots, -1e-6 * result.cost, lambda d: tuple(sorted(turned(d).items())) not in tried)
+        if d is None:
             break
+        new_turns = turned(d)
+        tried.add(tuple(sorted(new_turns.items())))
         new_komo = _declare(symbolic, arm, waypoints, new_turns, phases, slices_per_phase, approach_height)
         X_K[:, 6] += B @ d
         candidate = new_komo.solve(formulation=formulation, solver=solver, initial_guess=new_komo.interpolate(dict(zip(K, X_K))))
@@ -380,7 +428,7 @@ def _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_ph
     return komo, result, turns
 
 
-def _predicted_turn_changes(arm, G, g, X_K, B, slots) -> list[tuple[float, np.ndarray]]:
+def _predicted_turn_changes(arm, G, g, X_K, B, slots, H=None, fast: bool = False):
     """(predicted cost change, d) for joint-7 turns d over runs of actions, best first.
 
     Cost c(X_K) = sum_j |G X_K[:, j] + g[:, j]|^2 over joints j (X_K: (|K|, 7)
@@ -401,7 +449,14 @@ def _predicted_turn_changes(arm, G, g, X_K, B, slots) -> list[tuple[float, np.nd
     and the best alpha gives change(d) = turn_cost - (b_d' A^-1 b_d - b0' A^-1 b0),
     b_d = b0 + P d, measured against the best swivel step without a turn (zero at
     an exact optimum). Turns that take joint 7 within SEED_MARGIN of a limit are
-    left out.
+    left out. `H` is G'G when the caller has it (lgp.komo.Elimination.GtG).
+
+    `fast=True` does the two large products (P D and A^-1 b_d) in blocks small
+    enough for one BLAS thread (a 2-thread product of these sizes stalls when the
+    other core is busy: 25 ms instead of 0.2 ms) and returns (list, band, sure):
+    its changes are within `band` of this function's own, and `sure` is False
+    when A is too ill-conditioned for that bound. `_best_untried_turn` decides
+    with them only when no decision is within `band` of another.
     """
     from pydrake.multibody.tree import JacobianWrtVariable
 
@@ -411,36 +466,91 @@ def _predicted_turn_changes(arm, G, g, X_K, B, slots) -> list[tuple[float, np.nd
         plant.SetPositions(context, X_K[i])
         J = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kQDot, arm.G, np.zeros(3), plant.world_frame(), plant.world_frame())
         swivel[r] = np.linalg.svd(J)[2][-1]
-    H = G.T @ G  # half the Hessian of the cost, per joint, (|K|, |K|)
+    H = G.T @ G if H is None else H  # half the Hessian of the cost, per joint, (|K|, |K|)
     grad = G.T @ (G @ X_K + g)  # half the gradient, (|K|, 7)
     swivel_hessian = (swivel @ swivel.T) * H[np.ix_(slots, slots)]  # A
     swivel_gradient = np.einsum("rj,rj->r", swivel, grad[slots])  # b0
     swivel_turn_coupling = swivel[:, 6][:, None] * (H @ B)[slots]  # P, (waypoints, n_actions)
     turn_hessian = B.T @ H @ B  # B'HB, (n_actions, n_actions)
     turn_gradient = grad[:, 6] @ B  # grad_7' B, (n_actions,)
-    n = B.shape[1]
-    lo, hi = arm.q_lower[6] + SEED_MARGIN, arm.q_upper[6] - SEED_MARGIN
-    x7 = [X_K[B[:, k] > 0, 6] for k in range(n)]
-    turns = []  # candidate d: the same step on a run i..j of consecutive actions
-    for step in (np.pi / 2, -np.pi / 2, np.pi, -np.pi):
-        ok = [bool(np.all(x + step >= lo) and np.all(x + step <= hi)) for x in x7]
-        for i in range(n):
-            for j in range(i, n):
-                if not ok[j]:
-                    break
-                d = np.zeros(n)
-                d[i:j + 1] = step
-                turns.append(d)
-    if not turns:
-        return []
-    D = np.array(turns).T  # (n_actions, m): column m is one candidate d
+    D = _turn_steps(X_K, B, arm.q_lower[6] + SEED_MARGIN, arm.q_upper[6] - SEED_MARGIN)  # (n_actions, m): column m is one d
+    if D.shape[1] == 0:
+        return ([], 0.0, True) if fast else []
     turn_cost = np.einsum("km,kl,lm->m", D, turn_hessian, D) + 2 * turn_gradient @ D  # joints 1-6 held
-    b_d = swivel_gradient[:, None] + swivel_turn_coupling @ D
-    Ainv_b_d = np.linalg.solve(swivel_hessian, b_d)
-    swivel_gain = np.einsum("rm,rm->m", b_d, Ainv_b_d) - swivel_gradient @ np.linalg.solve(swivel_hessian, swivel_gradient)
+    if not fast:
+        b_d = swivel_gradient[:, None] + swivel_turn_coupling @ D
+        Ainv_b_d = np.linalg.solve(swivel_hessian, b_d)
+        swivel_gain = np.einsum("rm,rm->m", b_d, Ainv_b_d) - swivel_gradient @ np.linalg.solve(swivel_hessian, swivel_gradient)
+        change = turn_cost - swivel_gain
+        order = np.argsort(change)
+        return [(float(change[m]), D[:, m]) for m in order]
+    r, m = swivel_turn_coupling.shape[0], D.shape[1]
+    # A^-1 b_d = A^-1 b0 + (A^-1 P) d: one solve with 1 + n_actions right-hand sides.
+    # (numpy's LAPACK: scipy's lu_solve took 12 ms here on a busy machine, its BLAS threads waiting.)
+    solved = np.linalg.solve(swivel_hessian, np.column_stack([swivel_gradient, swivel_turn_coupling]))
+    Ainv_b0, Ainv_P = solved[:, 0], solved[:, 1:]
+    b_d, Ainv_b_d = np.empty((r, m)), np.empty((r, m))
+    cols = max(1, 200_000 // (r * swivel_turn_coupling.shape[1]))  # one BLAS thread below 262144 multiply-adds
+    for s in range(0, m, cols):
+        b_d[:, s:s + cols] = swivel_gradient[:, None] + swivel_turn_coupling @ D[:, s:s + cols]
+        Ainv_b_d[:, s:s + cols] = Ainv_b0[:, None] + Ainv_P @ D[:, s:s + cols]
+    swivel_gain = np.einsum("rm,rm->m", b_d, Ainv_b_d) - swivel_gradient @ Ainv_b0
     change = turn_cost - swivel_gain
+    # The two ways round differently by ~ r cond(A) 1e-16 times |b_d| (|A^-1 b0| + |A^-1 P| |d|)
+    # (backward-stable solves, no cancellation assumed): with cond(A) <= 1e4 the band
+    # below is >= 1e3 times that; a worse A is left to the exact way.
+    cond = np.linalg.cond(swivel_hessian, 1)
+    x_size = np.linalg.norm(Ainv_b0) + np.linalg.norm(Ainv_P) * np.linalg.norm(D, axis=0)
+    scale = np.linalg.norm(b_d, axis=0) * x_size + np.linalg.norm(swivel_gradient) * np.linalg.norm(Ainv_b0)
+    band = 1e-6 * float(scale.max() + np.abs(turn_cost).max())
     order = np.argsort(change)
-    return [(float(change[m]), D[:, m]) for m in order]
+    return [(float(change[m]), D[:, m]) for m in order], band, bool(cond < 1e4)
+
+
+def _turn_steps(X_K, B, lo: float, hi: float) -> np.ndarray:
+    """Candidate joint-7 turns d (n_actions, m): for each step in (+90, -90, +180, -180
+    deg) and each run i..j of consecutive actions whose keyframes all stay within
+    [lo, hi] when turned, d = step on actions i..j; in that order (step, i, j)."""
+    n = B.shape[1]
+    x7 = [X_K[B[:, k] > 0, 6] for k in range(n)]
+    columns = []
+    k = np.arange(n)
+    for step in (np.pi / 2, -np.pi / 2, np.pi, -np.pi):
+        ok = np.array([bool(np.all(x + step >= lo) and np.all(x + step <= hi)) for x in x7])
+        # The run from i may extend up to the first action j >= i that is not ok.
+        stop = np.minimum.accumulate(np.where(ok, n, k)[::-1])[::-1] if n else np.zeros(0, int)
+        i = np.repeat(k, np.maximum(stop - k, 0))
+        j = np.concatenate([np.arange(a, b) for a, b in zip(k, stop) if b > a]) if np.any(stop > k) else np.zeros(0, int)
+        block = np.where((k[None, :] >= i[:, None]) & (k[None, :] <= j[:, None]), step, 0.0)
+        columns.append(block)
+    return np.concatenate(columns).T if columns else np.zeros((n, 0))
+
+
+def _best_untried_turn(arm, e, X_K, B, slots, threshold: float, untried) -> np.ndarray | None:
+    """The first d, in order of predicted change, below `threshold` and `untried(d)`;
+    None when there is none. Decided on `_predicted_turn_changes(fast=True)` when every
+    change it compares (the ones up to the pick, the next one, the threshold) lies
+    more than its band apart; else on the exact ranking. Either way the pick is the
+    one the exact ranking gives."""
+    changes, band, sure = _predicted_turn_changes(arm, e.G, e.g, X_K, B, slots, e.GtG, fast=True)
+    pick, last = None, len(changes) - 1  # last: the index up to which the ranking must be certain
+    for index, (change, d) in enumerate(changes):
+        if change >= threshold:
+            last = index
+            break
+        if untried(d):
+            pick, last = d, index + 1
+            break
+    values = np.array([c for c, _ in changes[:last + 1]] + [np.inf])
+    certain = sure and bool(np.all(np.diff(values) > 2 * band)) and bool(np.all(np.abs(values[:-1] - threshold) > band))
+    if certain:
+        return pick
+    for change, d in _predicted_turn_changes(arm, e.G, e.g, X_K, B, slots, e.GtG):
+        if change >= threshold:
+            return None
+        if untried(d):
+            return d
+    return None
 
 
 def _declare(symbolic, arm, waypoints, turns, phases, slices_per_phase, approach_height=APPROACH) -> Komo:

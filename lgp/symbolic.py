@@ -14,7 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lgp.scene import CONTACT_TOLERANCE, OVERLAP_TOLERANCE, TABLE, Scene, penetration, support_graph, supported_by
+from lgp.geometry import rectangle_overlap
+from lgp.scene import (OVERLAP_TOLERANCE, TABLE, Block, Scene, penetration, support_graph, support_graph_after_move,
+                       supported_by)
 
 
 class IllegalActionError(ValueError):
@@ -77,12 +79,14 @@ def same_pose(p_a, yaw_a, p_b, yaw_b, size=None) -> bool:
     return bool(np.linalg.norm(np.asarray(p_a) - np.asarray(p_b)) <= POSITION_TOLERANCE and abs(d_yaw) <= YAW_TOLERANCE)
 
 
-def apply(action: Action, state: PlanState) -> PlanState:
+def apply(action: Action, state: PlanState, *, support=support_graph) -> PlanState:
     """The state after `action`; raises IllegalActionError if it is not allowed.
 
     Rules: one hand, so Grasp needs an empty hand and Place the block in hand; a
     block can be grasped only when nothing rests on it; a placed block must not
     overlap another block or obstacle and must rest on exactly what `onto` says.
+    `support(scene)` gives the support graph (lgp.scene.support_graph, or a
+    caller's memo of it).
     """
     scene = state.scene
     if action.block not in scene.names:
@@ -90,7 +94,7 @@ def apply(action: Action, state: PlanState) -> PlanState:
     if isinstance(action, Grasp):
         if state.held is not None:
             raise IllegalActionError(f"{action} in {scene.label}: the hand already holds {state.held}")
-        above = supported_by(support_graph(scene))[action.block]
+        above = supported_by(support(scene))[action.block]
         if above:
             raise IllegalActionError(f"{action} in {scene.label}: {', '.join(above)} rests on {action.block}")
         return PlanState(scene, held=action.block)
@@ -99,19 +103,74 @@ def apply(action: Action, state: PlanState) -> PlanState:
             raise IllegalActionError(f"{action} in {scene.label}: the hand holds {state.held}, not {action.block}")
         moved = scene.block(action.block).moved_to(action.p_WB, action.yaw)
         new = scene.with_blocks(moved if b.name == action.block else b for b in scene.blocks)
-        for other in (*new.blocks, *new.fixed):
+        for other in _near(moved, (*new.blocks, *new.fixed)):
             if other.name == moved.name:
                 continue
             depth = penetration(moved, other)
             if depth > OVERLAP_TOLERANCE:
                 raise IllegalActionError(f"{action} in {scene.label}: {moved.name} would overlap {other.name} by {depth * 1000:.1f} mm")
-        rests = set(support_graph(new, CONTACT_TOLERANCE)[moved.name])
+        rests = set(support(new)[moved.name])
         if rests != set(action.onto):
             raise IllegalActionError(
                 f"{action} in {scene.label}: {moved.name} would rest on {sorted(rests) or 'nothing'}, not {sorted(action.onto)}"
             )
         return PlanState(new, held=None)
     raise IllegalActionError(f"unknown action {action!r}")
+
+
+def _near(block, solids) -> list:
+    """The solids (in order) that `block` may interpenetrate by more than
+    OVERLAP_TOLERANCE: their centres lie within the sum of the half diagonals
+    (plus the tolerance). A superset; the exact test decides."""
+    if not solids:
+        return []
+    centres = np.array([s.p_WB if isinstance(s, Block) else s.p_WO for s in solids])
+    radius = np.array([np.linalg.norm(s.size) / 2 for s in solids])
+    near = np.linalg.norm(centres - block.p_WB, axis=1) <= radius + np.linalg.norm(block.size) / 2 + OVERLAP_TOLERANCE
+    return [solids[i] for i in np.flatnonzero(near)]
+
+
+#: Pairs whose array depth lies this far (m) below OVERLAP_TOLERANCE are ruled out
+#: without the scalar test: far above the ~1e-17 m by which the two can round apart.
+_SLACK = 1e-7
+
+
+def _enters_any(block: Block, solids: list) -> bool:
+    """Whether `block` interpenetrates any of `solids` by more than OVERLAP_TOLERANCE
+    (lgp.scene.penetration). The depths of all pairs at once only rule out the pairs
+    well below the tolerance; the scalar test decides the rest."""
+    if not solids:
+        return False
+    c, half, u = (np.array(x) for x in zip(*(s.outline() for s in solids)))
+    mine = block.outline()
+    horizontal, _ = rectangle_overlap(*(np.broadcast_to(x, (len(solids), 2)) for x in mine), c, half, u)
+    vertical = np.minimum(block.top, [s.top for s in solids]) - np.maximum(block.bottom, [s.bottom for s in solids])
+    maybe = np.flatnonzero(np.minimum(vertical, horizontal) > OVERLAP_TOLERANCE - _SLACK)
+    return any(penetration(block, solids[i]) > OVERLAP_TOLERANCE for i in maybe)
+
+
+def _support_memo():
+    """support_graph(scene) computed once per Scene object (symbolic_plan asks for
+    each state's graph up to three times: clear blocks, grasp, place), and for a
+    scene one block away from the last one asked, updated from that one's graph."""
+    graphs: dict[int, tuple[Scene, dict]] = {}
+    last: list = []
+
+    def support(scene: Scene) -> dict[str, list[str]]:
+        hit = graphs.get(id(scene))
+        if hit is None or hit[0] is not scene:
+            graph = None
+            if last:
+                before, previous = last[0]
+                changed = [a.name for a, b in zip(before.blocks, scene.blocks) if a is not b]
+                if (len(changed) == 1 and before.fixed is scene.fixed
+                        and [a.name for a in before.blocks] == [b.name for b in scene.blocks]):
+                    graph = support_graph_after_move(scene, previous, changed[0])
+            hit = graphs[id(scene)] = (scene, graph if graph is not None else support_graph(scene))
+        last[:] = [hit]
+        return hit[1]
+
+    return support
 
 
 @dataclass(frozen=True)
@@ -188,9 +247,10 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
         return tuple(s if s in fixed_names else block_of_target[s] for s in support_B[target_of[a].name])
 
     state, actions = PlanState(initial), []
+    support = _support_memo()
     while to_move:
         current = state.scene
-        above = supported_by(support_graph(current))
+        above = supported_by(support(current))
         clear = [a for a in to_move if not above[a]]
         # Bounding spheres prune the exact overlap test: solids whose centres are
         # farther apart than the sum of their half diagonals cannot interpenetrate.
@@ -203,8 +263,7 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
                 continue
             goal_block = current.block(a).moved_to(goal.p_WB, goal.yaw)
             near = np.linalg.norm(p_W - goal_block.p_WB, axis=1) <= radius + np.linalg.norm(goal_block.size) / 2 + OVERLAP_TOLERANCE
-            if any(penetration(goal_block, current.blocks[i]) > OVERLAP_TOLERANCE
-                   for i in np.flatnonzero(near) if current.blocks[i].name != a):
+            if _enters_any(goal_block, [current.blocks[i] for i in np.flatnonzero(near) if current.blocks[i].name != a]):
                 continue
             ready.append((goal.p_WB[2], order, a))
         legal = [r for r in ready if r[2] in clear]
@@ -237,7 +296,7 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
             )
         goal = target_of[a]
         for action in (Grasp(a), Place(a, onto(a), goal.p_WB.copy(), goal.yaw)):
-            state = apply(action, state)
+            state = apply(action, state, support=support)
             actions.append(action)
         to_move.remove(a)
         in_place.add(a)

@@ -11,7 +11,7 @@ from pydrake.solvers import Solve
 
 import stimuli
 from lgp import arm as arm_module
-from lgp.arm import Arm, X_WG_from_above, srs_ik
+from lgp.arm import Arm, X_WG_from_above, srs_ik, srs_ik_poses
 from lgp.planner import APPROACH
 
 #: The block box of the brief: every block centre of every trial lies in it.
@@ -51,6 +51,33 @@ def test_closed_form_ik_reproduces_the_pose(arm):
         for qi in q[:: max(1, len(q) // 10)]:
             np.testing.assert_allclose(arm.X_WG(qi).GetAsMatrix4(), X.GetAsMatrix4(), atol=1e-9)
     assert srs_ik(np.eye(3), np.array([3.0, 0, 0]), np.zeros(4)).shape == (0, 7)  # out of reach
+
+
+def test_batched_ik_gives_every_pose_the_solutions_it_gets_alone(arm):
+    # The planner solves all waypoints of a plan in one call; each pose must get, to
+    # the bit, what the closed form gives it alone (effort tables stay identical),
+    # whatever else is in the batch, out-of-reach poses included.
+    rng = np.random.default_rng(3)
+    poses = [(np.array([rng.uniform(-0.2, 0.8), rng.uniform(-0.6, 0.6), rng.uniform(0.0, 0.9)]), rng.uniform(-np.pi, np.pi))
+             for _ in range(60)] + [(np.array([3.0, 0.0, 0.0]), 0.0)]
+    swivels = np.linspace(-np.pi, np.pi, 16, endpoint=False) + 0.3
+    q, ok = arm.ik_grids_from_above(poses, swivels, margin=0.02)
+    X_BW = arm.X_WBase.inverse()
+    reached = 0
+    for i, (p, yaw) in enumerate(poses):
+        R_BG = np.array([X_BW.rotation().multiply(X_WG_from_above(p, yaw + m * np.pi / 2).rotation()).matrix() for m in range(4)])
+        alone = srs_ik(R_BG, X_BW.multiply(p), swivels)
+        if alone.shape[1] == 0:
+            assert not ok[i].any()
+            continue
+        reached += 1
+        assert np.array_equal(q[i], alone) and np.array_equal(ok[i], arm.within_limits(alone, 0.02))
+        for m, j in zip(*np.nonzero(ok[i][:, ::37])):  # and they place G where asked
+            np.testing.assert_allclose(arm.X_WG(q[i][m, 37 * j]).GetAsMatrix4(),
+                                       X_WG_from_above(p, yaw + m * np.pi / 2).GetAsMatrix4(), atol=1e-9)
+    assert reached > 30
+    q2, _ = srs_ik_poses(np.array([np.eye(3)[None]] * 2), np.array([[3.0, 0, 0], [0.3, 0.1, 0.5]]), swivels)
+    assert not q2[0].any() and np.array_equal(q2[1], srs_ik(np.eye(3)[None], np.array([0.3, 0.1, 0.5]), swivels))
 
 
 def test_home_is_within_limits_with_the_hand_vertical(arm):

@@ -2,6 +2,8 @@
 the kinematic rules of grasping, carrying and placing."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from pydrake.multibody.parsing import Parser
@@ -71,19 +73,50 @@ def test_free_point_full_and_reduced_programs_agree():
     np.testing.assert_allclose(reduced.q, full.q, atol=1e-6)
 
 
-def test_linear_structure_is_built_once_per_declaration_and_again_when_it_changes(monkeypatch):
+def test_linear_structure_is_built_once_per_skeleton_and_again_when_it_changes(monkeypatch):
     import lgp.komo.solve as solve_module
 
     built = []
     real = solve_module.linear_structure
     monkeypatch.setattr(solve_module, "linear_structure", lambda komo: built.append(1) or real(komo))
+    monkeypatch.setattr(solve_module, "_STRUCTURES", type(solve_module._STRUCTURES)())
     komo = cubic_komo(20)
     result = komo.solve(seeds={1.0: [1.0]})  # interpolates the seeds, solves, evaluates the cost
     komo.reduced_cost(result.keyframes)
     assert len(built) == 1
+    # Another layout of the same skeleton (only the nonlinear target differs) shares it.
+    other = cubic_komo(20)
+    other.objectives[0] = dataclasses.replace(other.objectives[0], target=np.array([0.7, 0.0, 0.0]))
+    shared = other.solve(seeds={1.0: [0.7]})
+    assert len(built) == 1 and shared.q[-1, 0] == pytest.approx(0.7, abs=1e-9)
     komo.add_objective([0.5], "qItself", type="sos", scale=10.0, target=[0.2])
     moved = komo.solve()
     assert len(built) == 2 and moved.cost > result.cost  # the new sos term is in the cost
+    komo.add_rest(0.5)
+    komo.solve()
+    assert len(built) == 3  # a rest is part of the skeleton too
+
+
+def test_shared_elimination_is_the_one_computed_afresh():
+    # The layouts of a trial reuse one elimination per keyframe set: it must be the
+    # same to the bit as eliminating again, and nobody may change it in place.
+    from lgp.komo.linear import eliminate, linear_structure
+
+    komo = cubic_komo(30)
+    komo.add_rest(0.5)
+    K = [4, 14, 29]
+    e = komo.elimination(K)
+    assert komo.elimination(reversed(K)) is e
+    fresh = eliminate(linear_structure(komo), K)
+    for name in ("F", "M", "m", "G", "g", "C_KK", "E_KK"):
+        assert np.array_equal(getattr(e, name), getattr(fresh, name)), name
+    assert np.array_equal(e.GtG, fresh.G.T @ fresh.G)
+    L, l, const = e.cost_factor
+    X_K = np.random.default_rng(0).normal(size=(3, 1))
+    assert np.sum((L @ X_K + l) ** 2) + const == pytest.approx(np.sum((fresh.G @ X_K + fresh.g) ** 2), rel=1e-12)
+    with pytest.raises(ValueError):
+        e.M[0, 0] = 1.0
+
 
 def test_free_slice_over_a_joint_limit_is_promoted_and_the_limit_holds():
     # Reaching 0.9 at a quarter of the phase and 1.0 at rest at the end overshoots 1.0
@@ -299,3 +332,24 @@ def test_bad_declarations_are_refused_with_the_reason():
         komo.add_mode_switch(1.0, "grasp", "point", "b1")
     with pytest.raises(KomoError, match="unknown solver"):
         komo.solve(solver="cplex")
+
+
+def test_object_poses_follow_the_holder_slice_by_slice():
+    # object_poses fills each held stretch at once; the definition is per row: X_WG X_GB
+    # while held (rows of slice s >= grasp, <= place), the last pose otherwise.
+    from lgp.komo.result import frame_poses, object_poses
+    from lgp.planner import declare
+
+    initial, target = tower_task(2)
+    result = plan(initial, target, 0)
+    komo, _, _ = declare(result.symbolic, default_arm(), np.random.default_rng(0))
+    poses = object_poses(komo, result.q)
+    X_WG = frame_poses(komo, result.q, "G")
+    for name, X0 in komo.objects.items():
+        current, held_rows = X0.GetAsMatrix4(), 0
+        for i in range(len(result.q)):
+            holder = komo.holder(name, i - 1) if i > 0 else None
+            if holder is not None:
+                current, held_rows = X_WG[i] @ holder[1].GetAsMatrix4(), held_rows + 1
+            assert np.array_equal(poses[name][i], current), (name, i)
+        assert held_rows == 20 + 1  # grasp at phase k to place at k + 1, both slices included

@@ -143,3 +143,85 @@ def test_viewer_replays_the_effort_table_row(capsys, trial_id, seed, sample):
     assert main([trial_id, "--seed", str(seed), "--sample", str(sample)]) == 0
     printed = float(re.search(r"^effort ([0-9.eE+-]+) J\*s$", capsys.readouterr().out, re.M).group(1))
     assert printed == pytest.approx(table.loc[table["sample"] == sample, "effort"].item(), rel=1e-9)
+
+
+def test_viterbi_step_picks_what_the_full_distance_matrix_picks():
+    # The seeding's dynamic programme ranks predecessors with a BLAS product and
+    # re-evaluates near-ties exactly: the picks and costs must be those of argmin
+    # down the full |a_i - b_j|^2 / dt^3 + cost_i matrix, to the bit, ties (equal
+    # and 1e-13-apart rows) going to the first row as argmin's do.
+    from lgp.planner import _best_predecessors, _squared_distances
+
+    rng = np.random.default_rng(5)
+    a = rng.uniform(-3, 3, (300, 7))
+    a[200:250] = a[:50]
+    a[250:260] = a[:10] + 1e-13
+    cost = rng.uniform(0, 50, 300)
+    cost[200:260] = np.concatenate([cost[:50], cost[:10]])
+    for m, n, dt3 in ((300, 280, 0.6**3), (1, 40, 0.8**3), (7, 1, 0.2**3), (300, 700, 1.0)):
+        b = np.vstack([a[:min(n, 60)], rng.uniform(-3, 3, (max(n - 60, 0), 7))])[:n]
+        d = _squared_distances(a[:m], b) / dt3 + cost[:m, None]
+        first = np.argmin(d, axis=0)
+        best, value = _best_predecessors(a[:m], b, dt3, cost[:m])
+        assert np.array_equal(best, first)
+        assert np.array_equal(value, d[first, np.arange(n)])
+
+
+def test_turn_candidates_are_every_run_of_consecutive_turnable_actions():
+    # Brute force: every step and every run i..j whose keyframes all stay within the
+    # joint-7 limits when turned, in the order (step, i, j).
+    from lgp.planner import _turn_steps
+
+    rng = np.random.default_rng(4)
+    for n in (1, 5, 12):
+        B = np.zeros((3 * n, n))
+        B[np.arange(3 * n), np.repeat(np.arange(n), 3)] = 1.0
+        X_K = rng.uniform(-2.8, 2.8, (3 * n, 7))
+        lo, hi = -2.9, 2.9
+        expected = []
+        for step in (np.pi / 2, -np.pi / 2, np.pi, -np.pi):
+            ok = [bool(np.all(X_K[B[:, k] > 0, 6] + step >= lo) and np.all(X_K[B[:, k] > 0, 6] + step <= hi)) for k in range(n)]
+            for i in range(n):
+                for j in range(i, n):
+                    if not all(ok[i:j + 1]):
+                        break
+                    d = np.zeros(n)
+                    d[i:j + 1] = step
+                    expected.append(d)
+        D = _turn_steps(X_K, B, lo, hi)
+        assert np.array_equal(D, np.array(expected).T.reshape(n, -1))
+
+
+def test_fast_turn_ranking_picks_what_the_exact_ranking_picks(monkeypatch):
+    # The quarter-turn re-choice ranks candidates with single-thread BLAS blocks and
+    # decides on them only when nothing is within its error band; the pick must be the
+    # exact ranking's, whatever has been tried, and also when it falls back.
+    import lgp.planner as planner
+
+    captured = []
+    real = planner._best_untried_turn
+    monkeypatch.setattr(planner, "_best_untried_turn", lambda *a: captured.append(a) or real(*a))
+    trial = stimuli.load_trial("7H")
+    plan(trial.sample_initial(np.random.default_rng(1)), trial.target, 0)
+    arm, e, X_K, B, slots, threshold, _ = captured[0]
+    ranked = planner._predicted_turn_changes(arm, e.G, e.g, X_K, B, slots)
+    assert all(change >= threshold for change, _ in ranked)  # the plan is at a turn optimum: none is taken
+    mid = len(ranked) // 2
+    threshold = (ranked[mid - 1][0] + ranked[mid][0]) / 2  # half of them pass: exercise the ranking
+    exact = [d for change, d in ranked if change < threshold]
+    assert len(exact) > 3
+    fast, band, sure = planner._predicted_turn_changes(arm, e.G, e.g, X_K, B, slots, fast=True)
+    assert sure and [tuple(d) for _, d in fast] == [tuple(d) for _, d in ranked]
+    ways = []
+    ranking = planner._predicted_turn_changes
+    monkeypatch.setattr(planner, "_predicted_turn_changes", lambda *a, **k: ways.append(k.get("fast", False)) or ranking(*a, **k))
+    for tried in (0, 1, 3, len(exact)):
+        skip = {tuple(d) for d in exact[:tried]}
+        pick = real(arm, e, X_K, B, slots, threshold, lambda d: tuple(d) not in skip)
+        assert (pick is None) if tried == len(exact) else np.array_equal(pick, exact[tried])
+    assert ways[:3] == [True] * 3  # the picks were decided on the fast ranking (none among all can fall back)
+    del ways[:]
+    wide = lambda *a, **k: (lambda out: (out[0], 1e300, out[2]) if k.get("fast") else out)(ranking(*a, **k))  # noqa: E731
+    monkeypatch.setattr(planner, "_predicted_turn_changes", lambda *a, **k: ways.append(k.get("fast", False)) or wide(*a, **k))
+    assert np.array_equal(real(arm, e, X_K, B, slots, threshold, lambda d: tuple(d) != tuple(exact[0])), exact[1])
+    assert ways == [True, False]  # every decision uncertain: the exact ranking decided

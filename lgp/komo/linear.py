@@ -15,6 +15,7 @@ reduced residual G X_K + g.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from math import comb
 
 import numpy as np
@@ -72,6 +73,19 @@ class Elimination:
         X = np.zeros((len(self.K) + len(self.F), X_K.shape[1]))
         X[self.K], X[self.F] = X_K, self.M @ X_K + self.m
         return X
+
+    @cached_property
+    def GtG(self) -> np.ndarray:
+        """G'G (|K|, |K|): half the Hessian of the reduced cost, the same for every joint."""
+        return self.G.T @ self.G
+
+    @cached_property
+    def cost_factor(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """(L, l, const) with |G X_K + g|^2 = |L X_K + l|^2 + const per joint column,
+        L upper triangular (the Cholesky factor of G'G = L'L)."""
+        L = np.linalg.cholesky(self.GtG).T
+        l = np.linalg.solve(L.T, self.G.T @ self.g)
+        return L, l, float(np.sum(self.g * self.g) - np.sum(l * l))
 
 
 def difference_row(komo: Declaration, s: int, order: int) -> np.ndarray:

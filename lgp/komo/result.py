@@ -44,20 +44,30 @@ def frame_poses(komo: Declaration, q: np.ndarray, frame: str) -> np.ndarray:
 
 
 def object_poses(komo: Declaration, q: np.ndarray) -> dict[str, np.ndarray]:
-    """X_WB (n, 4, 4) of every object along q (n = N + 1 rows, time 0 first)."""
+    """X_WB (n, 4, 4) of every object along q (n = N + 1 rows, time 0 first).
+
+    Row i is slice i - 1. An object's holder changes only at its mode switches
+    (at a switch's slice or the one after), so it is looked up there and the held
+    stretches are filled at once: X_WG X_GB per row, the same products as row by row.
+    """
     poses = {}
     cache: dict[str, np.ndarray] = {}
+    n = len(q)
     for name, X0 in komo.objects.items():
-        X = np.empty((len(q), 4, 4))
+        X = np.empty((n, 4, 4))
         current = X0.GetAsMatrix4()
-        for i in range(len(q)):
-            holder = komo.holder(name, i - 1) if i > 0 else None
+        changes = sorted({1, n} | {i for m in komo.switches if m.object == name for i in (m.slice + 1, m.slice + 2) if 1 <= i < n})
+        X[0] = current
+        for lo, hi in zip(changes[:-1], changes[1:]):  # rows lo..hi-1 share the holder of slice lo - 1
+            holder = komo.holder(name, lo - 1)
             if holder is not None:
                 gripper, X_GB = holder
                 if gripper not in cache:
                     cache[gripper] = frame_poses(komo, q, gripper)
-                current = cache[gripper][i] @ X_GB.GetAsMatrix4()
-            X[i] = current
+                X[lo:hi] = cache[gripper][lo:hi] @ X_GB.GetAsMatrix4()
+                current = X[hi - 1]
+            else:
+                X[lo:hi] = current
         poses[name] = X
     return poses
 

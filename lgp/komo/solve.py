@@ -20,6 +20,7 @@ docs/benchmarks.md).
 from __future__ import annotations
 
 import time as _time
+from collections import OrderedDict
 
 import numpy as np
 from scipy import sparse
@@ -27,7 +28,7 @@ from pydrake.solvers import IpoptSolver, MathematicalProgram, SnoptSolver, Solve
 
 from lgp.komo.constraints import drake_constraints, violation
 from lgp.komo.declaration import Declaration, KomoError
-from lgp.komo.linear import LinearStructure, eliminate, interpolate, linear_structure
+from lgp.komo.linear import Elimination, LinearStructure, eliminate, linear_structure
 from lgp.komo.result import KomoResult, frame_poses, object_poses, worst_violation
 
 #: A free slice may exceed a joint limit by this much (rad) before it is promoted.
@@ -36,34 +37,72 @@ LIMIT_TOLERANCE = 1e-9
 LAZY_TOLERANCE = 1e-9
 FORMULATIONS = ("reduced", "full")
 SOLVERS = ("snopt", "ipopt")
+#: Linear structures kept per process (least recently used dropped), and eliminations
+#: (keyframe sets) kept per structure: a plan needs 2-4, the layouts of a trial share them.
+STRUCTURES_KEPT = 4
+ELIMINATIONS_KEPT = 8
+
+# {structure key: (LinearStructure, {keyframes: Elimination})}: the linear part of a
+# declaration depends only on its skeleton (slices, rests, qItself objectives, home),
+# not on the poses it is asked to reach, so the Komos of a trial's layouts share it.
+_STRUCTURES: OrderedDict[tuple, tuple[LinearStructure, OrderedDict[tuple, Elimination]]] = OrderedDict()
+
+
+def _structure_key(komo: Declaration) -> tuple:
+    """Everything lgp.komo.linear.linear_structure reads from a declaration."""
+    qitself = tuple((o.slices, o.type, o.order, o.scale, None if o.target is None else np.asarray(o.target, float).tobytes())
+                    for o in komo.objectives if o.feature == "qItself")
+    return (komo.k_order, komo.N, komo.tau, komo.nq, komo.q_home.tobytes(), tuple(komo.rests), qitself)
+
+
+def _structure(komo: Declaration) -> tuple[LinearStructure, OrderedDict]:
+    key = _structure_key(komo)
+    entry = _STRUCTURES.get(key)
+    if entry is None:
+        entry = _STRUCTURES[key] = (linear_structure(komo), OrderedDict())
+        while len(_STRUCTURES) > STRUCTURES_KEPT:
+            _STRUCTURES.popitem(last=False)
+    _STRUCTURES.move_to_end(key)
+    return entry
 
 
 class Komo(Declaration):
     """A KOMO problem: declared on a phase clock (lgp.komo.declaration), then solved.
 
-    The linear structure (lgp.komo.linear) is computed once per state of the
-    declaration and shared by `solve`, `interpolate` and `reduced_cost`.
+    The linear structure (lgp.komo.linear) and its eliminations are computed once
+    per skeleton in a process and shared by `solve`, `interpolate` and
+    `reduced_cost` of every Komo with that skeleton (the layouts of a trial).
     """
 
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self._linear: tuple[list, list, np.ndarray, LinearStructure] | None = None
-
     def linear(self) -> LinearStructure:
-        """Cost residual and linear equalities of the declaration as it stands now."""
-        cached = self._linear
-        if (cached is None or len(cached[0]) != len(self.objectives) or any(a is not b for a, b in zip(cached[0], self.objectives))
-                or cached[1] != self.rests or not np.array_equal(cached[2], self.q_home)):
-            cached = self._linear = (list(self.objectives), list(self.rests), self.q_home.copy(), linear_structure(self))
-        return cached[3]
+        """Cost residual and linear equalities of the declaration as it stands now
+        (computed once per skeleton in this process and shared)."""
+        return _structure(self)[0]
+
+    def elimination(self, keyframes) -> Elimination:
+        """The free slices eliminated for these keyframes (lgp.komo.linear.eliminate),
+        computed once per (skeleton, keyframes) in this process and shared."""
+        linear, eliminations = _structure(self)
+        K = tuple(sorted(int(s) for s in keyframes))
+        e = eliminations.get(K)
+        if e is None:
+            e = eliminations[K] = eliminate(linear, K)
+            for array in (e.F, e.M, e.m, e.G, e.g, e.C_KK, e.E_KK):
+                array.setflags(write=False)  # shared: nobody may change it in place
+            while len(eliminations) > ELIMINATIONS_KEPT:
+                eliminations.popitem(last=False)
+        eliminations.move_to_end(K)
+        return e
 
     def interpolate(self, seeds: dict[int, np.ndarray]) -> np.ndarray:
         """Minimum-control-cost trajectory (N, nq) through `seeds` {slice: q} under the linear equalities."""
-        return interpolate(self.linear(), seeds)
+        K = sorted(seeds)
+        X_K = np.array([seeds[s] for s in K]).reshape(len(K), self.nq)
+        return self.elimination(K).trajectory(X_K)
 
     def reduced_cost(self, keyframes) -> tuple[np.ndarray, np.ndarray]:
         """(G, g) with cost = sum_j |G X_K[:, j] + g[:, j]|^2 once the other slices are eliminated."""
-        e = eliminate(self.linear(), sorted(keyframes))
+        e = self.elimination(keyframes)
         return e.G, e.g
 
     def frame_poses(self, q: np.ndarray, frame: str) -> np.ndarray:
@@ -92,7 +131,7 @@ class Komo(Declaration):
         nonlinear = self.nonlinear()
         if initial_guess is None:
             seed_slices = {self.slice_of(t): np.asarray(q, float) for t, q in (seeds or {}).items()}
-            initial_guess = interpolate(linear, seed_slices)
+            initial_guess = self.interpolate(seed_slices)
         X0 = np.asarray(initial_guess, float).reshape(self.N, self.nq)
         backend = _backend(solver, options)
         if formulation == "full":
@@ -136,15 +175,13 @@ def _solve_reduced(komo: Komo, linear: LinearStructure, K, nonlinear, X0, backen
     the same program, but SNOPT's quasi-Newton Hessian is then the identity
     instead of the badly conditioned G'G (9x fewer seconds on a 10-block plan).
     """
-    e = eliminate(linear, K)
+    e = komo.elimination(K)
     nK, nq = len(K), komo.nq
     prog = MathematicalProgram()
     x = prog.NewContinuousVariables(nK, nq, "q")
     z = prog.NewContinuousVariables(nK, nq, "z")
     xs, zs = x.reshape(-1), z.reshape(-1)
-    L = np.linalg.cholesky(e.G.T @ e.G).T  # G'G = L'L
-    l = np.linalg.solve(L.T, e.G.T @ e.g)  # |G x + g|^2 = |L x + l|^2 + const
-    const = float(np.sum(e.g * e.g) - np.sum(l * l))
+    L, l, const = e.cost_factor  # G'G = L'L, |G x + g|^2 = |L x + l|^2 + const
     lifted = sparse.hstack([sparse.kron(sparse.csr_matrix(L), sparse.eye(nq)), -sparse.eye(nK * nq)]).tocsc()
     prog.AddLinearEqualityConstraint(lifted, -l.reshape(-1), np.concatenate([xs, zs]))
     prog.AddQuadraticCost(2 * np.eye(nK * nq), np.zeros(nK * nq), const, zs, is_convex=True)

@@ -36,7 +36,7 @@ from models.risk.engine import (
     fall_certain,
     get_engine,
 )
-from models.risk.noise import draw_normals, perturb_from_normals
+from models.risk.noise import NoiseRule, draw_normals
 
 #: The engine used when none is named: the one that passes the faithfulness suite
 #: with the better throughput (docs/risk.md).
@@ -143,9 +143,10 @@ def _simulate_runs(scene: Scene, sigma: float, z: np.ndarray, runs: Sequence[int
     """Perturb and simulate runs `runs` of the scene (z: their normals, len(runs) x n x 3)."""
     eng = get_engine(engine)
     threshold = fall_threshold * _smallest_width(scene)
+    p_WB = NoiseRule(scene).positions(sigma, np.asarray(z, float).reshape(len(runs), len(scene), 3))
     rows = []
-    for r, z_r in zip(runs, z):
-        rollout = eng.simulate(perturb_from_normals(scene, sigma, z_r), fall_threshold=fall_threshold)
+    for r, p_r in zip(runs, p_WB):
+        rollout = eng.simulate(scene, fall_threshold=fall_threshold, p_WB=p_r)
         rows.append({"sigma": sigma, "run": int(r), **_row(rollout, threshold, fall_rule), "engine": engine,
                      "fall_rule": fall_rule, "fall_threshold": fall_threshold})
     return rows

@@ -170,7 +170,7 @@ class DrakeEngine(Engine):
 
         return {"engine": "drake", "version": version("drake"), "contact_model": "hydroelastic", **asdict(self.config)}
 
-    def _load(self, scene: Scene) -> None:
+    def _load(self, scene: Scene, p_WB: np.ndarray) -> None:
         key = layout_key(scene)
         if key not in self._layouts:
             self._layouts[key] = _Layout(scene, self.config)
@@ -181,7 +181,7 @@ class DrakeEngine(Engine):
         for k in range(len(scene)):
             s = L.q_start[k]
             q[s : s + 4] = quat[k]
-            q[s + 4 : s + 7] = scene.blocks[k].p_WB
+            q[s + 4 : s + 7] = p_WB[k]
         L.context.SetTime(0.0)
         L.plant.SetPositions(L.plant_context, q)
         L.plant.SetVelocities(L.plant_context, np.zeros(L.nv))

@@ -7,7 +7,7 @@ import numpy as np
 
 from lgp.geometry import quaternion_from_yaw
 from lgp.scene import Scene
-from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds, layout_key
+from models.risk.engine import DENSITY, FRICTION, Engine, layout_key, row_norms
 
 TIMESTEP = 0.002
 SOLREF = "0.004 1"
@@ -78,6 +78,7 @@ class MujocoEngine(Engine):
         quiet_log(mujoco)
         self.sleep = sleep
         self._models: dict[str, tuple] = {}
+        self._scene = None
 
     def settings(self) -> dict:
         return {
@@ -86,32 +87,44 @@ class MujocoEngine(Engine):
             "solref": SOLREF, "solimp": SOLIMP, "sleep": self.sleep,
         }
 
-    def _load(self, scene: Scene) -> None:
+    def _load(self, scene: Scene, p_WB: np.ndarray) -> None:
         mj = self._mj
-        key = layout_key(scene)
+        if scene is not self._scene:  # the runs of a chunk share one (immutable) scene
+            self._scene, self._key = scene, layout_key(scene)
+            self._quat = quaternion_from_yaw([b.yaw for b in scene.blocks])
+        key = self._key
         if key not in self._models:
             model = mj.MjModel.from_xml_string(mjcf(scene, self.sleep))
-            self._models[key] = (model, mj.MjData(model))
-        self.model, self.data = self._models[key]
-        m, d = self.model, self.data
+            data = mj.MjData(model)
+            n = len(scene)
+            # views into the state, made once per layout (the arrays live as long as data)
+            diagonals = row_norms(np.array([b.size for b in scene.blocks]).reshape(n, 3))
+            self._models[key] = (model, data, data.qpos.reshape(n, 7), data.qvel.reshape(n, 6), diagonals)
+        m, d, self._qpos, self._qvel, self._diagonals = self._models[key]
+        self.model, self.data = m, d
         mj.mj_resetData(m, d)
-        n = len(scene)
-        qpos = d.qpos.reshape(n, 7)
-        qpos[:, :3] = scene.positions
-        qpos[:, 3:] = quaternion_from_yaw([b.yaw for b in scene.blocks])
+        self._qpos[:, :3] = p_WB
+        self._qpos[:, 3:] = self._quat
         mj.mj_forward(m, d)
-        self._sizes = np.array([b.size for b in scene.blocks])
-        self._n = n
 
     def _advance(self, t: float) -> None:
-        m, d, step = self.model, self.data, self._mj.mj_step
-        while d.time < t - 0.5 * m.opt.timestep:
-            step(m, d)
+        # as many steps as a one-step-at-a-time loop `while d.time < t - dt / 2` takes
+        # (MuJoCo advances time by `time += timestep`, repeated here on the same
+        # doubles), in one call, so the loop runs in C
+        m, d = self.model, self.data
+        dt = m.opt.timestep
+        stop = t - 0.5 * dt
+        time, steps = d.time, 0
+        while time < stop:
+            time += dt
+            steps += 1
+        if steps:
+            self._mj.mj_step(m, d, steps)
 
     def _state(self):
-        qpos = self.data.qpos.reshape(self._n, 7)
-        qvel = self.data.qvel.reshape(self._n, 6)
-        return qpos[:, :3].copy(), block_speeds(qvel[:, :3], qvel[:, 3:], self._sizes)
+        # engine.block_speeds with the blocks' diagonals computed once per layout
+        qvel = self._qvel
+        return self._qpos[:, :3].copy(), row_norms(qvel[:, :3]) + row_norms(qvel[:, 3:]) * self._diagonals / 2
 
     def _asleep(self) -> bool:
         return self.sleep and int(self.data.ntree_awake) == 0

@@ -69,68 +69,116 @@ def perturb_from_normals(scene: Scene, sigma: float, z: np.ndarray) -> Scene:
 
 
 def perturbed_positions(scene: Scene, sigma: float, z: np.ndarray) -> np.ndarray:
-    """Block centres p_WB (n, 3) of the noisy scene (the work of `perturb`)."""
-    z = np.asarray(z, float)
-    n = len(scene)
-    if z.shape != (n, 3):
-        raise ValueError(f"{scene.label}: need standard normals of shape ({n}, 3), got {z.shape}")
-    if not sigma >= 0:
-        raise ValueError(f"{scene.label}: sigma must be >= 0 (a fraction of the block size), got {sigma}")
-    blocks = scene.blocks
-    p0 = scene.positions
-    if n == 0 or sigma == 0:
-        return p0.copy()
-    # noise along each block's own axes, scaled by its size along that axis
-    delta_B = sigma * z * np.array([b.size for b in blocks])
-    c, s = np.cos([b.yaw for b in blocks]), np.sin([b.yaw for b in blocks])
-    p = p0.copy()
-    p[:, 0] += c * delta_B[:, 0] - s * delta_B[:, 1]
-    p[:, 1] += s * delta_B[:, 0] + c * delta_B[:, 1]
-    p[:, 2] += delta_B[:, 2]
+    """Block centres p_WB (n, 3) of the noisy scene (the work of `perturb`); with
+    normals z of shape (R, n, 3), the centres (R, n, 3) of R noisy scenes."""
+    return NoiseRule(scene).positions(sigma, z)
 
-    solids = list(blocks) + list(scene.fixed)
-    m = len(solids)
-    bottom0 = np.array([o.bottom for o in solids])
-    top0 = np.array([o.top for o in solids])
-    # outlines seen from above: centre, half extents, unit edge directions
-    c_xy = np.vstack([p[:, :2], [f.p_WO[:2] for f in scene.fixed]]) if scene.fixed else p[:, :2].copy()
-    half = np.array([o.size[:2] / 2 for o in solids])
-    yaw = np.array([b.yaw for b in blocks] + [0.0] * len(scene.fixed))
-    u = np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
-    v = np.stack([-u[:, 1], u[:, 0]], axis=1)
-    outlines = (half, u, v)
-    c0_xy = np.vstack([p0[:, :2], c_xy[n:]])
 
-    # -- 1. side pairs: horizontal separation ------------------------------------------
-    ii, jj = np.triu_indices(m, 1)
-    keep = ii < n
-    ii, jj = ii[keep], jj[keep]
-    is_side = np.minimum(top0[ii], top0[jj]) - np.maximum(bottom0[ii], bottom0[jj]) > CONTACT_TOLERANCE
-    si, sj = ii[is_side], jj[is_side]
-    if len(si):
-        # each pair keeps the side it had in B: j stays beyond i along the axis that
-        # separated them in B (orientations are not perturbed, so the axis is fixed)
-        depth0, normal = _depth(c0_xy, outlines, si, sj)
-        allowed = np.maximum(0.0, depth0)  # overlap already in B
-        reach = _reach(outlines, si, sj, normal) - allowed  # least (c_j - c_i) . normal
-        _separate_side_pairs(scene.label, c_xy, si, sj, normal, reach, n)
-        p[:, :2] = c_xy[:n]
+class NoiseRule:
+    """The noise rule on one Finish state B, with every part that depends only on
+    B (outlines, side pairs with their separating axes, the stacked pairs of the
+    lift) computed once, and `positions` vectorised over runs: what a chunk of
+    noisy runs of one scene calls instead of `perturbed_positions` per run. Same
+    numbers to the bit as one `perturbed_positions` call per run
+    (tests/test_risk_noise.py keeps the per-run rule as the reference)."""
 
-    # -- 2. stacked pairs: vertical separation, bottom-up ------------------------------
-    top = top0.copy()
-    for i in sorted(range(n), key=lambda k: (bottom0[k], k)):
-        h = blocks[i].size[2] / 2
-        z_rest = min(0.0, bottom0[i]) + h  # the table
-        beneath = np.flatnonzero(top0 <= bottom0[i] + CONTACT_TOLERANCE)  # beneath i in B
-        if len(beneath):
-            depth = _depth(c_xy, outlines, np.full(len(beneath), i), beneath)[0]
-            under = beneath[depth > _EPS]
-            if len(under):
-                allowed = np.maximum(0.0, top0[under] - bottom0[i])  # overlap already in B
-                z_rest = max(z_rest, float(np.max(top[under] - allowed)) + h)
-        p[i, 2] = max(p[i, 2], z_rest)
-        top[i] = p[i, 2] + h
-    return p
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        blocks = scene.blocks
+        n = self.n = len(scene)
+        self.p0 = scene.positions
+        self.size = np.array([b.size for b in blocks], dtype=float).reshape(n, 3)
+        self.cos = np.cos([b.yaw for b in blocks])
+        self.sin = np.sin([b.yaw for b in blocks])
+        solids = list(blocks) + list(scene.fixed)
+        bottom0 = np.array([o.bottom for o in solids])
+        top0 = self.top0 = np.array([o.top for o in solids])
+        # outlines seen from above: half extents, unit edge directions; fixed boxes' centres
+        self.half = np.array([o.size[:2] / 2 for o in solids]).reshape(-1, 2)
+        yaw = np.array([b.yaw for b in blocks] + [0.0] * len(scene.fixed))
+        self.u = np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
+        v = np.stack([-self.u[:, 1], self.u[:, 0]], axis=1)
+        self.fixed_xy = np.array([f.p_WO[:2] for f in scene.fixed], dtype=float).reshape(-1, 2)
+        m = len(solids)
+        c0_xy = np.vstack([self.p0[:, :2], self.fixed_xy])
+        outlines = (self.half, self.u, v)
+
+        # 1. side pairs: each keeps the side it had in B, along the axis that separated
+        # them in B (orientations are not perturbed, so the axis is fixed)
+        ii, jj = np.triu_indices(m, 1)
+        keep = ii < n
+        ii, jj = ii[keep], jj[keep]
+        is_side = np.minimum(top0[ii], top0[jj]) - np.maximum(bottom0[ii], bottom0[jj]) > CONTACT_TOLERANCE
+        si, sj = ii[is_side], jj[is_side]
+        self.side = None
+        if len(si):
+            depth0, normal = _depth(c0_xy, outlines, si, sj)
+            allowed = np.maximum(0.0, depth0)  # overlap already in B
+            reach = _reach(outlines, si, sj, normal) - allowed  # least (c_j - c_i) . normal
+            self.side = list(zip(si.tolist(), sj.tolist(), normal[:, 0].tolist(), normal[:, 1].tolist(), reach.tolist()))
+
+        # 2. stacked pairs: the solids beneath each block in B, bottom-up in B's height order
+        self.order = sorted(range(n), key=lambda k: (bottom0[k], k))
+        self.h = self.size[:, 2] / 2
+        self.z_table = np.minimum(0.0, bottom0[:n]) + self.h  # rest on the table
+        below_i, below_j, self.beneath = [], [], []
+        for i in self.order:
+            beneath = np.flatnonzero(top0 <= bottom0[i] + CONTACT_TOLERANCE)  # beneath i in B
+            allowed = np.maximum(0.0, top0[beneath] - bottom0[i])  # overlap already in B
+            self.beneath.append((i, slice(len(below_i), len(below_i) + len(beneath)), beneath, allowed))
+            below_i += [i] * len(beneath)
+            below_j += beneath.tolist()
+        self.below_i, self.below_j = np.array(below_i, dtype=int), np.array(below_j, dtype=int)
+
+    def positions(self, sigma: float, z: np.ndarray) -> np.ndarray:
+        """Block centres p_WB of the noisy scenes: (n, 3) for normals z (n, 3), or
+        (R, n, 3) for z (R, n, 3)."""
+        scene, n = self.scene, self.n
+        z = np.asarray(z, float)
+        if z.shape[-2:] != (n, 3) or z.ndim not in (2, 3):
+            raise ValueError(f"{scene.label}: need standard normals of shape ({n}, 3), got {z.shape}")
+        if not sigma >= 0:
+            raise ValueError(f"{scene.label}: sigma must be >= 0 (a fraction of the block size), got {sigma}")
+        one = z.ndim == 2
+        z = z[None] if one else z
+        runs = len(z)
+        p = np.broadcast_to(self.p0, z.shape).copy()
+        if n == 0 or sigma == 0 or runs == 0:
+            return p[0] if one else p
+        # noise along each block's own axes, scaled by its size along that axis
+        delta_B = sigma * z * self.size
+        c, s = self.cos, self.sin
+        p[:, :, 0] += c * delta_B[:, :, 0] - s * delta_B[:, :, 1]
+        p[:, :, 1] += s * delta_B[:, :, 0] + c * delta_B[:, :, 1]
+        p[:, :, 2] += delta_B[:, :, 2]
+
+        # -- 1. side pairs: horizontal separation, run by run ------------------------------
+        if self.side is not None:
+            fixed = self.fixed_xy.tolist()
+            for r in range(runs):
+                c_xy = p[r, :, :2].tolist() + fixed
+                _separate_side_pairs(scene.label, c_xy, self.side, n)
+                p[r, :, :2] = c_xy[:n]
+
+        # -- 2. stacked pairs: vertical separation, bottom-up, all runs at once -----------
+        L = len(self.below_i)
+        if L:
+            c_xy = np.concatenate([p[:, :, :2], np.broadcast_to(self.fixed_xy, (runs, *self.fixed_xy.shape))], axis=1)
+            a, b = self.below_i, self.below_j
+            depth = rectangle_overlap(
+                c_xy[:, a].reshape(-1, 2), np.tile(self.half[a], (runs, 1)), np.tile(self.u[a], (runs, 1)),
+                c_xy[:, b].reshape(-1, 2), np.tile(self.half[b], (runs, 1)), np.tile(self.u[b], (runs, 1)),
+            )[0].reshape(runs, L)
+            on = depth > _EPS  # the outlines of i and the solid beneath it overlap
+        top = np.broadcast_to(self.top0, (runs, len(self.top0))).copy()
+        for i, pairs, beneath, allowed in self.beneath:
+            z_rest = np.full(runs, self.z_table[i])
+            if len(beneath):
+                rests = np.where(on[:, pairs], top[:, beneath] - allowed, -np.inf)
+                z_rest = np.maximum(z_rest, rests.max(axis=1) + self.h[i])
+            p[:, i, 2] = np.maximum(p[:, i, 2], z_rest)
+            top[:, i] = p[:, i, 2] + self.h[i]
+        return p[0] if one else p
 
 
 def _depth(c_xy, outlines, i, j):
@@ -150,25 +198,39 @@ def _reach(outlines, i, j, normal):
     return r(i) + r(j)
 
 
-def _separate_side_pairs(label, c_xy, si, sj, normal, reach, n) -> None:
+def _separate_side_pairs(label, c_xy, pairs, n) -> None:
     """Cyclic projections (Gauss-Seidel, as in position-based dynamics) onto the
     half-planes (c_j - c_i) . normal >= reach: an offending pair is pushed apart
     along its normal, half each, a fixed box not moving. The constraints are linear
-    and B satisfies all of them, so the sweeps converge."""
+    and B satisfies all of them, so the sweeps converge.
+
+    c_xy: outline centres as a list of [x, y] lists, moved in place; pairs:
+    (i, j, normal x, normal y, reach) tuples. Plain floats, not numpy: a scene
+    has tens of pairs, and each push must see the previous ones (measured: numpy
+    over all runs of a chunk in lockstep is no faster at 100 runs a chunk, and
+    slower at 10 or 20, because a line of 10 takes ~400 sweeps)."""
     for _ in range(_MAX_SWEEPS):
-        slack = np.einsum("pk,pk->p", c_xy[sj] - c_xy[si], normal) - reach
-        bad = np.flatnonzero(slack < -_EPS)
-        if not len(bad):
+        bad = []
+        for pair in pairs:
+            i, j, n0, n1, rk = pair
+            ci, cj = c_xy[i], c_xy[j]
+            if ((cj[0] - ci[0]) * n0 + (cj[1] - ci[1]) * n1) - rk < -_EPS:
+                bad.append(pair)
+        if not bad:
             return
-        for k in bad:  # sequential, so each push sees the previous ones
-            i, j, nk = si[k], sj[k], normal[k]
-            excess = reach[k] - float(np.dot(c_xy[j] - c_xy[i], nk))
+        for i, j, n0, n1, rk in bad:  # sequential, so each push sees the previous ones
+            ci, cj = c_xy[i], c_xy[j]
+            excess = rk - ((cj[0] - ci[0]) * n0 + (cj[1] - ci[1]) * n1)
             if excess <= _EPS:
                 continue
-            push = nk * (excess + _EPS)
+            step = excess + _EPS
+            px, py = n0 * step, n1 * step
             if j < n:
-                c_xy[i] -= push / 2
-                c_xy[j] += push / 2
+                ci[0] -= px / 2
+                ci[1] -= py / 2
+                cj[0] += px / 2
+                cj[1] += py / 2
             else:  # a fixed box does not move
-                c_xy[i] -= push
+                ci[0] -= px
+                ci[1] -= py
     raise RuntimeError(f"{label}: could not separate overlapping neighbours after {_MAX_SWEEPS} sweeps")

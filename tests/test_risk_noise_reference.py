@@ -1,0 +1,133 @@
+"""The vectorised noise rule (models.risk.noise.NoiseRule, all runs of a chunk at
+once) gives the same block centres, to the bit, as the per-run rule it replaced,
+kept here verbatim as the reference (git: models/risk/noise.py before issue 17)."""
+import numpy as np
+import pytest
+
+import stimuli
+from lgp.geometry import rectangle_overlap
+from lgp.paper import SIGMA_GRID
+from lgp.scene import CONTACT_TOLERANCE
+from models.risk.noise import NoiseRule, draw_normals, perturbed_positions
+from tests.test_risk_noise import SCENES
+
+_EPS = 1e-12
+_MAX_SWEEPS = 500
+
+
+def reference_positions(scene, sigma, z):
+    """The per-run noise rule as it was (numpy per pair and per block)."""
+    z = np.asarray(z, float)
+    n = len(scene)
+    blocks = scene.blocks
+    p0 = scene.positions
+    if n == 0 or sigma == 0:
+        return p0.copy()
+    delta_B = sigma * z * np.array([b.size for b in blocks])
+    c, s = np.cos([b.yaw for b in blocks]), np.sin([b.yaw for b in blocks])
+    p = p0.copy()
+    p[:, 0] += c * delta_B[:, 0] - s * delta_B[:, 1]
+    p[:, 1] += s * delta_B[:, 0] + c * delta_B[:, 1]
+    p[:, 2] += delta_B[:, 2]
+    solids = list(blocks) + list(scene.fixed)
+    m = len(solids)
+    bottom0 = np.array([o.bottom for o in solids])
+    top0 = np.array([o.top for o in solids])
+    c_xy = np.vstack([p[:, :2], [f.p_WO[:2] for f in scene.fixed]]) if scene.fixed else p[:, :2].copy()
+    half = np.array([o.size[:2] / 2 for o in solids])
+    yaw = np.array([b.yaw for b in blocks] + [0.0] * len(scene.fixed))
+    u = np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
+    v = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    c0_xy = np.vstack([p0[:, :2], c_xy[n:]])
+
+    def depth_of(cxy, i, j):
+        return rectangle_overlap(cxy[i], half[i], u[i], cxy[j], half[j], u[j])
+
+    def r(k, normal):
+        return half[k, 0] * np.abs(np.einsum("pk,pk->p", u[k], normal)) + half[k, 1] * np.abs(
+            np.einsum("pk,pk->p", v[k], normal))
+
+    ii, jj = np.triu_indices(m, 1)
+    keep = ii < n
+    ii, jj = ii[keep], jj[keep]
+    is_side = np.minimum(top0[ii], top0[jj]) - np.maximum(bottom0[ii], bottom0[jj]) > CONTACT_TOLERANCE
+    si, sj = ii[is_side], jj[is_side]
+    if len(si):
+        depth0, normal = depth_of(c0_xy, si, sj)
+        reach = r(si, normal) + r(sj, normal) - np.maximum(0.0, depth0)
+        for _ in range(_MAX_SWEEPS):
+            slack = np.einsum("pk,pk->p", c_xy[sj] - c_xy[si], normal) - reach
+            bad = np.flatnonzero(slack < -_EPS)
+            if not len(bad):
+                break
+            for k in bad:
+                i, j, nk = si[k], sj[k], normal[k]
+                excess = reach[k] - float(np.dot(c_xy[j] - c_xy[i], nk))
+                if excess <= _EPS:
+                    continue
+                push = nk * (excess + _EPS)
+                if j < n:
+                    c_xy[i] -= push / 2
+                    c_xy[j] += push / 2
+                else:
+                    c_xy[i] -= push
+        else:
+            raise RuntimeError("no convergence")
+        p[:, :2] = c_xy[:n]
+    top = top0.copy()
+    for i in sorted(range(n), key=lambda k: (bottom0[k], k)):
+        h = blocks[i].size[2] / 2
+        z_rest = min(0.0, bottom0[i]) + h
+        beneath = np.flatnonzero(top0 <= bottom0[i] + CONTACT_TOLERANCE)
+        if len(beneath):
+            depth = depth_of(c_xy, np.full(len(beneath), i), beneath)[0]
+            under = beneath[depth > _EPS]
+            if len(under):
+                allowed = np.maximum(0.0, top0[under] - bottom0[i])
+                z_rest = max(z_rest, float(np.max(top[under] - allowed)) + h)
+        p[i, 2] = max(p[i, 2], z_rest)
+        top[i] = p[i, 2] + h
+    return p
+
+
+TRIALS = {t.id: t.target for t in stimuli.load_paper()}
+
+
+def assert_same_as_reference(trial, seeds, runs, sigmas):
+    scene = TRIALS[trial]
+    rule = NoiseRule(scene)
+    for seed in seeds:
+        z = draw_normals(runs, len(scene), seed)
+        for sigma in sigmas:
+            batch = rule.positions(sigma, z)
+            for r in range(len(z)):
+                ref = reference_positions(scene, sigma, z[r])
+                assert np.array_equal(batch[r], ref), f"{trial} sigma {sigma} seed {seed} run {r}"
+            assert np.array_equal(perturbed_positions(scene, sigma, z[-1]), batch[-1])
+
+
+@pytest.mark.parametrize("trial", list(TRIALS))
+def test_vectorised_noise_rule_equals_the_per_run_rule_on_every_trial(trial):
+    """All 24 trials, 8 runs at four noise levels: every block centre equal to the
+    bit, in one batched call and run by run."""
+    assert_same_as_reference(trial, [3], 8, [0.05, 0.065, 0.1, 0.4])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("trial", list(TRIALS))
+def test_vectorised_noise_rule_equals_the_per_run_rule_over_the_paper_grid(trial):
+    """All 24 trials, the paper's sigma grid plus heavier noise, 40 runs x 3 seeds."""
+    assert_same_as_reference(trial, [0, 1, 2], 40, [*SIGMA_GRID, 0.2, 0.4])
+
+
+@pytest.mark.parametrize("scene", SCENES, ids=lambda s: s.label)
+def test_vectorised_noise_rule_equals_the_per_run_rule_on_yawed_boxed_and_fixed_scenes(scene):
+    """Textbook structures, a bucket of fixed boxes and yawed blocks, heavy-tailed
+    normals (the pushes and lifts work hardest)."""
+    rule = NoiseRule(scene)
+    for seed in range(3):
+        z = 2 * draw_normals(15, len(scene), seed)
+        for sigma in (0.0, 0.05, 0.1, 0.3):
+            batch = rule.positions(sigma, z)
+            for r in range(len(z)):
+                assert np.array_equal(batch[r], reference_positions(scene, sigma, z[r])), f"{scene.label} {sigma} {seed} {r}"
