@@ -384,6 +384,34 @@ def support_graph(scene: Scene, tol: float = CONTACT_TOLERANCE) -> dict[str, lis
     return graph
 
 
+def support_graph_after_move(scene: Scene, previous: dict[str, list[str]], moved: str,
+                             tol: float = CONTACT_TOLERANCE) -> dict[str, list[str]]:
+    """support_graph(scene, tol), given `previous`, the graph (same tol) of a scene
+    that differs from `scene` only in the pose of block `moved`.
+
+    Whether one solid rests on another depends on that pair alone (the broad phase
+    and `rests_on` are pairwise), so only pairs with `moved` are decided again; the
+    lists keep support_graph's order (blocks in scene order, fixed names sorted, table).
+    """
+    blocks = list(scene.blocks)
+    below = _resting_candidates(blocks, list(scene.fixed), tol)
+    block_names = {b.name for b in blocks}
+    graph: dict[str, list[str]] = {}
+    for i, b in enumerate(blocks):
+        near = below[i]
+        if b.name == moved:
+            under = [o.name for o in near if isinstance(o, Block) and rests_on(b, o, tol)]
+            under += sorted({o.name for o in near if not isinstance(o, Block) and rests_on(b, o, tol)})
+            if abs(b.bottom) <= tol:
+                under.append(TABLE)
+        else:
+            before = set(previous[b.name])
+            under = [o.name for o in near if isinstance(o, Block) and (rests_on(b, o, tol) if o.name == moved else o.name in before)]
+            under += [s for s in previous[b.name] if s not in block_names]  # fixed (sorted) and table: unchanged
+        graph[b.name] = under
+    return graph
+
+
 def supported_by(graph: dict[str, list[str]]) -> dict[str, list[str]]:
     """Invert a support graph: {solid: [blocks resting on it]}."""
     above: dict[str, list[str]] = {name: [] for name in graph}

@@ -14,7 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lgp.scene import OVERLAP_TOLERANCE, TABLE, Block, Scene, penetration, support_graph, supported_by
+from lgp.geometry import rectangle_overlap
+from lgp.scene import (OVERLAP_TOLERANCE, TABLE, Block, Scene, penetration, support_graph, support_graph_after_move,
+                       supported_by)
 
 
 class IllegalActionError(ValueError):
@@ -128,15 +130,44 @@ def _near(block, solids) -> list:
     return [solids[i] for i in np.flatnonzero(near)]
 
 
+#: Pairs whose array depth lies this far (m) below OVERLAP_TOLERANCE are ruled out
+#: without the scalar test: far above the ~1e-17 m by which the two can round apart.
+_SLACK = 1e-7
+
+
+def _enters_any(block: Block, solids: list) -> bool:
+    """Whether `block` interpenetrates any of `solids` by more than OVERLAP_TOLERANCE
+    (lgp.scene.penetration). The depths of all pairs at once only rule out the pairs
+    well below the tolerance; the scalar test decides the rest."""
+    if not solids:
+        return False
+    c, half, u = (np.array(x) for x in zip(*(s.outline() for s in solids)))
+    mine = block.outline()
+    horizontal, _ = rectangle_overlap(*(np.broadcast_to(x, (len(solids), 2)) for x in mine), c, half, u)
+    vertical = np.minimum(block.top, [s.top for s in solids]) - np.maximum(block.bottom, [s.bottom for s in solids])
+    maybe = np.flatnonzero(np.minimum(vertical, horizontal) > OVERLAP_TOLERANCE - _SLACK)
+    return any(penetration(block, solids[i]) > OVERLAP_TOLERANCE for i in maybe)
+
+
 def _support_memo():
     """support_graph(scene) computed once per Scene object (symbolic_plan asks for
-    each state's graph up to three times: clear blocks, grasp, place)."""
+    each state's graph up to three times: clear blocks, grasp, place), and for a
+    scene one block away from the last one asked, updated from that one's graph."""
     graphs: dict[int, tuple[Scene, dict]] = {}
+    last: list = []
 
     def support(scene: Scene) -> dict[str, list[str]]:
         hit = graphs.get(id(scene))
         if hit is None or hit[0] is not scene:
-            hit = graphs[id(scene)] = (scene, support_graph(scene))
+            graph = None
+            if last:
+                before, previous = last[0]
+                changed = [a.name for a, b in zip(before.blocks, scene.blocks) if a is not b]
+                if (len(changed) == 1 and before.fixed is scene.fixed
+                        and [a.name for a in before.blocks] == [b.name for b in scene.blocks]):
+                    graph = support_graph_after_move(scene, previous, changed[0])
+            hit = graphs[id(scene)] = (scene, graph if graph is not None else support_graph(scene))
+        last[:] = [hit]
         return hit[1]
 
     return support
@@ -232,8 +263,7 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
                 continue
             goal_block = current.block(a).moved_to(goal.p_WB, goal.yaw)
             near = np.linalg.norm(p_W - goal_block.p_WB, axis=1) <= radius + np.linalg.norm(goal_block.size) / 2 + OVERLAP_TOLERANCE
-            if any(penetration(goal_block, current.blocks[i]) > OVERLAP_TOLERANCE
-                   for i in np.flatnonzero(near) if current.blocks[i].name != a):
+            if _enters_any(goal_block, [current.blocks[i] for i in np.flatnonzero(near) if current.blocks[i].name != a]):
                 continue
             ready.append((goal.p_WB[2], order, a))
         legal = [r for r in ready if r[2] in clear]

@@ -289,6 +289,37 @@ def test_lazy_constraint_is_imposed_only_where_violated_and_matches_full():
     assert reduced.cost == pytest.approx(full.cost, rel=1e-5)
 
 
+def test_points_measured_in_a_fixed_frame_bound_the_leading_point():
+    # Two points 0.1 m either side of the slider, measured in a frame A turned half a
+    # turn about z at x = 0.5 (x_A = 0.5 - x_W): x_A >= -0.2 for both is x <= 0.6 for
+    # the leading point (x <= 0.8 for the other): the same program as a world ceiling
+    # of the slider at 0.6, and the same violation.
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    from lgp.komo.constraints import violation
+
+    X_WA = RigidTransform(RotationMatrix.MakeZRotation(np.pi), [0.5, 0.0, 0.0])
+    programs = []
+    for ceiling in ("points in A", "world"):
+        komo = cubic_komo(40)
+        komo.objectives.pop(0)
+        komo.add_objective([1.0], "position", ("point",), "eq", target=[0.6, 0, 0])
+        if ceiling == "world":
+            komo.add_objective([], "position", ("point",), "ineq", scale=(1, 0, 0), target=[0.6, 0, 0])
+        else:
+            komo.add_objective([], "position", ("point",), "ineq", scale=(-1, 0, 0), target=[-0.2, 0, 0],
+                               points=[[0.1, 0, 0], [-0.1, 0, 0]], X_WA=X_WA)
+        o = komo.objectives[-1]
+        assert violation(komo, o, 5, np.array([0.7])) == pytest.approx(0.1)
+        assert violation(komo, o, 5, np.array([0.55])) == 0.0
+        programs.append(komo.solve())
+    assert all(r.success for r in programs)
+    assert programs[0].q.max() <= 0.6 + 1e-9
+    assert programs[0].cost == pytest.approx(programs[1].cost, rel=1e-6)
+    with pytest.raises(KomoError, match="points"):
+        cubic_komo(10).add_objective([1.0], "qItself", type="eq", target=[0.0], points=[[0, 0, 0]])
+
+
 def test_bad_declarations_are_refused_with_the_reason():
     komo = Komo(free_point(), phases=2, slices_per_phase=10, q_home=[0.0], objects={})
     with pytest.raises(KomoError, match="not a slice"):

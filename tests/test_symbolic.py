@@ -140,3 +140,25 @@ def test_bounding_sphere_prefilter_keeps_every_overlap_the_exact_test_finds():
         assert [s.name for s in near] == [s.name for s in solids if any(s is t for t in near)]  # order kept
         flagged += len(exact)
     assert flagged > 100
+
+
+def test_array_overlap_verdict_is_the_scalar_one():
+    # The ready-move check rules pairs out with array depths; brute force with the
+    # scalar penetration on random, touching and slightly overlapping blocks.
+    from lgp.scene import OVERLAP_TOLERANCE, penetration
+    from lgp.symbolic import _enters_any
+
+    rng = np.random.default_rng(8)
+    verdicts = set()
+    for _ in range(300):
+        block = Block("m", [0.3, 0.0, d / 2], rng.choice([0.0, rng.uniform(-3, 3)]))
+        others = []
+        for i in range(rng.integers(1, 5)):
+            gap = rng.choice([d, d - OVERLAP_TOLERANCE, d - 2 * OVERLAP_TOLERANCE, d + 1e-9, rng.uniform(0, 2 * d)])
+            angle = rng.choice([0.0, np.pi / 2, rng.uniform(-np.pi, np.pi)])
+            others.append(Block(f"b{i}", [0.3 + gap * np.cos(angle), gap * np.sin(angle), d / 2 + rng.choice([0.0, d / 2, d])],
+                                rng.choice([0.0, rng.uniform(-3, 3)])))
+        expected = any(penetration(block, o) > OVERLAP_TOLERANCE for o in others)
+        assert _enters_any(block, others) == expected
+        verdicts.add(expected)
+    assert verdicts == {True, False}

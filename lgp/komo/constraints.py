@@ -31,7 +31,6 @@ def drake_constraints(komo: Declaration, o: Objective, s: int) -> list[PositionC
         frame, X_GB = komo.frame(name), RigidTransform()
     plant, context, world = komo.plant, komo.context, komo.plant.world_frame()
     if o.feature == "position":
-        p_GQ = X_GB.translation()
         scale = np.broadcast_to(np.asarray(o.scale, float), (3,))
         free = scale == 0  # rai-style: a zero scale drops the axis, a negative one flips an ineq
         if o.type == "eq":
@@ -39,7 +38,12 @@ def drake_constraints(komo: Declaration, o: Objective, s: int) -> list[PositionC
         else:
             lo = np.where(scale < 0, o.target, -np.inf)
             hi = np.where(scale > 0, o.target, np.inf)
-        return [PositionConstraint(plant, world, lo, hi, frame, p_GQ, context)]
+        if o.points is None and o.X_WA is None:
+            return [PositionConstraint(plant, world, lo, hi, frame, X_GB.translation(), context)]
+        # Points fixed on the frame (p_FQ), measured in a fixed frame A: p_AQ = X_WA^-1 X_WG X_GF p_FQ.
+        points = o.points if o.points is not None else ((0.0, 0.0, 0.0),)
+        X_WA = o.X_WA if o.X_WA is not None else RigidTransform()
+        return [PositionConstraint(plant, world, X_WA, lo, hi, frame, X_GB.multiply(np.asarray(p, float)), context) for p in points]
     # pose: X_WG = X_target X_GB^-1, written as three point positions (6 equalities):
     X_WT = o.target.multiply(X_GB.inverse())
     inf = np.inf

@@ -45,6 +45,8 @@ class Objective:
     order: int
     time: tuple[float, ...]
     lazy: bool = False
+    points: tuple[tuple[float, float, float], ...] | None = None  # "position": points Q fixed on the frame (p_FQ), not its origin
+    X_WA: RigidTransform | None = None  # "position": measured and expressed in this fixed frame A, not the world
 
 
 @dataclass(frozen=True)
@@ -105,7 +107,7 @@ class Declaration:
         raise KomoError(f"times must be [], [t] or [t_start, t_end], got {times}")
 
     def add_objective(self, times, feature: str, frames=(), type: str = "sos", scale=1.0, target=None, order: int = 0,
-                      lazy: bool = False):
+                      lazy: bool = False, points=None, X_WA: RigidTransform | None = None):
         """Declare `feature` of `frames` at `times` ([t], [t0, t1] or [] for all).
 
         Features: "qItself" (the joint vector, or its order-th time derivative;
@@ -118,6 +120,10 @@ class Declaration:
         reduced formulation once the solution violates it (its slice is then promoted
         to a keyframe and the program re-solved), which keeps it exact but cheap when
         it is mostly inactive; the full formulation imposes it everywhere from the start.
+        "position" may instead constrain `points` (m, 3) fixed on the frame (p_FQ,
+        e.g. a held block's corners; one constraint each, the same bounds), and be
+        measured and expressed in a fixed frame `X_WA` (e.g. an obstacle's) instead of
+        the world: p_AQ = X_WA^-1 p_WQ.
         Time derivatives are backward differences, as in rai.
         """
         if feature not in FEATURES:
@@ -148,7 +154,16 @@ class Declaration:
         scale = float(scale) if np.ndim(scale) == 0 else tuple(float(v) for v in np.reshape(scale, 3))
         if lazy and (feature == "qItself" or type == "sos"):
             raise KomoError("only nonlinear eq/ineq objectives can be lazy")
-        self.objectives.append(Objective(self._slices(times), feature, frames, type, scale, target, int(order), times, bool(lazy)))
+        if (points is not None or X_WA is not None) and feature != "position":
+            raise KomoError(f"points and X_WA apply to position objectives, not {feature}")
+        if points is not None:
+            points = np.asarray(points, float)
+            if points.ndim != 2 or points.shape[1] != 3 or not len(points) or not np.all(np.isfinite(points)):
+                raise KomoError(f"points must be an (m, 3) array of finite positions, got shape {points.shape}")
+            points = tuple(tuple(float(v) for v in row) for row in points)
+        X_WA = None if X_WA is None else RigidTransform(X_WA)
+        self.objectives.append(Objective(self._slices(times), feature, frames, type, scale, target, int(order), times, bool(lazy),
+                                         points, X_WA))
         return self
 
     def add_mode_switch(self, time: float, mode: str, gripper: str, obj: str, X_GB: RigidTransform | None = None, X_WB=None):
