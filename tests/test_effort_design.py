@@ -247,3 +247,34 @@ def test_show_replays_the_effort_of_a_run_with_another_design(capsys):
     printed = capsys.readouterr().out
     expected = kinetic_energy(plan_of_sample(trial, 0, 0, approach_height=0.02, slices_per_phase=40))
     assert f"effort {expected:.12g} J*s" in printed
+
+
+def test_clearance_design_lifts_a_tower_clear_with_less_effort_than_the_legs():
+    # 10E relocates a 4-block tower 10 cm: each block leaves the top of the tower and
+    # lands on the new one. Without legs no corner goes below the table, no block
+    # into another, and the effort is between the straight-carry bound and the legs'.
+    clearance, legs = _layout_0_plan("10E", 0.0), _layout_0_plan("10E", APPROACH)
+    below, inside, where = worst_carry_intrusion(clearance, clearance.initial.fixed)
+    assert below <= 1e-6 and inside <= OVERLAP_TOLERANCE, where
+    assert straight_carry_bound(legs) <= kinetic_energy(clearance) < kinetic_energy(legs)
+
+
+def test_face_gaps_of_aligned_boxes_are_minus_their_penetration():
+    # For boxes of the same yaw, the carried one not lower, the largest gap beyond a
+    # face plane of the other (lgp.planner._face_gaps, on corners) is minus the
+    # separating-axis depth of lgp.scene.penetration, overlapping or apart.
+    from lgp.planner import _box_corners, _face_gaps, _Obstacle
+    from lgp.scene import Block, penetration
+
+    rng = np.random.default_rng(3)
+    d = 0.0254
+    for _ in range(200):
+        yaw = rng.uniform(-np.pi, np.pi)
+        other = Block("o", [0.4, 0.0, d / 2], yaw)
+        p = other.p_WB + np.concatenate([rng.uniform(-1.5 * d, 1.5 * d, 2), [rng.uniform(0, 1.5 * d)]])
+        moving = Block("m", p, yaw)
+        R = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+        corners = _box_corners(moving.size) @ R.T + moving.p_WB
+        gaps = _face_gaps(corners, [_Obstacle("o", R, other.p_WB, other.size / 2)])[0]
+        depth = penetration(moving, other)
+        assert gaps.max() == pytest.approx(-depth, abs=1e-12)
