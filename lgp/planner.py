@@ -612,10 +612,10 @@ def carried_slices(symbolic: SymbolicPlan, slices_per_phase: int) -> list[tuple[
 
 
 def _usable(result: KomoResult, approach_height: float) -> bool:
-    """Solved, every constraint within 1e-6. Without legs SNOPT may also end with
-    info 41 ("cannot be improved") at a feasible point: a carried block sliding on
-    the table or a top right after a grasp's rest is a degenerate active set; the
-    status stays in the effort table (column status)."""
+    """Solved, every constraint within 1e-6. Without legs SNOPT (if it is the
+    CLEARANCE_SOLVER) may also end with info 41 ("cannot be improved") at a feasible
+    point: a carried block sliding on the table right after a grasp's rest is a
+    degenerate active set (7E); the status stays in the effort table (column status)."""
     if result.max_violation > 1e-6:
         return False
     return result.success or (approach_height == 0 and "snopt info 41" in result.status)
