@@ -387,7 +387,7 @@ def effort_section(ctx: Context) -> Section:
     lines = ["## Sensitivity of effort to the motion design", "",
              f"Effort (J s, mean over {int(table['samples'].max()) if len(table) else 0} layout(s) per trial, seed "
              f"{ctx.args.seed}) for each design: approach legs of 5 and 2 cm at every grasp and place, none (a "
-             "clearance constraint keeps the carried block above the table and every block it passes; "
+             "clearance constraint keeps the carried block above the table and out of every other block and the bucket; "
              "docs/effort.md), and the run's design at twice its slices per phase. The first design is the run's.",
              ""]
     if len(table):
