@@ -248,6 +248,20 @@ def test_a_new_import_is_followed(tmp_path):
     assert len({before, after, modules_digest("models.risk", root=root)}) == 3
 
 
+def test_a_file_that_appears_is_followed_though_the_importer_is_unchanged(tmp_path):
+    """Parsed imports are remembered by the importer's bytes, but which names are
+    modules is decided from the files each time: `from lgp import extra` means the
+    package until lgp/extra.py exists, then that module."""
+    (tmp_path / "lgp").mkdir()
+    (tmp_path / "lgp" / "__init__.py").write_text("")
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "__init__.py").write_text("")
+    (tmp_path / "models" / "risk.py").write_text("def f():\n    from lgp import extra\n")
+    assert import_closure("models.risk", root=tmp_path) == ["lgp", "models", "models.risk"]
+    (tmp_path / "lgp" / "extra.py").write_text("X = 1\n")
+    assert import_closure("models.risk", root=tmp_path) == ["lgp", "lgp.extra", "models", "models.risk"]
+
+
 def test_reproduce_keys_cover_libraries_and_engine_settings(monkeypatch):
     from lgp import reproduce
     from models.risk import get_engine
