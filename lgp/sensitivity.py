@@ -388,7 +388,10 @@ def effort_section(ctx: Context) -> Section:
              f"Effort (J s, mean over {int(table['samples'].max()) if len(table) else 0} layout(s) per trial, seed "
              f"{ctx.args.seed}) for each design: approach legs of 5 and 2 cm at every grasp and place, none (a "
              "clearance constraint keeps the carried block above the table and out of every other block and the bucket; "
-             "docs/effort.md), and the run's design at twice its slices per phase. The first design is the run's.",
+             "docs/effort.md), and the run's design at twice its slices per phase. The first design is the run's. "
+             "The legs designs have no obstacle constraint between their waypoints: 5 cm legs clear every solid, "
+             "2 cm legs do not (blocks leaving the bucket pass into its 4.5 cm wall; depths in docs/effort.md), so "
+             "compare 2 cm on pair 12 with care.",
              ""]
     if len(table):
         wide = table.pivot(index="trial", columns="design", values="effort").reindex([t.id for t in ctx.trials])[designs]
