@@ -139,17 +139,21 @@ def test_import_reader_sees_imports_inside_functions():
     assert dict(module_imports("lgp"))["lgp.planner"] is False  # lgp.plan, lazily
 
 
+def _project_modules_loaded_by(code: str) -> set[str]:
+    """The project modules a fresh interpreter has loaded after running `code`."""
+    code += f"\nimport sys\nprint(' '.join(m for m in sys.modules if m.split('.')[0] in {PACKAGES!r}))"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return set(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env,
+                              cwd=ROOT).stdout.split())
+
+
 @pytest.mark.slow
 def test_import_closure_holds_every_module_python_loads():
     """An independent answer: the project modules a fresh interpreter has loaded
     after importing the computation and running it are all in the closure."""
-    code = ("import sys, stimuli, models.effort, models.risk\n"
-            "from models.risk import get_engine\n"
-            "get_engine('mujoco'); models.effort.physical_effort('9E', samples=1)\n"
-            f"print(' '.join(m for m in sys.modules if m.split('.')[0] in {PACKAGES!r}))")
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    loaded = set(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env,
-                                cwd=ROOT).stdout.split())
+    loaded = _project_modules_loaded_by("import stimuli, models.effort, models.risk\n"
+                                        "from models.risk import get_engine\n"
+                                        "get_engine('mujoco'); models.effort.physical_effort('9E', samples=1)\n")
     closure = set(import_closure("models.effort", "models.risk", "models.risk.mujoco_engine", "stimuli"))
     assert {"models.effort", "lgp.planner", "lgp.komo", "models.risk.mujoco_engine", "stimuli"} <= loaded
     assert loaded <= closure, loaded - closure
@@ -163,13 +167,9 @@ def test_the_risk_key_covers_what_a_risk_run_loads_and_not_the_planner():
     re-exported by models.risk lazily)."""
     from lgp import reproduce
 
-    code = ("import sys, stimuli\n"
-            "from models.risk import risk_table\n"
-            "risk_table([stimuli.load_trial('7H')], [0.065], n_sims=2, jobs=1)\n"
-            f"print(' '.join(m for m in sys.modules if m.split('.')[0] in {PACKAGES!r}))")
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    loaded = set(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env,
-                                cwd=ROOT).stdout.split())
+    loaded = _project_modules_loaded_by("import stimuli\n"
+                                        "from models.risk import risk_table\n"
+                                        "risk_table([stimuli.load_trial('7H')], [0.065], n_sims=2, jobs=1)\n")
     closure = set(import_closure("models.risk.core", "models.risk.mujoco_engine", "stimuli"))
     assert {"models.risk.core", "models.risk.mujoco_engine", "stimuli"} <= loaded
     assert loaded <= closure, loaded - closure
