@@ -116,6 +116,10 @@ def test_shared_elimination_is_the_one_computed_afresh():
     assert np.sum((L @ X_K + l) ** 2) + const == pytest.approx(np.sum((fresh.G @ X_K + fresh.g) ** 2), rel=1e-12)
     with pytest.raises(ValueError):
         e.M[0, 0] = 1.0
+    linear = komo.linear()
+    for array in (linear.W.data, linear.w0, linear.C.indices, linear.E, e.GtG, L, l):
+        with pytest.raises(ValueError):
+            array[...] = 0.0
 
 
 def test_free_slice_over_a_joint_limit_is_promoted_and_the_limit_holds():

@@ -25,6 +25,14 @@ from scipy.sparse import linalg as splinalg
 from lgp.komo.declaration import Declaration, KomoError
 
 
+def _read_only(*arrays):
+    """Mark arrays (dense, or the buffers of a scipy sparse matrix) read-only: the
+    structures and eliminations are shared by every Komo of a skeleton in a process."""
+    for a in arrays:
+        for buffer in (a.data, a.indices, a.indptr) if sparse.issparse(a) else (a,):
+            buffer.setflags(write=False)
+
+
 @dataclass(frozen=True)
 class LinearStructure:
     """Cost residual W X + w0 and equalities C X = E over the decision slices.
@@ -37,6 +45,9 @@ class LinearStructure:
     w0: np.ndarray
     C: sparse.csr_matrix
     E: np.ndarray
+
+    def __post_init__(self):
+        _read_only(self.W, self.w0, self.C, self.E)
 
     @property
     def N(self) -> int:
@@ -59,7 +70,7 @@ class Elimination:
     C_KK X_K = E_KK the equalities that involve keyframes only.
     """
 
-    K: list[int]
+    K: tuple[int, ...]
     F: np.ndarray
     M: np.ndarray
     m: np.ndarray
@@ -68,16 +79,21 @@ class Elimination:
     C_KK: np.ndarray
     E_KK: np.ndarray
 
+    def __post_init__(self):
+        _read_only(self.F, self.M, self.m, self.G, self.g, self.C_KK, self.E_KK)
+
     def trajectory(self, X_K: np.ndarray) -> np.ndarray:
         """The whole (N, nq) trajectory with keyframes X_K and the free slices eliminated."""
         X = np.zeros((len(self.K) + len(self.F), X_K.shape[1]))
-        X[self.K], X[self.F] = X_K, self.M @ X_K + self.m
+        X[list(self.K)], X[self.F] = X_K, self.M @ X_K + self.m
         return X
 
     @cached_property
     def GtG(self) -> np.ndarray:
         """G'G (|K|, |K|): half the Hessian of the reduced cost, the same for every joint."""
-        return self.G.T @ self.G
+        GtG = self.G.T @ self.G
+        _read_only(GtG)
+        return GtG
 
     @cached_property
     def cost_factor(self) -> tuple[np.ndarray, np.ndarray, float]:
@@ -85,6 +101,7 @@ class Elimination:
         L upper triangular (the Cholesky factor of G'G = L'L)."""
         L = np.linalg.cholesky(self.GtG).T
         l = np.linalg.solve(L.T, self.G.T @ self.g)
+        _read_only(L, l)
         return L, l, float(np.sum(self.g * self.g) - np.sum(l * l))
 
 
@@ -159,7 +176,7 @@ def eliminate(linear: LinearStructure, K) -> Elimination:
     M, m = sol[:nF, :nK], sol[:nF, nK:]
     G = W_F @ M + W_K.toarray()
     g = W_F @ m + w0
-    return Elimination(K, F, M, m, G, g, C[only_K][:, K].toarray(), E[only_K])
+    return Elimination(tuple(K), F, M, m, G, g, C[only_K][:, K].toarray(), E[only_K])
 
 
 def interpolate(linear: LinearStructure, seeds: dict[int, np.ndarray]) -> np.ndarray:

@@ -86,9 +86,7 @@ class Komo(Declaration):
         K = tuple(sorted(int(s) for s in keyframes))
         e = eliminations.get(K)
         if e is None:
-            e = eliminations[K] = eliminate(linear, K)
-            for array in (e.F, e.M, e.m, e.G, e.g, e.C_KK, e.E_KK):
-                array.setflags(write=False)  # shared: nobody may change it in place
+            e = eliminations[K] = eliminate(linear, K)  # read-only: shared by every Komo of the skeleton
             while len(eliminations) > ELIMINATIONS_KEPT:
                 eliminations.popitem(last=False)
         eliminations.move_to_end(K)
