@@ -179,8 +179,12 @@ def eliminate(linear: LinearStructure, K) -> Elimination:
     return Elimination(tuple(K), F, M, m, G, g, C[only_K][:, K].toarray(), E[only_K])
 
 
-def interpolate(linear: LinearStructure, seeds: dict[int, np.ndarray]) -> np.ndarray:
-    """Minimum-control-cost trajectory (N, nq) through `seeds` {slice: q} under the linear equalities."""
+def interpolate(linear: LinearStructure, seeds: dict[int, np.ndarray], elimination=None) -> np.ndarray:
+    """Minimum-control-cost trajectory (N, nq) through `seeds` {slice: q} under the linear equalities.
+
+    `elimination(K)` gives the Elimination for keyframes K (default: eliminate afresh;
+    lgp.komo.Komo passes its cached one)."""
     K = sorted(seeds)
     X_K = np.array([seeds[s] for s in K]).reshape(len(K), linear.nq)
-    return eliminate(linear, K).trajectory(X_K)
+    e = eliminate(linear, K) if elimination is None else elimination(K)
+    return e.trajectory(X_K)

@@ -28,7 +28,7 @@ from pydrake.solvers import IpoptSolver, MathematicalProgram, SnoptSolver, Solve
 
 from lgp.komo.constraints import drake_constraints, violation
 from lgp.komo.declaration import Declaration, KomoError
-from lgp.komo.linear import Elimination, LinearStructure, eliminate, linear_structure
+from lgp.komo.linear import Elimination, LinearStructure, eliminate, interpolate, linear_structure
 from lgp.komo.result import KomoResult, frame_poses, object_poses, worst_violation
 
 #: A free slice may exceed a joint limit by this much (rad) before it is promoted.
@@ -93,10 +93,9 @@ class Komo(Declaration):
         return e
 
     def interpolate(self, seeds: dict[int, np.ndarray]) -> np.ndarray:
-        """Minimum-control-cost trajectory (N, nq) through `seeds` {slice: q} under the linear equalities."""
-        K = sorted(seeds)
-        X_K = np.array([seeds[s] for s in K]).reshape(len(K), self.nq)
-        return self.elimination(K).trajectory(X_K)
+        """Minimum-control-cost trajectory (N, nq) through `seeds` {slice: q} under the linear equalities
+        (lgp.komo.linear.interpolate with this skeleton's shared eliminations)."""
+        return interpolate(self.linear(), seeds, self.elimination)
 
     def reduced_cost(self, keyframes) -> tuple[np.ndarray, np.ndarray]:
         """(G, g) with cost = sum_j |G X_K[:, j] + g[:, j]|^2 once the other slices are eliminated."""
@@ -140,7 +139,7 @@ class Komo(Declaration):
             waiting = [(o, s) for o, s in nonlinear if o.lazy]
             K = sorted({s for _, s in active})
             for _ in range(max_promotions + 1):
-                X, result, nvar = _solve_reduced(self, linear, K, active, X0, backend)
+                X, result, nvar = _solve_reduced(self, K, active, X0, backend)
                 if not result.is_success():
                     break
                 # Promote what the solution violates: free slices over a joint limit,
@@ -165,7 +164,7 @@ class Komo(Declaration):
                           keyframes=tuple(K), max_violation=worst, worst_objective=worst_o, X_WB=object_poses(self, q))
 
 
-def _solve_reduced(komo: Komo, linear: LinearStructure, K, nonlinear, X0, backend):
+def _solve_reduced(komo: Komo, K, nonlinear, X0, backend):
     """Keyframes K are the decision variables; free slices are X_F = M X_K + m.
 
     The reduced cost |G X_K + g|^2 is written as |z|^2 + const on auxiliary
