@@ -263,6 +263,14 @@ def _sat_depths(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 _SLACK = 1e-7
 
 
+def may_penetrate(vertical: np.ndarray, horizontal: np.ndarray) -> np.ndarray:
+    """Which pairs the vectorised depths (m; vertical extent overlap, horizontal SAT
+    depth) leave to the scalar `penetration` test: those not well below
+    OVERLAP_TOLERANCE. The slack is far above the ~1e-17 m by which array and scalar
+    depths can round apart, so this filter cannot change a verdict."""
+    return np.minimum(vertical, horizontal) > OVERLAP_TOLERANCE - _SLACK
+
+
 def rests_on(upper: Block, lower, tol: float = CONTACT_TOLERANCE) -> bool:
     """True when `upper`'s bottom face lies on `lower`'s top face over a real area."""
     return abs(upper.bottom - lower.top) <= tol and footprint_overlap_area(upper, lower) > MIN_SUPPORT_AREA
@@ -317,7 +325,7 @@ def validate_scene(scene: Scene) -> None:
     for kind, others, C, lo, hi, same in (("", blocks, cb, lob, hib, True), ("fixed ", fixed, cf, lof, hif, False)):
         i, j = _box_pairs(lob, hib, lo, hi, same)
         vertical = np.minimum(hib[i, 2], hi[j, 2]) - np.maximum(lob[i, 2], lo[j, 2])
-        keep = np.minimum(vertical, _sat_depths(cb[i], C[j]) if len(i) else vertical) > OVERLAP_TOLERANCE - _SLACK
+        keep = may_penetrate(vertical, _sat_depths(cb[i], C[j]) if len(i) else vertical)
         overlaps += [((a, int(kind != ""), c), blocks[a], others[c], kind) for a, c in zip(i[keep].tolist(), j[keep].tolist())]
     for _, a, b, kind in sorted(overlaps, key=lambda o: o[0]):
         depth = penetration(a, b)

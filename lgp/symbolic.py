@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lgp.geometry import rectangle_overlap
-from lgp.scene import (OVERLAP_TOLERANCE, TABLE, Block, Scene, penetration, support_graph, support_graph_after_move,
+from lgp.scene import (OVERLAP_TOLERANCE, TABLE, Block, Scene, may_penetrate, penetration, support_graph, support_graph_after_move,
                        supported_by)
 
 
@@ -130,11 +130,6 @@ def _near(block, solids) -> list:
     return [solids[i] for i in np.flatnonzero(near)]
 
 
-#: Pairs whose array depth lies this far (m) below OVERLAP_TOLERANCE are ruled out
-#: without the scalar test: far above the ~1e-17 m by which the two can round apart.
-_SLACK = 1e-7
-
-
 def _enters_any(block: Block, solids: list) -> bool:
     """Whether `block` interpenetrates any of `solids` by more than OVERLAP_TOLERANCE
     (lgp.scene.penetration). The depths of all pairs at once only rule out the pairs
@@ -145,7 +140,7 @@ def _enters_any(block: Block, solids: list) -> bool:
     mine = block.outline()
     horizontal, _ = rectangle_overlap(*(np.broadcast_to(x, (len(solids), 2)) for x in mine), c, half, u)
     vertical = np.minimum(block.top, [s.top for s in solids]) - np.maximum(block.bottom, [s.bottom for s in solids])
-    maybe = np.flatnonzero(np.minimum(vertical, horizontal) > OVERLAP_TOLERANCE - _SLACK)
+    maybe = np.flatnonzero(may_penetrate(vertical, horizontal))
     return any(penetration(block, solids[i]) > OVERLAP_TOLERANCE for i in maybe)
 
 
@@ -252,18 +247,13 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
         current = state.scene
         above = supported_by(support(current))
         clear = [a for a in to_move if not above[a]]
-        # Bounding spheres prune the exact overlap test: solids whose centres are
-        # farther apart than the sum of their half diagonals cannot interpenetrate.
-        p_W = current.positions
-        radius = np.array([np.linalg.norm(o.size) / 2 for o in current.blocks])
         ready = []  # (target height, A order, block assigned to a target that can be built now)
         for order, a in enumerate(to_move):
             goal = target_of[a]
             if not all(s in fixed_names or s in in_place for s in onto(a)):
                 continue
             goal_block = current.block(a).moved_to(goal.p_WB, goal.yaw)
-            near = np.linalg.norm(p_W - goal_block.p_WB, axis=1) <= radius + np.linalg.norm(goal_block.size) / 2 + OVERLAP_TOLERANCE
-            if _enters_any(goal_block, [current.blocks[i] for i in np.flatnonzero(near) if current.blocks[i].name != a]):
+            if _enters_any(goal_block, [b for b in _near(goal_block, current.blocks) if b.name != a]):
                 continue
             ready.append((goal.p_WB[2], order, a))
         legal = [r for r in ready if r[2] in clear]
