@@ -24,7 +24,7 @@ import numpy as np
 
 from lgp.geometry import quaternion_from_yaw
 from lgp.scene import Scene
-from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds, layout_key
+from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds, half_diagonals, layout_key
 
 
 @dataclass(frozen=True)
@@ -186,7 +186,7 @@ class DrakeEngine(Engine):
         L.plant.SetPositions(L.plant_context, q)
         L.plant.SetVelocities(L.plant_context, np.zeros(L.nv))
         L.simulator.Initialize()
-        self._sizes = np.array([b.size for b in scene.blocks])
+        self._half_diagonals = half_diagonals([b.size for b in scene.blocks])
 
     def _advance(self, t: float) -> None:
         self._L.simulator.AdvanceTo(t)
@@ -199,4 +199,4 @@ class DrakeEngine(Engine):
         p = q[idx]
         w = v[L.v_start[:, None] + np.arange(0, 3)]
         lin = v[L.v_start[:, None] + np.arange(3, 6)]
-        return p, block_speeds(lin, w, self._sizes)
+        return p, block_speeds(lin, w, self._half_diagonals)

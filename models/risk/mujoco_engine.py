@@ -7,7 +7,7 @@ import numpy as np
 
 from lgp.geometry import quaternion_from_yaw
 from lgp.scene import Scene
-from models.risk.engine import DENSITY, FRICTION, Engine, layout_key, row_norms
+from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds, half_diagonals, layout_key
 
 TIMESTEP = 0.002
 SOLREF = "0.004 1"
@@ -98,9 +98,9 @@ class MujocoEngine(Engine):
             data = mj.MjData(model)
             n = len(scene)
             # views into the state, made once per layout (the arrays live as long as data)
-            diagonals = row_norms(np.array([b.size for b in scene.blocks]).reshape(n, 3))
-            self._models[key] = (model, data, data.qpos.reshape(n, 7), data.qvel.reshape(n, 6), diagonals)
-        m, d, self._qpos, self._qvel, self._diagonals = self._models[key]
+            radii = half_diagonals([b.size for b in scene.blocks])
+            self._models[key] = (model, data, data.qpos.reshape(n, 7), data.qvel.reshape(n, 6), radii)
+        m, d, self._qpos, self._qvel, self._half_diagonals = self._models[key]
         self.model, self.data = m, d
         mj.mj_resetData(m, d)
         self._qpos[:, :3] = p_WB
@@ -122,9 +122,8 @@ class MujocoEngine(Engine):
             self._mj.mj_step(m, d, steps)
 
     def _state(self):
-        # engine.block_speeds with the blocks' diagonals computed once per layout
         qvel = self._qvel
-        return self._qpos[:, :3].copy(), row_norms(qvel[:, :3]) + row_norms(qvel[:, 3:]) * self._diagonals / 2
+        return self._qpos[:, :3].copy(), block_speeds(qvel[:, :3], qvel[:, 3:], self._half_diagonals)
 
     def _asleep(self) -> bool:
         return self.sleep and int(self.data.ntree_awake) == 0

@@ -36,7 +36,7 @@ import numpy as np
 from lgp.geometry import quaternion_from_yaw
 from lgp.paper import BLOCK_SIZE
 from lgp.scene import Scene
-from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds
+from models.risk.engine import DENSITY, FRICTION, Engine, block_speeds, half_diagonals
 
 INSTALL_HINT = 'the physx engine needs the optional extra: pip install -e ".[physx]" (the sapien package)'
 
@@ -157,7 +157,7 @@ class PhysxEngine(Engine):
         # restored and its bodies are re-added, and chaotic runs then depend on
         # the runs before them (measured: up to 8 cm apart; docs/risk.md).
         self._L = _Layout(self._sapien, scene, self.config)
-        self._sizes = np.array([b.size for b in scene.blocks])
+        self._half_diagonals = half_diagonals([b.size for b in scene.blocks])
         self._steps = 0
         self._last = None  # (step, p, q) of the last _state call
 
@@ -181,10 +181,10 @@ class PhysxEngine(Engine):
         if last is None or last[0] == self._steps:
             v = np.array([b.linear_velocity for b in L.bodies], dtype=float) / k
             w = np.array([b.angular_velocity for b in L.bodies], dtype=float)
-            return p, block_speeds(v, w, self._sizes)
+            return p, block_speeds(v, w, self._half_diagonals)
         dt = (self._steps - last[0]) * self.config.timestep
         angle = 2 * np.arccos(np.clip(np.abs(np.sum(q * last[2], axis=1)), 0.0, 1.0))
-        return p, block_speeds((p - last[1]) / dt, angle[:, None] * [0, 0, 1] / dt, self._sizes)
+        return p, block_speeds((p - last[1]) / dt, angle[:, None] * [0, 0, 1] / dt, self._half_diagonals)
 
     def _asleep(self) -> bool:
         return all(b.is_sleeping for b in self._L.bodies)
