@@ -80,7 +80,7 @@ class NoiseRule:
     lift) computed once, and `positions` vectorised over runs: what a chunk of
     noisy runs of one scene calls instead of `perturbed_positions` per run. Same
     numbers to the bit as one `perturbed_positions` call per run
-    (tests/test_risk_noise.py keeps the per-run rule as the reference)."""
+    (tests/test_risk_noise_reference.py keeps the per-run rule as the reference)."""
 
     def __init__(self, scene: Scene):
         self.scene = scene
