@@ -54,28 +54,33 @@ def test_block_touching_only_at_an_edge_is_not_supported():
 def test_support_graph_after_a_move_is_the_support_graph_of_the_new_scene():
     # The symbolic planner updates the support graph after each place instead of
     # recomputing it; brute force: the full graph, lists in the same order, for
-    # random moves onto the table, onto other blocks and into the bucket.
+    # random moves onto the table, onto other blocks and (12E, 12H: the trials with
+    # fixed boxes) into the bucket, among blocks already resting on its floor.
     from lgp.scene import support_graph_after_move
 
     rng = np.random.default_rng(6)
-    checked = 0
-    for tid in ("7H", "3E", "9E", "10H", "4H"):
+    checked = into_bucket = 0
+    for tid in ("7H", "3E", "9E", "10H", "4H", "12E", "12H"):
         scene = stimuli.load_trial(tid).target
         graph = support_graph(scene)
+        floor = min(scene.fixed, key=lambda f: f.top, default=None)  # the bucket's floor
         for _ in range(25):
             b = scene.blocks[rng.integers(len(scene.blocks))]
             other = scene.blocks[rng.integers(len(scene.blocks))]
-            place = rng.integers(3)
+            place = rng.integers(4 if floor else 3)
             if place == 0:  # onto the top of another block, partly overlapping
                 p = other.p_WB + [rng.uniform(-0.02, 0.02), rng.uniform(-0.02, 0.02), other.size[2]]
             elif place == 1:  # back onto the table
                 p = [rng.uniform(0.2, 0.6), rng.uniform(-0.3, 0.3), b.size[2] / 2]
-            else:  # hovering
+            elif place == 2:  # hovering
                 p = [rng.uniform(0.2, 0.6), rng.uniform(-0.3, 0.3), rng.uniform(0.02, 0.1)]
+            else:  # onto the bucket's floor
+                p = floor.p_WO + [rng.uniform(-0.01, 0.01), rng.uniform(-0.1, 0.1), (floor.size[2] + b.size[2]) / 2]
             moved = b.moved_to(p, rng.uniform(-np.pi, np.pi) if rng.random() < 0.5 else b.yaw)
             new = scene.with_blocks(moved if x.name == b.name else x for x in scene.blocks)
             updated = support_graph_after_move(new, graph, b.name)
             assert updated == support_graph(new)
             scene, graph = new, updated
             checked += sum(map(len, graph.values()))
-    assert checked > 200
+            into_bucket += floor is not None and floor.name in graph[b.name]
+    assert checked > 200 and into_bucket > 5
