@@ -342,7 +342,7 @@ def test_object_poses_follow_the_holder_slice_by_slice():
     # object_poses fills each held stretch at once; the definition is per row: X_WG X_GB
     # while held (rows of slice s >= grasp, <= place), the last pose otherwise.
     from lgp.komo.result import frame_poses, object_poses
-    from lgp.planner import declare
+    from lgp.planner import SLICES_PER_PHASE, declare
 
     initial, target = tower_task(2)
     result = plan(initial, target, 0)
@@ -356,4 +356,4 @@ def test_object_poses_follow_the_holder_slice_by_slice():
             if holder is not None:
                 current, held_rows = X_WG[i] @ holder[1].GetAsMatrix4(), held_rows + 1
             assert np.array_equal(poses[name][i], current), (name, i)
-        assert held_rows == 20 + 1  # grasp at phase k to place at k + 1, both slices included
+        assert held_rows == SLICES_PER_PHASE + 1  # grasp at phase k to place at k + 1, both slices included
