@@ -720,9 +720,9 @@ def _plan_with_clearance(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str
        and the initial guess.
     2. The program without legs (same quarter turns) is solved by CLEARANCE_SOLVER.
        Wherever a carried block's bottom corners come within CLEARANCE / 2 of the
-       table top, or its 8 corners are not all beyond some face plane of another
-       block or fixed box (in that solid's frame) but OVERLAP_TOLERANCE * 3/4 inside
-       it, a constraint is added at that row, and at the rows where the same block
+       table top, or no face plane of either box separates it from another block
+       or fixed box (`_separation`) and they overlap by more than
+       OVERLAP_TOLERANCE * 3/4, a constraint is added at that row, and at the rows where the same block
        is within CLEARANCE_MARGIN of the same solid: its bottom corners CLEARANCE
        above the table; its corners beyond one face plane of the solid (over its
        top, or beside one of its four sides; touching allowed): of the faces that
