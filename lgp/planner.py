@@ -234,7 +234,8 @@ def plan_symbolic(symbolic: SymbolicPlan, rng=0, *, formulation: str = "reduced"
         action = symbolic.actions[k - 1] if k and 1 <= k <= len(symbolic.actions) else None
         where = f"action {k} {action}" if action else "joint limits"
         raise PlanningError(
-            f"{initial.label} -> {symbolic.target.label}: KOMO ({formulation}, {solver}) failed at {where}: "
+            f"{initial.label} -> {symbolic.target.label}: KOMO ({formulation}, "
+            f"{solver if approach_height > 0 else CLEARANCE_SOLVER}) failed at {where}: "
             f"{result.status}, constraint violation {result.max_violation:.2e}", action)
     return Plan(initial, symbolic.target, symbolic, result.t, result.q,
                 {n: result.X_WB[n][:, :3, 3].copy() for n in names},
@@ -622,13 +623,12 @@ def _usable(result: KomoResult, approach_height: float) -> bool:
     degenerate active set (7E); the status stays in the effort table (column status)."""
     if result.max_violation > 1e-6:
         return False
-    return result.success or (approach_height == 0 and "snopt info 41" in result.status)
+    return result.success or (approach_height == 0 and CLEARANCE_SOLVER == "snopt" and "snopt info 41" in result.status)
 
 
 def _box_corners(size) -> np.ndarray:
     """The 8 corners (8, 3) of a box of full extents `size`, in its own frame."""
-    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    return signs * np.asarray(size, float) / 2
+    return _UNIT_CORNERS * np.asarray(size, float) / 2
 
 
 @dataclass(frozen=True)
@@ -664,6 +664,29 @@ def _face_gaps(p_WC: np.ndarray, obstacles: list[_Obstacle]) -> np.ndarray:
                             lo[:, 2] - e[:, 2]])
 
 
+def _separation(X_WB: np.ndarray, half: np.ndarray, p_WC: np.ndarray, obstacles: list[_Obstacle]) -> np.ndarray:
+    """(n_obstacles,) signed separation (m) of the carried block (pose X_WB, half
+    extents `half`, corners p_WC) from each obstacle: the largest gap beyond a face
+    plane of either box (the obstacle's 6, then the block's 6). For boxes that share
+    their vertical axis (yaw only) the face normals are every separating axis, so
+    < 0 means they interpenetrate by at least that much (lgp.scene.penetration)."""
+    if not obstacles:
+        return np.zeros(0)
+    R = np.array([o.R_WO for o in obstacles])
+    p = np.array([o.p_WO for o in obstacles])
+    e = np.array([o.half for o in obstacles])
+    C = np.einsum("nji,nkj->nki", R, p_WC[None] - p[:, None])  # block's corners in each obstacle's frame
+    own = np.maximum(C.min(axis=1) - e, -e - C.max(axis=1)).max(axis=1)
+    O = p[:, None] + np.einsum("nij,nkj->nki", R, _UNIT_CORNERS[None] * e[:, None])  # obstacles' corners in W
+    D = (O - X_WB[:3, 3]) @ X_WB[:3, :3]  # in the block's frame
+    theirs = np.maximum(D.min(axis=1) - half, -half - D.max(axis=1)).max(axis=1)
+    return np.maximum(own, theirs)
+
+
+#: The 8 corners of the unit cube [-1, 1]^3.
+_UNIT_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+
+
 def _separating_face(reference_gaps: np.ndarray, gaps: np.ndarray) -> int:
     """The face plane of a solid to keep a carried block beyond at one row: of the
     faces that separate the reference plan's block from it (gap >= -REFERENCE_SLACK),
@@ -697,9 +720,9 @@ def _plan_with_clearance(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str
        and the initial guess.
     2. The program without legs (same quarter turns) is solved by CLEARANCE_SOLVER.
        Wherever a carried block's bottom corners come within CLEARANCE / 2 of the
-       table top, or its 8 corners are not all beyond some face plane of another
-       block or fixed box (in that solid's frame) but OVERLAP_TOLERANCE * 3/4 inside
-       it, a constraint is added at that row, and at the rows where the same block
+       table top, or no face plane of either box separates it from another block
+       or fixed box (`_separation`) and they overlap by more than
+       OVERLAP_TOLERANCE * 3/4, a constraint is added at that row, and at the rows where the same block
        is within CLEARANCE_MARGIN of the same solid: its bottom corners CLEARANCE
        above the table; its corners beyond one face plane of the solid (over its
        top, or beside one of its four sides; touching allowed): of the faces that
@@ -713,13 +736,19 @@ def _plan_with_clearance(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str
     komo, seeds, turns = declare(symbolic, arm, rng, slices_per_phase, APPROACH)
     komo, reference, turns = _solve(symbolic, arm, komo, seeds, turns, formulation, solver, slices_per_phase, APPROACH)
     if not _usable(reference, APPROACH):
-        return komo, reference
+        o = reference.worst_objective
+        k = int(round(o.time[0])) if o is not None and o.time else None
+        action = symbolic.actions[k - 1] if k and 1 <= k <= len(symbolic.actions) else None
+        raise PlanningError(f"the reference plan with {APPROACH:g} m legs (the start of the design without legs) failed"
+                            f"{f' at action {k} {action}' if action else ''}: {reference.status}, constraint violation "
+                            f"{reference.max_violation:.2e}", action)
     initial = symbolic.initial
     S = slices_per_phase
     komo = _declare(symbolic, arm, _waypoints(symbolic, 0.0), turns, len(symbolic.actions) + 1, S, 0.0)
     carried = carried_slices(symbolic, S)
     corners = {b.name: _box_corners(b.size) for b in initial.blocks}
     bottom = {n: c[c[:, 2] < 0] for n, c in corners.items()}
+    half = {b.name: np.asarray(b.size, float) / 2 for b in initial.blocks}
     elapsed = reference.solve_time
     declared: dict[tuple[str, int, str], int] = {}  # (block, row, solid) -> corners constrained
     result = reference
@@ -741,7 +770,7 @@ def _plan_with_clearance(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str
             if height < CLEARANCE_MARGIN:
                 near.append((name, i, None, height, p_WC))
             obstacles = _obstacles(initial, result.X_WB, name, i)
-            for o, g in zip(obstacles, _face_gaps(p_WC, obstacles).max(axis=1)):
+            for o, g in zip(obstacles, _separation(X, half[name], p_WC, obstacles)):
                 if g < CLEARANCE_MARGIN:
                     near.append((name, i, o, float(g), p_WC))
 
@@ -783,9 +812,9 @@ def _plan_with_clearance(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str
             name, i, o, g, _ = min(worst, key=lambda w: w[3])
             k = int(np.ceil(i / S))
             action = symbolic.actions[k - 1] if 1 <= k <= len(symbolic.actions) else None
-            what = "the table top" if o is None else o.key
-            raise PlanningError(
-                f"action {k} {action}: carried block {name} still enters {what} by {-g * 1000:.3f} mm at t = {i / S:g} s "
-                f"after {round_} clearance re-solves", action)
+            where = (f"comes within {g * 1000:.3f} mm of the table top (less than {CLEARANCE / 2 * 1000:g} mm)" if o is None
+                     else f"still enters {o.key} by {-g * 1000:.3f} mm")
+            raise PlanningError(f"action {k} {action}: carried block {name} {where} at t = {i / S:g} s after {round_ + 1} "
+                                f"solves without legs", action)
     result.solve_time = elapsed
     return komo, result

@@ -278,3 +278,60 @@ def test_face_gaps_of_aligned_boxes_are_minus_their_penetration():
         gaps = _face_gaps(corners, [_Obstacle("o", R, other.p_WB, other.size / 2)])[0]
         depth = penetration(moving, other)
         assert gaps.max() == pytest.approx(-depth, abs=1e-12)
+
+
+def test_separation_of_boxes_of_any_yaws_is_minus_their_penetration():
+    # The verdict "entered" of the design without legs (lgp.planner._separation: the
+    # largest gap beyond a face plane of either box) agrees with the separating-axis
+    # depth of lgp.scene.penetration for blocks of different yaws, apart or
+    # overlapping, at any height; with the obstacle's planes alone a 45-degree block
+    # 1 mm away read as 8 mm inside.
+    from lgp.planner import _box_corners, _Obstacle, _separation
+    from lgp.scene import Block, penetration
+
+    def rotation(yaw):
+        return np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+
+    rng = np.random.default_rng(4)
+    d = 0.0254
+    depths = []
+    for _ in range(400):
+        other = Block("o", [0.4, 0.0, d / 2], rng.uniform(-np.pi, np.pi))
+        p = other.p_WB + np.concatenate([rng.uniform(-1.6 * d, 1.6 * d, 2), [rng.uniform(-0.5 * d, 1.5 * d)]])
+        moving = Block("m", p, rng.uniform(-np.pi, np.pi))
+        X_WB = np.eye(4)
+        X_WB[:3, :3], X_WB[:3, 3] = rotation(moving.yaw), moving.p_WB
+        corners = _box_corners(moving.size) @ X_WB[:3, :3].T + moving.p_WB
+        gap = _separation(X_WB, moving.size / 2, corners, [_Obstacle("o", rotation(other.yaw), other.p_WB, other.size / 2)])[0]
+        depth = penetration(moving, other)
+        depths.append(depth)
+        assert gap == pytest.approx(-depth, abs=1e-12)
+    assert min(depths) < -0.005 and max(depths) > 0.005  # both sides of contact were drawn
+
+    # the reviewer's case: 45 degrees, 1 mm from an aligned block
+    other = Block("o", [0.4, 0.0, d / 2], 0.0)
+    moving = Block("m", other.p_WB + [d / 2 + d / np.sqrt(2) + 0.001, 0, 0], np.pi / 4)
+    X_WB = np.eye(4)
+    X_WB[:3, :3], X_WB[:3, 3] = rotation(np.pi / 4), moving.p_WB
+    corners = _box_corners(moving.size) @ X_WB[:3, :3].T + moving.p_WB
+    gap = _separation(X_WB, moving.size / 2, corners, [_Obstacle("o", np.eye(3), other.p_WB, other.size / 2)])[0]
+    assert gap == pytest.approx(0.001, abs=1e-9) == pytest.approx(-penetration(moving, other), abs=1e-9)
+
+
+def test_the_design_without_legs_fails_loudly_when_its_reference_plan_fails(monkeypatch):
+    # The design without legs starts from the legs plan; if that plan is not usable
+    # (here: SNOPT's info 41, forced), planning raises and says so, instead of
+    # returning the legs motion as the plan without legs.
+    import dataclasses
+
+    import lgp.planner as planner
+
+    real = planner._solve
+
+    def failing(*args, **kwargs):
+        komo, result, turns = real(*args, **kwargs)
+        return komo, dataclasses.replace(result, success=False, status="SolutionFound (snopt info 41)"), turns
+
+    monkeypatch.setattr(planner, "_solve", failing)
+    with pytest.raises(planner.PlanningError, match="reference plan with 0.05 m legs"):
+        plan_of_sample(stimuli.load_trial("10E"), 0, 0, approach_height=0.0)  # not _layout_0_plan's cached plan
