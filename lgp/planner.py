@@ -649,19 +649,29 @@ def _obstacles(initial: Scene, X_WB: dict[str, np.ndarray], carried: str, i: int
     return out
 
 
+def _gaps_beyond_faces(P_F: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """(n, 6) gap (m) of the point sets P_F (n, k, 3), each in the frame of a box of
+    half extents half (n, 3), beyond that box's face planes +x, -x, +y, -y, +z, -z:
+    the least distance of a point past the plane (< 0 when some point is not past it)."""
+    lo, hi = P_F.min(axis=1) - half, -half - P_F.max(axis=1)
+    return np.stack([lo, hi], axis=2).reshape(len(P_F), 6)
+
+
+def _obstacle_frames(obstacles: list[_Obstacle]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """R_WO (n, 3, 3), p_WO (n, 3) and half extents (n, 3) of the obstacles."""
+    return (np.array([o.R_WO for o in obstacles]), np.array([o.p_WO for o in obstacles]),
+            np.array([o.half for o in obstacles]))
+
+
 def _face_gaps(p_WC: np.ndarray, obstacles: list[_Obstacle]) -> np.ndarray:
     """(n_obstacles, 5) gap (m) of the points p_WC (the carried block's corners) beyond
     each face plane of each obstacle, in the obstacle's frame: +x, -x, +y, -y, +z.
     A gap >= 0 on some face means that face's plane separates the two boxes."""
     if not obstacles:
         return np.zeros((0, 5))
-    R = np.array([o.R_WO for o in obstacles])
-    p = np.array([o.p_WO for o in obstacles])
-    e = np.array([o.half for o in obstacles])
+    R, p, e = _obstacle_frames(obstacles)
     C = np.einsum("nji,nkj->nki", R, p_WC[None] - p[:, None])  # corners in each obstacle's frame
-    lo, hi = C.min(axis=1), C.max(axis=1)
-    return np.column_stack([lo[:, 0] - e[:, 0], -e[:, 0] - hi[:, 0], lo[:, 1] - e[:, 1], -e[:, 1] - hi[:, 1],
-                            lo[:, 2] - e[:, 2]])
+    return _gaps_beyond_faces(C, e)[:, :5]
 
 
 def _separation(X_WB: np.ndarray, half: np.ndarray, p_WC: np.ndarray, obstacles: list[_Obstacle]) -> np.ndarray:
@@ -672,15 +682,13 @@ def _separation(X_WB: np.ndarray, half: np.ndarray, p_WC: np.ndarray, obstacles:
     < 0 means they interpenetrate by at least that much (lgp.scene.penetration)."""
     if not obstacles:
         return np.zeros(0)
-    R = np.array([o.R_WO for o in obstacles])
-    p = np.array([o.p_WO for o in obstacles])
-    e = np.array([o.half for o in obstacles])
-    C = np.einsum("nji,nkj->nki", R, p_WC[None] - p[:, None])  # block's corners in each obstacle's frame
-    own = np.maximum(C.min(axis=1) - e, -e - C.max(axis=1)).max(axis=1)
-    O = p[:, None] + np.einsum("nij,nkj->nki", R, _UNIT_CORNERS[None] * e[:, None])  # obstacles' corners in W
-    D = (O - X_WB[:3, 3]) @ X_WB[:3, :3]  # in the block's frame
-    theirs = np.maximum(D.min(axis=1) - half, -half - D.max(axis=1)).max(axis=1)
-    return np.maximum(own, theirs)
+    R, p, e = _obstacle_frames(obstacles)
+    C = np.einsum("nji,nkj->nki", R, p_WC[None] - p[:, None])  # the block's corners in each obstacle's frame
+    O_W = p[:, None] + np.einsum("nij,nkj->nki", R, _UNIT_CORNERS[None] * e[:, None])  # obstacles' corners in W
+    O_B = (O_W - X_WB[:3, 3]) @ X_WB[:3, :3]  # ... in the block's frame
+    beyond_obstacle = _gaps_beyond_faces(C, e).max(axis=1)
+    beyond_block = _gaps_beyond_faces(O_B, np.broadcast_to(half, e.shape)).max(axis=1)
+    return np.maximum(beyond_obstacle, beyond_block)
 
 
 #: The 8 corners of the unit cube [-1, 1]^3.
