@@ -133,7 +133,7 @@ def risk_grid(risk_table: pd.DataFrame, sigmas: Sequence[float] | None = None) -
             bad = n[~(np.isfinite(n) & (n >= 1) & (n == np.round(n)))]
             if len(bad):
                 raise ModelInputError(f"risk table: {column} of trial {bad.index[0]} at sigma {s:g} is "
-                                      f"{bad.iloc[0]!r}, not a whole number >= 1 (runs behind the risk)")
+                                      f"{float(bad.iloc[0]):g}, not a whole number >= 1 (runs behind the risk)")
             runs[k] = n.to_numpy()
     return RiskGrid(np.asarray(grid, dtype=float), risk, runs, "R")
 
