@@ -193,15 +193,6 @@ def check_targets(trials, engine: str | None, cache: Cache, fall_rule: str = "ho
         raise UnstableSceneError("; ".join(problems))
 
 
-def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
-    order = {t.id: i for i, t in enumerate(trials)}
-    g = samples.groupby("trial")["effort"]
-    df = pd.DataFrame({"effort": g.mean(), "effort_sd": g.std(ddof=1), "samples": g.size()}).reset_index()
-    df["pair"] = df["trial"].map({t.id: t.pair for t in trials}).astype("Int64")  # empty for a trial of no pair
-    df["level"] = df["trial"].map({t.id: t.level for t in trials})
-    return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]
-
-
 def kappa_range(E_e: float, R_e: float, E_h: float, R_h: float) -> str:
     """Ratios k = b2/b1 (b1 > 0, k >= 0) for which Eq. 1 costs E less than H.
 
@@ -524,6 +515,7 @@ def run(args, argv=None) -> int:
         with cli.deferred_interrupt():  # Drake loads here; a Ctrl-C meanwhile waits until it has
             import models.effort  # noqa: F401
             import models.risk  # noqa: F401
+        from models.effort import summarise_effort
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache,
                                        approach_height=args.approach_height, slices_per_phase=args.slices)

@@ -9,8 +9,8 @@ import pytest
 
 import stimuli
 from lgp.paper import BUILD_SITE
-from lgp.app.view import CAMERA_FOV, camera_frame, cumulative_effort, order_colours, placement_order
-from models.effort import kinetic_energy, kinetic_energy_by_action, plan_of_sample
+from lgp.app.view import CAMERA_FOV, camera_frame, order_colours, placement_order
+from models.effort import cumulative_effort, kinetic_energy, kinetic_energy_by_action, plan_of_sample
 
 
 @pytest.fixture(scope="module")
