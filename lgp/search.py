@@ -55,7 +55,8 @@ from scipy.optimize import linear_sum_assignment
 from lgp.assignment import assign_blocks
 from lgp.planner import (APPROACH, APPROACH_TIME, PHASE_DURATION, SEED_MARGIN, SLICES_PER_PHASE, SWIVELS, Plan,
                          PlanningError, check_design, default_arm, plan_symbolic)
-from lgp.scene import OVERLAP_TOLERANCE, TABLE, Block, Scene, support_graph, supported_by
+from lgp.scene import (CONTACT_TOLERANCE, MIN_SUPPORT_AREA, TABLE, Scene, footprint_overlap_area, support_graph,
+                       supported_by)
 from lgp.symbolic import (Grasp, Place, SymbolicPlan, SymbolicPlanningError, _enters_any, _near, same_pose,
                           symbolic_plan)
 
@@ -212,6 +213,37 @@ def skeleton_bound(symbolic: SymbolicPlan, *, approach_height: float = APPROACH,
     return total
 
 
+#: A carried block may enter another solid by at most this much (m) along its path
+#: (the paper planner's plans keep within it: tests/test_planner.py).
+SWEEP_TOLERANCE = 1e-3
+
+
+def first_sweep(plan: Plan) -> str | None:
+    """Where the first carried block enters another block or fixed box by more than
+    SWEEP_TOLERANCE along the plan (lgp.scene.penetration at every slice it
+    moves), None when none does. The legs design has no collision constraint
+    between its waypoints: an order or assignment the paper never tried can carry
+    a block through a neighbour (7H), and the search then rejects the plan."""
+    from lgp.scene import penetration
+
+    initial = plan.initial
+    names = initial.names
+    P = np.array([plan.p_WB[n] for n in names])  # (blocks, slices, 3)
+    yaw = np.array([np.arctan2(plan.R_WB[n][:, 1, 0], plan.R_WB[n][:, 0, 0]) for n in names])
+    reach = np.array([np.linalg.norm(b.size) / 2 for b in initial.blocks])
+    moving = np.any(np.diff(P, axis=1) != 0, axis=2)  # (blocks, slices - 1): moved into slice i + 1
+    for k, i in zip(*np.nonzero(moving)):
+        i = i + 1
+        me = initial.blocks[k].moved_to(P[k, i], yaw[k, i])
+        near = np.flatnonzero(np.linalg.norm(P[:, i] - P[k, i], axis=1) <= reach + reach[k])
+        others = [initial.blocks[j].moved_to(P[j, i], yaw[j, i]) for j in near if j != k] + list(initial.fixed)
+        for o in others:
+            depth = penetration(me, o)
+            if depth > SWEEP_TOLERANCE:
+                return f"carried block {names[k]} enters {o.name} by {depth * 1000:.1f} mm at t = {plan.t[i]:g} s"
+    return None
+
+
 # ----------------------------------------------------------------------------- symbolic states
 
 
@@ -248,6 +280,9 @@ class _Problem:
         self._spot_index: dict[tuple, int] = {}
         self._reach: dict[tuple, bool] = {}
         self.slot_p = np.array([s.p_WB for s in self.slots]).reshape(-1, 3)
+        # A block of A with a fixed box resting on it can never be grasped.
+        self.pinned = [any(abs(f.bottom - b.top) <= CONTACT_TOLERANCE and footprint_overlap_area(b, f) > MIN_SUPPORT_AREA
+                           for f in initial.fixed) for b in self.blocks]
         self.start_p = initial.positions
 
     # -- positions and scenes
@@ -409,7 +444,7 @@ def _children(problem: _Problem, node: _Node, spots_per_set_aside: int):
     settled = node.settled or problem.settled(where, scene, above)
     names = [b.name for b in problem.blocks]
     filled = {w - 1 for w in where if w > 0}
-    clear = [i for i, w in enumerate(where) if w <= 0 and not above[names[i]]]
+    clear = [i for i, w in enumerate(where) if w <= 0 and not above[names[i]] and not (w == 0 and problem.pinned[i])]
     out = []
     ready = [j for j in range(len(problem.slots)) if j not in filled and all(k in filled for k in problem.slot_below[j])]
     for j in ready:
@@ -513,6 +548,10 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
             result = plan_symbolic(symbolic, rng, **options)
         except PlanningError as e:
             tried.append((bound, f"failed: {e}"))
+            return
+        sweep = first_sweep(result)
+        if sweep is not None:
+            tried.append((bound, f"rejected: {sweep}"))
             return
         effort = kinetic_energy(result)
         tried.append((bound, effort))

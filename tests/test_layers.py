@@ -33,6 +33,8 @@ LAYERS = [
     ("KOMO", ["lgp.komo", "lgp.komo.*"], None),
     # the package lgp re-exports lgp.plan (lazily), so it sits with the planner
     ("planner", ["lgp.planner", "lgp.planner.*", "lgp"], None),
+    # the logic layer that searches (issue 24): skeletons over the planner's KOMO
+    ("search", ["lgp.search", "lgp.search.*"], None),
     ("models", ["models", "models.*"], None),
     # analysis imports nothing of the physics: no stimuli, scene, planner or models
     ("analysis", ["analysis", "analysis.*"], ["ground"]),
