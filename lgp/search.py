@@ -659,3 +659,47 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     result.planning_time = seconds
     return SearchResult(result, effort, min(float(lowest_open), effort), bound, solves, expansions, seconds, stopped,
                         paper_effort, paper_symbolic, tried)
+
+
+# ----------------------------------------------------------------------------- planner="paper" | "search"
+
+#: The planners `plan` dispatches to: the paper's pipeline (the default; it
+#: reproduces the paper) and this search.
+PLANNERS = ("paper", "search")
+
+
+def check_planner(planner: str) -> str:
+    """`planner` if it is one of PLANNERS, else ValueError naming them."""
+    if planner not in PLANNERS:
+        raise ValueError(f"planner must be one of {', '.join(PLANNERS)}, got {planner!r}")
+    return planner
+
+
+def plan(initial: Scene, target: Scene, rng_or_seed=0, *, planner: str = "paper", budget: Budget | None = None,
+         **options) -> Plan:
+    """lgp.plan: the paper's pipeline (planner="paper", lgp.planner.plan) or the
+    search (planner="search", `search`; its SearchResult is the plan's `search`
+    attribute: skeleton, effort, bound, gap). `options` are the planner's
+    (formulation, solver, slices_per_phase, approach_height, arm)."""
+    from lgp import planner as paper
+
+    if check_planner(planner) == "paper":
+        if budget is not None:
+            raise ValueError("a budget applies to planner='search' only")
+        return paper.plan(initial, target, rng_or_seed, **options)
+    result = search(initial, target, rng_or_seed, budget=budget, **options)
+    result.plan.search = result
+    return result.plan
+
+
+def describe_search(plan: Plan) -> str:
+    """'' for a plan of the paper's pipeline; for a searched plan one line: its
+    skeleton's bound, the best unexplored bound, the gap and what the search cost."""
+    result = getattr(plan, "search", None)
+    if result is None:
+        return ""
+    gap = 100 * result.gap / result.effort if result.effort > 0 else 0.0
+    paper = f", paper's skeleton {result.paper_effort:.4f} J s" if result.paper_effort is not None else ", no paper skeleton"
+    return (f"search: bound {result.bound:.4f} J s (best unexplored branch), gap {result.gap:.4f} J s ({gap:.1f} %), "
+            f"this skeleton's bound {result.skeleton_bound:.4f} J s, {result.set_asides} set-asides{paper}; "
+            f"{result.solves} KOMO solves, {result.expansions} expansions, stopped: {result.stopped}")
