@@ -330,7 +330,7 @@ def test_run_analysis_writes_in_and_out_of_sample_tables_the_same_whatever_jobs(
         out = run_analysis(sim, E, risk, tmp_path / f"j{jobs}", seed=3, n_boot=60, n_perm=40, jobs=jobs, figures=False)
         files[jobs] = {p: open(p, "rb").read() for p in out["files"]["path"] if "comparison" in p or "cv_" in p
                        or "permutation" in p}
-    assert len(files[1]) == 6
+    assert len(files[1]) == 7
     assert [v for _, v in sorted(files[1].items())] == [v for _, v in sorted(files[2].items())]
     mc = out["model_comparison"]
     assert set(mc["scheme"]) == set(SCHEMES) and len(mc) == 3 * 3 * 3
