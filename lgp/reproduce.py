@@ -29,6 +29,7 @@ import pandas as pd
 
 import stimuli
 from lgp import cli
+from lgp.planner.design import check_approach_height
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
 from lgp.progress import Progress
@@ -71,15 +72,14 @@ def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_thre
 
 
 def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
-               slices_per_phase: int | None = None) -> str:
+               slices_per_phase: int | None = None, design=None) -> str:
     """The cache key of one trial's effort table: the trial file, M, the seed, the
     planner's design (approach height, slices per phase) and effort_key_inputs()."""
-    from lgp.planner import APPROACH, SLICES_PER_PHASE, check_design
+    from lgp.planner import Design
 
-    h, S = check_design(APPROACH if approach_height is None else approach_height,
-                        SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase)
-    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=h,
-                     slices_per_phase=S, **effort_key_inputs())
+    design = Design.of(design, approach_height, slices_per_phase)
+    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=design.approach_height,
+                     slices_per_phase=design.slices_per_phase, **effort_key_inputs())
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
@@ -94,18 +94,17 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
     """
     from models.effort import effort_of_unit, effort_table, effort_units
 
-    from lgp.planner import APPROACH, SLICES_PER_PHASE
+    from lgp.planner import Design
 
-    design = {"approach_height": APPROACH if approach_height is None else approach_height,
-              "slices_per_phase": SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase}
-    keys = {t.id: effort_key(t, samples, seed, **design) for t in trials}
+    design = Design.of(None, approach_height, slices_per_phase)  # checked once for the stage
+    keys = {t.id: effort_key(t, samples, seed, design=design) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
         cached = cache.get("effort", keys[t.id])
         if cached is not None:
             tables[t.id] = cached
     todo = [t for t in trials if t.id not in tables]
-    units = [u for t in todo for u in effort_units(t, samples, seed, **design)]
+    units = [u for t in todo for u in effort_units(t, samples, seed, design=design)]
     owner = [u[0] for u in units]
     pending = Counter(t.id for t in owner)
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
@@ -395,7 +394,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
     p.add_argument("--fall-rule", default="horizontal", help="a run falls by horizontal (default) or 3d displacement")
     p.add_argument("--fall-threshold", type=float, default=0.25, help="fall threshold in units of d (default %(default)s)")
-    p.add_argument("--approach-height", type=cli.approach_height, default=None,
+    p.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=None,
                    help="effort: vertical approach/retreat leg (m) at every grasp and place; 0 = a clearance constraint "
                         "instead (default 0.05; docs/effort.md)")
     p.add_argument("--slices", type=cli.positive_int, default=None,

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import stimuli
-from lgp.planner import APPROACH, APPROACH_TIME, PHASE_DURATION, SLICES_PER_PHASE, plan
+from lgp.planner import APPROACH, APPROACH_TIME, PHASE_DURATION, SLICES_PER_PHASE, Design, plan
 from lgp.scene import OVERLAP_TOLERANCE
 from models.effort import BLOCK_MASS, effort_of_unit, effort_units, kinetic_energy, path_kinetic_energy, plan_of_sample
 
@@ -36,7 +36,7 @@ def test_slices_per_phase_sets_the_time_step_of_the_plan():
 def test_units_carry_the_design_to_the_workers():
     trial = stimuli.load_trial("9E")  # fixed A: one unit
     (unit,) = effort_units(trial, 3, 0, approach_height=0.02, slices_per_phase=40)
-    assert unit[3] == (0.02, 40)
+    assert unit[3] == Design(0.02, 40) and unit[3].approach_height == 0.02 and unit[3].slices_per_phase == 40
     row = effort_of_unit(unit)
     assert row["effort"] == pytest.approx(kinetic_energy(plan_of_sample(trial, 0, 0, approach_height=0.02,
                                                                          slices_per_phase=40)), rel=1e-9)
@@ -261,9 +261,9 @@ def test_clearance_design_lifts_a_tower_clear_with_less_effort_than_the_legs():
 
 def test_face_gaps_of_aligned_boxes_are_minus_their_penetration():
     # For boxes of the same yaw, the carried one not lower, the largest gap beyond a
-    # face plane of the other (lgp.planner._face_gaps, on corners) is minus the
+    # face plane of the other (lgp.planner.clearance.face_gaps, on corners) is minus the
     # separating-axis depth of lgp.scene.penetration, overlapping or apart.
-    from lgp.planner import _box_corners, _face_gaps, _Obstacle
+    from lgp.planner.clearance import Obstacle as _Obstacle, box_corners as _box_corners, face_gaps as _face_gaps
     from lgp.scene import Block, penetration
 
     rng = np.random.default_rng(3)
@@ -281,12 +281,12 @@ def test_face_gaps_of_aligned_boxes_are_minus_their_penetration():
 
 
 def test_separation_of_boxes_of_any_yaws_is_minus_their_penetration():
-    # The verdict "entered" of the design without legs (lgp.planner._separation: the
+    # The verdict "entered" of the design without legs (lgp.planner.clearance.separation: the
     # largest gap beyond a face plane of either box) agrees with the separating-axis
     # depth of lgp.scene.penetration for blocks of different yaws, apart or
     # overlapping, at any height; with the obstacle's planes alone a 45-degree block
     # 1 mm away read as 8 mm inside.
-    from lgp.planner import _box_corners, _Obstacle, _separation
+    from lgp.planner.clearance import Obstacle as _Obstacle, box_corners as _box_corners, separation as _separation
     from lgp.scene import Block, penetration
 
     def rotation(yaw):
@@ -325,13 +325,14 @@ def test_the_design_without_legs_fails_loudly_when_its_reference_plan_fails(monk
     import dataclasses
 
     import lgp.planner as planner
+    from lgp.planner import turns as quarter_turns
 
-    real = planner._solve
+    real = quarter_turns.solve
 
     def failing(*args, **kwargs):
         komo, result, turns = real(*args, **kwargs)
-        return komo, dataclasses.replace(result, success=False, status="SolutionFound (snopt info 41)"), turns
+        return komo, dataclasses.replace(result, success=False, solver_info=41), turns
 
-    monkeypatch.setattr(planner, "_solve", failing)
+    monkeypatch.setattr(quarter_turns, "solve", failing)
     with pytest.raises(planner.PlanningError, match="reference plan with 0.05 m legs"):
         plan_of_sample(stimuli.load_trial("10E"), 0, 0, approach_height=0.0)  # not _layout_0_plan's cached plan

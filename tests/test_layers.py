@@ -24,7 +24,7 @@ LAYERS = [
     ("arm", ["lgp.arm"], None),
     ("KOMO", ["lgp.komo", "lgp.komo.*"], None),
     # the package lgp re-exports lgp.plan (lazily), so it sits with the planner
-    ("planner", ["lgp.planner", "lgp"], None),
+    ("planner", ["lgp.planner", "lgp.planner.*", "lgp"], None),
     ("models", ["models", "models.*"], None),
     # analysis imports nothing of the physics: no stimuli, scene, planner or models
     ("analysis", ["analysis", "analysis.*"], ["ground"]),

@@ -15,11 +15,12 @@ Each action takes one phase of 1 s (lgp.planner.PHASE_DURATION). The measure is
 `kinetic_energy_by_action`), computed here from the Plan's block trajectories
 p_WB; the planner only produces trajectories.
 
-Two modelling choices the paper leaves open are parameters of every function
-here (and of the planner): `approach_height` (m; default lgp.planner.APPROACH =
-0.05, the vertical leg at every grasp and place; 0 plans each carry with a
-clearance constraint instead) and `slices_per_phase` (default
-lgp.planner.SLICES_PER_PHASE = 20). docs/effort.md says how much each moves effort.
+Two modelling choices the paper leaves open make the planner's motion design
+(lgp.planner.Design), a parameter of every function here: `approach_height` (m;
+default lgp.planner.APPROACH = 0.05, the vertical leg at every grasp and place; 0
+plans each carry with a clearance constraint instead) and `slices_per_phase`
+(default lgp.planner.SLICES_PER_PHASE = 20), given as ``design=Design(h, S)`` or
+as the two keywords. docs/effort.md says how much each moves effort.
 
 The command line (the table of docs/effort.md) is models/effort/__main__.py,
 kept out of this module so that the effort cache key (lgp.cache.modules_digest of
@@ -37,7 +38,7 @@ import pandas as pd
 
 from lgp.paper import SAMPLES
 from lgp.executor import borrowed
-from lgp.planner import APPROACH, PHASE_DURATION, SLICES_PER_PHASE, PlanningError, check_design, plan
+from lgp.planner import PHASE_DURATION, Design, PlanningError, plan
 
 COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "status"]
 #: Mass of a unit block [paper: "a unit mass to a unit block"], kg.
@@ -116,14 +117,15 @@ def plan_of_sample(trial, seed: int, sample: int, **planner_options):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): {e}", e.action) from e
 
 
-def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float = APPROACH,
-                     slices_per_phase: int = SLICES_PER_PHASE) -> dict:
+def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float | None = None,
+                     slices_per_phase: int | None = None, design: Design | None = None) -> dict:
     """One row of the effort table: plan the sample's layout, integrate kinetic energy.
 
-    `approach_height` (m) and `slices_per_phase` are the planner's (lgp.planner.plan).
+    The motion design, `design` or its two values (None: the default), is the
+    planner's (lgp.planner.plan).
     Raises PlanningError naming the trial, the sample and the failing action.
     """
-    result = plan_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    result = plan_of_sample(trial, seed, sample, design=Design.of(design, approach_height, slices_per_phase))
     effort = kinetic_energy(result)
     if not np.isfinite(effort):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): effort is {effort}")
@@ -151,13 +153,13 @@ class EffortResult(NamedTuple):
         return f"EffortResult(mean={self.mean:.6g} J*s over {len(self.table)} layouts)"
 
 
-def effort_units(trial, samples: int, seed: int, *, approach_height: float = APPROACH,
-                 slices_per_phase: int = SLICES_PER_PHASE) -> list[tuple]:
+def effort_units(trial, samples: int, seed: int, *, approach_height: float | None = None,
+                 slices_per_phase: int | None = None, design: Design | None = None) -> list[tuple]:
     """The work units of a trial's effort, (trial, seed, sample, design), one per
     layout that needs planning: every sample, or only sample 0 when A is not
-    random. `design` = (approach_height, slices_per_phase), carried in the unit so
+    random. `design` (an lgp.planner.Design, checked once here), carried in the unit so
     an executor's workers plan with the same choices."""
-    design = check_design(approach_height, slices_per_phase)
+    design = Design.of(design, approach_height, slices_per_phase)
     return [(trial, seed, i, design) for i in (range(samples) if trial.initial.is_random else [0])]
 
 
@@ -165,8 +167,7 @@ def effort_of_unit(unit) -> dict:
     """effort_of_sample for one unit of `effort_units` (what executors map); a
     3-tuple (trial, seed, sample) plans with the default design."""
     trial, seed, sample, *rest = unit
-    approach_height, slices_per_phase = rest[0] if rest else (APPROACH, SLICES_PER_PHASE)
-    return effort_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    return effort_of_sample(trial, seed, sample, design=rest[0] if rest else Design())
 
 
 def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
@@ -179,7 +180,8 @@ def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
 
 def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
                     progress: Callable[[int, int], None] | None = None, executor=None, *,
-                    approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE) -> EffortResult:
+                    approach_height: float | None = None, slices_per_phase: int | None = None,
+                    design: Design | None = None) -> EffortResult:
     """Physical effort of `trial` over `samples` random layouts: an `EffortResult`
     with ``.mean`` (J s) and ``.table`` (one row per layout: trial, sample, effort,
     n_actions, solve_time, solver, status).
@@ -190,9 +192,10 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
     warm workers across trials). `progress(done, total)` is called after each
     sample. A trial whose layout is not random (a fixed structure in A) is planned
     once and its row repeated: every sample would draw the same layout.
-    `approach_height` (m; 0.05 default, 0 = clearance constraint instead of the
-    legs) and `slices_per_phase` (20 default) are passed to the planner
-    (lgp.planner.plan; docs/effort.md, "Modelling choices").
+    The motion design, `design` or `approach_height` (m; 0.05 default, 0 =
+    clearance constraint instead of the legs) and `slices_per_phase` (20
+    default), is checked once and passed to the planner (lgp.planner.plan;
+    docs/effort.md, "Modelling choices").
     """
     if isinstance(trial, str):
         import stimuli
@@ -200,7 +203,7 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
         trial = stimuli.load_trial(trial)
     if samples < 1:
         raise ValueError(f"physical_effort needs samples >= 1, got {samples}")
-    units = effort_units(trial, samples, seed, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    units = effort_units(trial, samples, seed, design=Design.of(design, approach_height, slices_per_phase))
     done = 0
 
     def record(_, row):
