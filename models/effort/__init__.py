@@ -23,7 +23,7 @@ plans each carry with a clearance constraint instead) and `slices_per_phase`
 as the two keywords. docs/effort.md says how much each moves effort.
 
 The command line (the table of docs/effort.md) is models/effort/__main__.py,
-kept out of this module so that the effort cache key (lgp.cache.modules_digest of
+kept out of this module so that the effort cache key (lgp.app.cache.modules_digest of
 ``models.effort``) does not hash the CLI or its argument helpers::
 
     python -m models.effort --samples 30 --jobs 2 --out effort_samples.csv
