@@ -39,6 +39,7 @@ from lgp.app.manifest import TimedCache, clear_previous, expand, file_sha256, in
 from lgp.app.page import Stopwatch, write_index
 from lgp.app.replays import write_replays
 from lgp.app import sensitivity
+from lgp.errors import InputError
 
 PROG = "python -m lgp.reproduce"
 
@@ -495,7 +496,7 @@ def run(args, argv=None) -> int:
 
         human = load_human_data(args.human_data)
         if not {t.id for t in trials} >= set(TRIAL_IDS):
-            raise ValueError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
+            raise InputError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     removed = clear_previous(out)  # this folder describes this run only (lgp/app/manifest.py)

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from lgp.errors import InputError
 from lgp.paper import BLOCK_SIZE as d
 from lgp.paper import BUILD_SITE
 
@@ -88,7 +89,7 @@ def structure(kind: str, rng: np.random.Generator) -> tuple[list[tuple[float, fl
                 dy += rng.uniform(-d / 6, d / 6)
         text = f"random stack of {len(cells)} blocks in {cols} column{'s' if cols > 1 else ''}"
     else:
-        raise ValueError(f"unknown structure kind {kind!r} (known: {', '.join(KINDS)})")
+        raise InputError(f"unknown structure kind {kind!r} (known: {', '.join(KINDS)})")
     return [(x, y, d / 2 + level * d) for x, y, level in cells], text
 
 
@@ -128,7 +129,7 @@ def generate(directory: str | Path, count: int, seed: int = 0, engine: str | Non
     from models.risk.core import UnstableSceneError
 
     if count < 1:
-        raise ValueError(f"count must be >= 1, got {count}")
+        raise InputError(f"count must be >= 1, got {count}")
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     paths = []

@@ -196,6 +196,30 @@ def test_a_bug_keeps_its_traceback_and_a_known_error_is_one_line(capsys):
                                        "(and 1 more line(s); --debug shows all)\n")
 
 
+def test_a_plain_value_error_from_the_projects_own_code_is_a_bug_with_its_traceback(capsys):
+    """A ValueError raised in project code by a mistake (a tuple unpacked wrongly:
+    an effort unit with two fields instead of three) is a bug, not bad input: it
+    keeps its traceback. A check of input raises a class of the project."""
+    from lgp.errors import InputError
+    from lgp.executor import executor_for
+    from models.effort import effort_of_unit
+
+    def bug(argv):
+        effort_of_unit(("7H", 0))  # not enough values to unpack, inside models/effort
+
+    with pytest.raises(ValueError, match="not enough values to unpack"):
+        cli.run_cli(bug, [], prog="p")
+    assert capsys.readouterr().err == ""
+
+    def check(argv):
+        executor_for(0)  # the project's own check of a count: InputError
+
+    with pytest.raises(InputError):
+        executor_for(0)
+    assert cli.run_cli(check, [], prog="p") == 1
+    assert capsys.readouterr().err == "p: error: jobs must be >= 1, got 0\n"
+
+
 def test_debug_flag_and_environment_variable_show_the_traceback(capsys, monkeypatch):
     from stimuli import StimulusError
 

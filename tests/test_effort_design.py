@@ -318,6 +318,29 @@ def test_separation_of_boxes_of_any_yaws_is_minus_their_penetration():
     assert gap == pytest.approx(0.001, abs=1e-9) == pytest.approx(-penetration(moving, other), abs=1e-9)
 
 
+def test_snopts_cannot_improve_is_usable_only_without_legs_and_read_from_its_code():
+    # Without legs SNOPT's info 41 ("cannot be improved") at a feasible point is
+    # accepted (a degenerate active set, lgp.planner.clearance.usable); the decision
+    # reads the typed code, and the status column reads as solved only for kSolutionFound.
+    import dataclasses
+
+    from pydrake.solvers import SolutionResult
+
+    from lgp.planner.clearance import usable
+    from models.effort import converged
+
+    result = _layout_0_plan("9E", APPROACH).komo
+    assert usable(result, APPROACH) and result.solver == "snopt"
+    stalled = dataclasses.replace(result, success=False, solution_result=SolutionResult.kSolverSpecificError, solver_info=41)
+    assert usable(stalled, 0.0) and not usable(stalled, APPROACH)
+    assert not usable(dataclasses.replace(stalled, solver_info=42), 0.0)
+    assert not usable(dataclasses.replace(stalled, solver="ipopt"), 0.0)  # IPOPT's code 41 is not SNOPT's
+    assert not usable(dataclasses.replace(result, max_violation=1e-5), APPROACH)
+    statuses = [result.status, stalled.status, "kSolutionFound", "nothing to move", "failed"]
+    assert statuses[:2] == ["kSolutionFound (snopt info 1)", "kSolverSpecificError (snopt info 41)"]
+    assert list(converged(statuses)) == [True, False, True, True, False]
+
+
 def test_the_design_without_legs_fails_loudly_when_its_reference_plan_fails(monkeypatch):
     # The design without legs starts from the legs plan; if that plan is not usable
     # (here: SNOPT's info 41, forced), planning raises and says so, instead of

@@ -29,6 +29,7 @@ import pandas as pd
 
 from lgp.app.cache import Cache, input_key, modules_digest
 from lgp.app.replays import page_files
+from lgp.errors import InputError
 
 #: |(H - E) / E| below this is a solver-level tie of effort (docs/results.md, pair 6).
 EFFORT_TIE = 1e-4
@@ -395,7 +396,7 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
         s = effort_samples[effort_samples["trial"] == trial.id]
         r = risk[risk["trial"] == trial.id]
         if not len(s) or not len(r):
-            raise ValueError(f"results page: trial {trial.id} has no effort or no risk rows")
+            raise InputError(f"results page: trial {trial.id} has no effort or no risk rows")
         cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out))
     nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
     title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"

@@ -37,10 +37,16 @@ import numpy as np
 import pandas as pd
 
 from lgp.paper import SAMPLES
+from lgp.errors import InputError
 from lgp.executor import borrowed
 from lgp.planner import PHASE_DURATION, Design, PlanningError, plan
 
 COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "status"]
+#: Column status of a layout whose plan needs no motion (A is already B).
+NOTHING_TO_MOVE = "nothing to move"
+#: Column status of a solved plan starts with this: Drake's SolutionResult
+#: kSolutionFound by name, as lgp.komo.KomoResult.status writes it.
+SOLUTION_FOUND = "kSolutionFound"
 #: Mass of a unit block [paper: "a unit mass to a unit block"], kg.
 BLOCK_MASS = 1.0
 
@@ -137,8 +143,17 @@ def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float | 
         "n_actions": len(result.actions),
         "solve_time": result.planning_time,  # wall-clock s, assignment to KOMO
         "solver": komo.solver if komo else "none",
-        "status": komo.status if komo else "nothing to move",
+        "status": komo.status if komo else NOTHING_TO_MOVE,
     }
+
+
+def converged(status) -> pd.Series:
+    """Per row of an effort table's column status (text, as the table and its CSV
+    hold it): whether the layout's plan was solved (KOMO's SolutionResult is
+    kSolutionFound) or needed no motion. The in-memory verdict is typed
+    (KomoResult.solution_result, .solver_info); this is the one reader of its text."""
+    text = pd.Series(status).astype(str)
+    return text.str.startswith(SOLUTION_FOUND) | (text == NOTHING_TO_MOVE)
 
 
 class EffortResult(NamedTuple):
@@ -202,7 +217,7 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
 
         trial = stimuli.load_trial(trial)
     if samples < 1:
-        raise ValueError(f"physical_effort needs samples >= 1, got {samples}")
+        raise InputError(f"physical_effort needs samples >= 1, got {samples}")
     units = effort_units(trial, samples, seed, design=Design.of(design, approach_height, slices_per_phase))
     done = 0
 

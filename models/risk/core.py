@@ -22,6 +22,7 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 import pandas as pd
 
+from lgp.errors import InputError
 from lgp.executor import borrowed, default_jobs
 from lgp.geometry import digest
 from lgp.paper import N_SIMS, SIGMA_GRID
@@ -62,13 +63,13 @@ def _engine_name(engine: str | None, profile: str | None = None) -> str:
 def check_fall_rule(fall_rule: str, fall_threshold: float) -> tuple[str, float]:
     """(rule, threshold) checked: ValueError for an unknown rule or a threshold <= 0."""
     if fall_rule not in FALL_RULES:
-        raise ValueError(f"unknown fall rule {fall_rule!r}; known rules: {', '.join(FALL_RULES)}")
+        raise InputError(f"unknown fall rule {fall_rule!r}; known rules: {', '.join(FALL_RULES)}")
     try:
         threshold = float(fall_threshold)
     except (TypeError, ValueError):
-        raise ValueError(f"fall threshold must be a number (units of the block size d), got {fall_threshold!r}") from None
+        raise InputError(f"fall threshold must be a number (units of the block size d), got {fall_threshold!r}") from None
     if not threshold > 0 or not np.isfinite(threshold):
-        raise ValueError(f"fall threshold must be > 0 (units of the block size d), got {fall_threshold!r}")
+        raise InputError(f"fall threshold must be > 0 (units of the block size d), got {fall_threshold!r}")
     return fall_rule, threshold
 
 
@@ -101,7 +102,7 @@ def apply_fall_rule(runs: pd.DataFrame, fall_rule: str, fall_threshold: float, d
     equals the new one's, e.g. any two thresholds <= 0.5 d."""
     fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
     if "fall_threshold" in runs and (runs["fall_threshold"].map(fall_certain) != fall_certain(fall_threshold)).any():
-        raise ValueError(f"runs simulated with early stops for another fall threshold cannot be re-judged at {fall_threshold:g} d")
+        raise InputError(f"runs simulated with early stops for another fall threshold cannot be re-judged at {fall_threshold:g} d")
     column = "max_displacement" if fall_rule == "horizontal" else "max_displacement_3d"
     return runs.assign(fell=runs[column] > fall_threshold * d, fall_rule=fall_rule, fall_threshold=fall_threshold)
 
@@ -211,10 +212,10 @@ def run_grid(
     fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
     sigmas = [float(s) for s in sigmas]
     if n_sims < 1:
-        raise ValueError(f"need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
+        raise InputError(f"need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
     for s in sigmas:
         if not s >= 0:
-            raise ValueError(f"sigma must be >= 0 (a fraction of the block size), got {s}")
+            raise InputError(f"sigma must be >= 0 (a fraction of the block size), got {s}")
     ids = list(trial_ids) if trial_ids is not None else [s.label for s in scenes]
     for scene in scenes:
         check_stable(scene, name, fall_rule=fall_rule, fall_threshold=fall_threshold)
@@ -353,7 +354,7 @@ def _as_scenes(items) -> tuple[list[str], list[Scene]]:
                 ids.append(str(it.id))
                 scenes.append(it.target)
     if len(set(ids)) != len(ids):
-        raise ValueError(f"trial ids must be unique, got {ids}")
+        raise InputError(f"trial ids must be unique, got {ids}")
     return ids, scenes
 
 
