@@ -52,6 +52,49 @@ def test_a_bad_approach_height_is_refused_naming_the_rule(bad):
         plan(trial.sample_initial(np.random.default_rng(0)), trial.target, approach_height=bad)
 
 
+def test_one_rule_for_the_design_in_the_planner_the_units_the_command_lines_and_the_key(capsys):
+    # The approach height is in [0, 0.5) m and the slices an integer >= 1, refused
+    # alike by Design (the planner, the effort units, the cache key) and by every
+    # command line, whose check is Design's own (lgp.cli.checked).
+    import argparse
+
+    from lgp import cli
+    from lgp.planner import MAX_APPROACH_HEIGHT, DesignError, check_approach_height
+    from lgp.reproduce import effort_key, parse_args
+
+    assert MAX_APPROACH_HEIGHT == 0.5
+    assert Design(0.0, 1) == Design("0", 1.0) and Design(0.4999, 40).legs and not Design(0.0).legs
+    trial = stimuli.load_trial("9E")
+    for bad in (0.5, 0.7, -1e-9):
+        with pytest.raises(DesignError, match=r"approach height .*\[0, 0.5\)"):
+            Design(bad)
+        with pytest.raises(DesignError):
+            effort_units(trial, 3, 0, approach_height=bad)
+        with pytest.raises(DesignError):
+            effort_key(trial, 3, 0, bad)
+        with pytest.raises(argparse.ArgumentTypeError, match=r"\[0, 0.5\)"):
+            cli.checked(check_approach_height, "approach height")(str(bad))
+        with pytest.raises(SystemExit):
+            parse_args([f"--approach-height={bad}"])
+        assert "[0, 0.5)" in capsys.readouterr().err
+    for bad in (0, 2.5, True):
+        with pytest.raises(DesignError, match="slices_per_phase"):
+            Design(APPROACH, bad)
+    with pytest.raises(TypeError):
+        Design.of(Design(), approach_height=0.02)  # a design or its values, not both
+
+
+def test_the_design_and_the_planners_entry_points_load_no_drake():
+    # Command lines refuse a bad design, and cache keys are computed, before Drake loads.
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom lgp.planner import Design, Plan, plan, APPROACH\nDesign(0.02, 40)\n"
+            "assert 'pydrake' not in sys.modules, sorted(m for m in sys.modules if 'drake' in m)\n"
+            "from lgp.planner import declare\nassert 'pydrake' in sys.modules\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
 def test_the_design_is_part_of_the_effort_cache_key():
     from lgp.reproduce import effort_key
 
