@@ -87,6 +87,17 @@ def approach_height(text: str) -> float:
     return value
 
 
+def positive_number(text: str) -> float:
+    """A finite number > 0 (a budget of seconds)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
+
+
 def trial_id(text: str) -> str:
     """A trial id, case-insensitive, returned in its canonical spelling: the paper's
     1E ... 12H, or another <pair><E|H> (a trial file the loader then looks for)."""
@@ -100,6 +111,22 @@ def trial_id(text: str) -> str:
 def trial_id_or_all(text: str) -> str:
     """A trial id (see `trial_id`) or the word ``all``."""
     return "all" if str(text).strip().lower() == "all" else trial_id(text)
+
+
+def one_of(names: Sequence[str], what: str) -> Callable[[str], str]:
+    """A validator for a word from `names`, case-insensitive (``3D`` is ``3d``), returned
+    in its listed spelling; anything else is refused as ``unknown <what> ...``
+    (argparse prefixes ``argument --flag:``). E.g. ``type=one_of(FALL_RULES, "fall rule")``."""
+    names = tuple(names)
+
+    def check(text: str) -> str:
+        for name in names:
+            if str(text).strip().lower() == name.lower():
+                return name
+        raise argparse.ArgumentTypeError(f"unknown {what} {text!r}; known {what}s: {', '.join(names)} (case-insensitive)")
+
+    check.__name__ = what.replace(" ", "_")
+    return check
 
 
 def _nearest_existing(path: Path) -> Path:

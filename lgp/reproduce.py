@@ -1,10 +1,10 @@
 """The paper's pipeline end to end: stimuli -> physical effort -> physical risk ->
-(analysis, when human data are given) -> tidy CSVs, figures, report.md and the results page index.html (lgp/page.py).
+(analysis, when human data are given) -> tidy CSVs, figures, report.md and the results page index.html (lgp/app/page.py).
 
     python -m lgp.reproduce --quick                 # a small version, about a minute
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
-    python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/sensitivity.py)
+    python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/app/sensitivity.py)
     python -m lgp.reproduce --fall-rule 3d --fall-threshold 0.1   # the risk model with another fall rule
     python -m lgp.reproduce --approach-height 0 --slices 40       # effort with another motion design (docs/effort.md)
 
@@ -31,12 +31,14 @@ import stimuli
 from lgp import cli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
-from lgp.progress import Progress
-from lgp.progress import log as progress_log
-from lgp.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
-from lgp.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
-from lgp.page import Stopwatch, write_index, write_replays
-from lgp import sensitivity
+from lgp.app.progress import Progress
+from lgp.app.progress import log as progress_log
+from lgp.app.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
+from lgp.app.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
+from lgp.app.page import Stopwatch, write_index
+from lgp.app.replays import write_replays
+from lgp.app import sensitivity
+from lgp.app.sensitivity import planner_choice
 
 PROG = "python -m lgp.reproduce"
 
@@ -71,21 +73,26 @@ def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_thre
 
 
 def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
-               slices_per_phase: int | None = None) -> str:
+               slices_per_phase: int | None = None, planner: str = "paper", budget=None) -> str:
     """The cache key of one trial's effort table: the trial file, M, the seed, the
-    planner's design (approach height, slices per phase) and effort_key_inputs()."""
+    planner's design (approach height, slices per phase), for planner="search"
+    the planner and its budget (lgp.search.Budget), and effort_key_inputs()."""
     from lgp.planner import APPROACH, SLICES_PER_PHASE, check_design
+    from lgp.search import Budget, check_planner
 
     h, S = check_design(APPROACH if approach_height is None else approach_height,
                         SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase)
+    searched = {"planner": planner, "budget": repr(budget or Budget())} if check_planner(planner) == "search" else {}
     return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=h,
-                     slices_per_phase=S, **effort_key_inputs())
+                     slices_per_phase=S, **searched, **effort_key_inputs())
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
-                  slices_per_phase: int | None = None, log: bool = True) -> pd.DataFrame:
+                  slices_per_phase: int | None = None, log: bool = True, planner: str = "paper",
+                  budget=None) -> pd.DataFrame:
     """Per (trial, sample) effort, one cached file per trial (and design: the
-    planner's `approach_height` and `slices_per_phase`, defaults when None).
+    planner's `approach_height` and `slices_per_phase`, defaults when None; the
+    `planner`, "paper" or "search" with its `budget`).
 
     The layouts of every uncached trial are one stream of work units on the run's
     one executor (warm workers plan across trial boundaries); a trial's file is
@@ -98,6 +105,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
 
     design = {"approach_height": APPROACH if approach_height is None else approach_height,
               "slices_per_phase": SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase}
+    if planner != "paper":
+        design |= {"planner": planner, "budget": budget}
     keys = {t.id: effort_key(t, samples, seed, **design) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
@@ -190,15 +199,6 @@ def check_targets(trials, engine: str | None, cache: Cache, fall_rule: str = "ho
             problems.append(str(df["problem"].iloc[0]))
     if problems:
         raise UnstableSceneError("; ".join(problems))
-
-
-def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
-    order = {t.id: i for i, t in enumerate(trials)}
-    g = samples.groupby("trial")["effort"]
-    df = pd.DataFrame({"effort": g.mean(), "effort_sd": g.std(ddof=1), "samples": g.size()}).reset_index()
-    df["pair"] = df["trial"].map({t.id: t.pair for t in trials}).astype("Int64")  # empty for a trial of no pair
-    df["level"] = df["trial"].map({t.id: t.level for t in trials})
-    return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]
 
 
 def kappa_range(E_e: float, R_e: float, E_h: float, R_h: float) -> str:
@@ -333,6 +333,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), "
         f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}, "
         f"effort planned with {_design_text(getattr(args, 'approach_height', None), getattr(args, 'slices', None))}"
+        + (f", planner search ({args.budget})" if getattr(args, "planner", "paper") == "search" else "")
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
         f"Risk engine: {engine or args.engine or 'default'}.",
         compute_text,
@@ -409,6 +410,13 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "instead (default 0.05; docs/effort.md)")
     p.add_argument("--slices", type=cli.positive_int, default=None,
                    help="effort: KOMO slices per 1 s phase (default 20; docs/effort.md, time discretisation)")
+    p.add_argument("--planner", type=cli.one_of(("paper", "search"), "planner"), default="paper",
+                   help="effort: paper (the paper's pipeline, default) or search (best-first over skeletons, lgp.search; "
+                        "docs/effort.md)")
+    p.add_argument("--budget-solves", type=cli.positive_int, default=None,
+                   help="--planner search: at most this many KOMO solves per layout (default 3)")
+    p.add_argument("--budget-seconds", type=cli.positive_number, default=None,
+                   help="--planner search: at most this many seconds per layout (default 120)")
     p.add_argument("--jobs", type=cli.positive_int, default=default_jobs(),
                    help="processes, or LocalCluster workers with --scheduler local-dask, >= 1 (default: all cores, %(default)s here)")
     p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
@@ -420,7 +428,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=cli.positive_int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
-    p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/build_stage.py)")
+    p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/app/build_risk.py)")
     p.add_argument("--build-sigmas", type=cli.sigma, nargs="+", help="noise levels of --build-risk in (0, 1] (default 0.065 0.1)")
     p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
@@ -438,6 +446,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         sensitivity.check_arguments(args)
     except ValueError as e:
         p.exit(2, f"{p.prog}: error: {e}\n")
+    if args.planner != "search" and (args.budget_solves or args.budget_seconds):
+        p.error("--budget-solves and --budget-seconds apply to --planner search only")
+    args.budget = None
+    if args.planner == "search":
+        from lgp.search import Budget
+
+        args.budget = Budget(solves=args.budget_solves or Budget().solves, seconds=args.budget_seconds or Budget().seconds)
     if args.risk_measure and not (args.build_risk and args.human_data):
         p.error("--risk-measure needs --build-risk and --human-data")
     if args.per_participant_sigma and not args.human_data:
@@ -507,7 +522,7 @@ def run(args, argv=None) -> int:
             raise ValueError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    removed = clear_previous(out)  # this folder describes this run only (lgp/manifest.py)
+    removed = clear_previous(out)  # this folder describes this run only (lgp/app/manifest.py)
     if removed:
         _log(f"removed the outputs of an earlier run from {out}: {', '.join(removed)} (the cache is kept)")
     cache = TimedCache(out / "cache", enabled=not args.no_cache)
@@ -523,9 +538,11 @@ def run(args, argv=None) -> int:
         with cli.deferred_interrupt():  # Drake loads here; a Ctrl-C meanwhile waits until it has
             import models.effort  # noqa: F401
             import models.risk  # noqa: F401
+        from models.effort import summarise_effort
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache,
-                                       approach_height=args.approach_height, slices_per_phase=args.slices)
+                                       approach_height=args.approach_height, slices_per_phase=args.slices,
+                                       **planner_choice(args))
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
@@ -537,16 +554,16 @@ def run(args, argv=None) -> int:
         if args.sensitivity:
             clock.lap("sensitivity")
         if args.build_risk:
-            from lgp import build_stage
+            from lgp.app import build_risk
 
-            stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
+            stages = build_risk.build_risk_tables(trials, args.build_sigmas or build_risk.BUILD_SIGMAS, args.n_sims,
                                                    args.samples, args.seed, args.engine, executor, cache,
                                                    fall_rule=args.fall_rule, fall_threshold=args.fall_threshold,
                                                    approach_height=args.approach_height)
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,
-            planner_options={"approach_height": args.approach_height, "slices_per_phase": args.slices})
+            planner_options={"approach_height": args.approach_height, "slices_per_phase": args.slices, **planner_choice(args)})
         clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
@@ -554,11 +571,11 @@ def run(args, argv=None) -> int:
     if replays:
         written += [Path(p) for p in replays.values()]
     sections, build = [], None
-    for s in sensitive:  # --sensitivity (lgp/sensitivity.py)
+    for s in sensitive:  # --sensitivity (lgp/app/sensitivity.py)
         written += s.files
         sections.append("\n".join(s.lines))
     if args.build_risk:
-        paths, section, build = build_stage.build_risk_outputs(stages, out, args.command)
+        paths, section, build = build_risk.build_risk_outputs(stages, out, args.command)
         written += paths
         sections.append(section)
     pairs, analysis = None, None
@@ -580,9 +597,9 @@ def run(args, argv=None) -> int:
                                 risk_measure=args.risk_measure)
         written += [Path(path) for path in analysis["files"]["path"]]
         if args.per_participant_sigma:
-            from lgp import build_stage
+            from lgp.app import build_risk
 
-            paths, section = build_stage.participant_sigma_outputs(human, e_samples, r, out,
+            paths, section = build_risk.participant_sigma_outputs(human, e_samples, r, out,
                                                                    args.participant_betas, args.command)
             written += paths
             sections.append(section)
@@ -599,7 +616,7 @@ def run(args, argv=None) -> int:
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None,
                           time.perf_counter() - t0, software, compute)
     if sections:
-        from lgp.build_stage import append_report
+        from lgp.app.build_risk import append_report
 
         append_report(report, sections)
     written.append(report)
@@ -614,7 +631,7 @@ def run(args, argv=None) -> int:
                   "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
                   "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
                   "sensitivity": getattr(args, "sensitivity", None), "approach_height": args.approach_height,
-                  "slices_per_phase": args.slices}
+                  "slices_per_phase": args.slices, **{k: repr(v) if k == "budget" else v for k, v in planner_choice(args).items()}}
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
     files = list(dict.fromkeys(expand(written)))

@@ -495,6 +495,25 @@ def _check_events(where: str, events) -> None:
             stack.pop()
 
 
+def _at(mark) -> str:
+    return f"line {mark.line + 1}, column {mark.column + 1}"
+
+
+def yaml_error_line(e: yaml.YAMLError) -> str:
+    """A YAML error as one line that keeps its position ("not valid YAML at line 8,
+    column 11: mapping values are not allowed here"); PyYAML's own text spreads the
+    position over further lines, which a one-line CLI error would cut off."""
+    problem = getattr(e, "problem", None)
+    mark = getattr(e, "problem_mark", None)
+    if not problem or mark is None:
+        return "not valid YAML: " + " ".join(str(e).split())
+    text = f"not valid YAML at {_at(mark)}: {problem}"
+    context, context_mark = getattr(e, "context", None), getattr(e, "context_mark", None)
+    if context:
+        text += f" ({context}" + (f" at {_at(context_mark)}" if context_mark is not None else "") + ")"
+    return text
+
+
 def _safe_load(text: str, where: str):
     """yaml.safe_load without anchors, aliases or duplicate keys; libyaml's C parser
     when present (a first pass over the parse events refuses them before anything
@@ -534,7 +553,7 @@ def load_file(path: str | Path, data: bytes | None = None) -> Trial:
     try:
         fields = _safe_load(text, str(path))
     except yaml.YAMLError as e:
-        raise StimulusError(f"{path}: not valid YAML: {e}") from None
+        raise StimulusError(f"{path}: {yaml_error_line(e)}") from None
     if not isinstance(fields, dict):
         raise StimulusError(f"{path}: a trial file is a mapping of fields (id, pair, level, initial, target, ...), got {type(fields).__name__}")
     trial = parse_trial(fields, path)

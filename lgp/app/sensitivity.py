@@ -37,7 +37,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from lgp.cache import Cache, input_key, write_csv_atomic
+from lgp.app.cache import Cache, input_key, write_csv_atomic
 from lgp.paper import BLOCK_SIZE, PAPER_SIGMA, RISK_PAIRS
 
 #: The noise levels of the risk section: the paper's sigma and the top of its grid.
@@ -58,6 +58,14 @@ EFFORT_QUICK_SAMPLES = 1
 DEFAULT_RISK_ENGINES = ("mujoco", "physx", "physx:game-defaults")
 
 COLUMNS = ["engine", "faithful", "fall_rule", "fall_threshold", "trial", "sigma", "risk", "falls", "n", "stands_unperturbed"]
+
+
+def planner_choice(args) -> dict:
+    """The planner of a run's effort (lgp.reproduce --planner): {} for the paper's
+    pipeline (its cache keys and manifests as before the search existed), else
+    {"planner": "search", "budget": lgp.search.Budget}."""
+    planner = getattr(args, "planner", "paper")
+    return {} if planner == "paper" else {"planner": planner, "budget": getattr(args, "budget", None)}
 
 
 @dataclass
@@ -337,13 +345,13 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
         t0 = time.perf_counter()
         try:
             table = ctx.effort_tables(ctx.trials, samples, args.seed, ctx.executor, ctx.cache,
-                                      approach_height=h, slices_per_phase=S)
+                                      approach_height=h, slices_per_phase=S, **planner_choice(args))
         except Exception:  # a trial the planner cannot do with this design: the others, one by one (cached ones at once)
             parts = []
             for t in ctx.trials:
                 try:
                     parts.append(ctx.effort_tables([t], samples, args.seed, ctx.executor, ctx.cache,
-                                                   approach_height=h, slices_per_phase=S))
+                                                   approach_height=h, slices_per_phase=S, **planner_choice(args)))
                 except Exception as e:  # said in the report and the table (effort NaN), not hidden
                     notes.append(f"{label}, {t.id}: {type(e).__name__}: {e}")
                     ctx.log(f"[sensitivity] effort, {label}, {t.id}: failed ({type(e).__name__})")

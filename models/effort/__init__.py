@@ -21,25 +21,30 @@ here (and of the planner): `approach_height` (m; default lgp.planner.APPROACH =
 clearance constraint instead) and `slices_per_phase` (default
 lgp.planner.SLICES_PER_PHASE = 20). docs/effort.md says how much each moves effort.
 
-Command line, the table of docs/effort.md::
+The command line (the table of docs/effort.md) is models/effort/__main__.py,
+kept out of this module so that the effort cache key (lgp.app.cache.modules_digest of
+``models.effort``) does not hash the CLI or its argument helpers::
 
     python -m models.effort --samples 30 --jobs 2 --out effort_samples.csv
     python -m models.effort 2E 2H --approach-height 0 --slices 40
 """
 from __future__ import annotations
 
-import sys
 from typing import Callable, NamedTuple
 
 import numpy as np
 import pandas as pd
 
-from lgp import cli
 from lgp.paper import SAMPLES
 from lgp.executor import borrowed
-from lgp.planner import APPROACH, PHASE_DURATION, SLICES_PER_PHASE, PlanningError, check_design, plan
+from lgp.planner import APPROACH, PHASE_DURATION, SLICES_PER_PHASE, PlanningError, check_design
+from lgp.search import Budget, check_planner, describe_search, plan
 
 COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "status"]
+#: planner="search" adds what the search found: the lower bound of the best
+#: unexplored branch (J s), the gap to the plan's effort, set-asides, KOMO solves,
+#: and the paper skeleton's effort on the same layout (empty when it has none).
+SEARCH_COLUMNS = COLUMNS + ["bound", "gap", "set_asides", "solves", "paper_effort"]
 #: Mass of a unit block [paper: "a unit mass to a unit block"], kg.
 BLOCK_MASS = 1.0
 
@@ -78,11 +83,23 @@ def kinetic_energy_by_action(plan, mass: float = BLOCK_MASS) -> list[float]:
     return out
 
 
+def cumulative_effort(plan) -> np.ndarray:
+    """Effort (J s) integrated from time 0 to each slice; the last entry is the plan's effort."""
+    v = np.stack([np.diff(p, axis=0) for p in plan.p_WB.values()]) / plan.tau  # (blocks, n-1, 3)
+    # The same rule as kinetic_energy, one slice interval at a time, so the last
+    # value equals kinetic_energy(plan) (checked in tests/test_view.py).
+    per_step = 0.5 * BLOCK_MASS * (v ** 2).sum(axis=(0, 2)) * plan.tau
+    return np.concatenate([[0.0], np.cumsum(per_step)])
+
+
 def describe(plan) -> str:
-    """The plan's action list with times and per-action energies, one line each, and its effort."""
+    """The plan's action list (its skeleton) with times and per-action energies, one
+    line each, and its effort; a searched plan also its bound and gap."""
     energies = kinetic_energy_by_action(plan) if plan.actions else []
     lines = [f"{k + 1:3d}  t = {k + 1:5.1f} s  {a}   E = {e:.4f} J s" for k, (a, e) in enumerate(zip(plan.actions, energies))]
     lines.append(f"physical effort: {kinetic_energy(plan):.4f} J s over {len(plan.actions)} actions")
+    if describe_search(plan):
+        lines.append(describe_search(plan))
     return "\n".join(lines)
 
 
@@ -108,18 +125,24 @@ def plan_of_sample(trial, seed: int, sample: int, **planner_options):
 
 
 def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float = APPROACH,
-                     slices_per_phase: int = SLICES_PER_PHASE) -> dict:
+                     slices_per_phase: int = SLICES_PER_PHASE, planner: str = "paper", budget: Budget | None = None) -> dict:
     """One row of the effort table: plan the sample's layout, integrate kinetic energy.
 
-    `approach_height` (m) and `slices_per_phase` are the planner's (lgp.planner.plan).
+    `approach_height` (m) and `slices_per_phase` are the planner's (lgp.planner.plan);
+    `planner` "paper" (default) or "search" (lgp.search, with `budget`).
     Raises PlanningError naming the trial, the sample and the failing action.
     """
-    result = plan_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    options = {"planner": planner, "budget": budget} if check_planner(planner) == "search" else {}
+    result = plan_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase, **options)
     effort = kinetic_energy(result)
     if not np.isfinite(effort):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): effort is {effort}")
     komo = result.komo
-    return {
+    searched = getattr(result, "search", None)
+    extra = {} if searched is None else {
+        "bound": searched.bound, "gap": searched.gap, "set_asides": searched.set_asides, "solves": searched.solves,
+        "paper_effort": searched.paper_effort}
+    return extra | {
         "trial": trial.id,
         "sample": sample,
         "effort": effort,
@@ -143,12 +166,15 @@ class EffortResult(NamedTuple):
 
 
 def effort_units(trial, samples: int, seed: int, *, approach_height: float = APPROACH,
-                 slices_per_phase: int = SLICES_PER_PHASE) -> list[tuple]:
+                 slices_per_phase: int = SLICES_PER_PHASE, planner: str = "paper", budget: Budget | None = None) -> list[tuple]:
     """The work units of a trial's effort, (trial, seed, sample, design), one per
     layout that needs planning: every sample, or only sample 0 when A is not
-    random. `design` = (approach_height, slices_per_phase), carried in the unit so
-    an executor's workers plan with the same choices."""
+    random. `design` = (approach_height, slices_per_phase), and for
+    planner="search" also ("search", budget), carried in the unit so an
+    executor's workers plan with the same choices."""
     design = check_design(approach_height, slices_per_phase)
+    if check_planner(planner) == "search":
+        design = (*design, planner, budget or Budget())
     return [(trial, seed, i, design) for i in (range(samples) if trial.initial.is_random else [0])]
 
 
@@ -156,21 +182,26 @@ def effort_of_unit(unit) -> dict:
     """effort_of_sample for one unit of `effort_units` (what executors map); a
     3-tuple (trial, seed, sample) plans with the default design."""
     trial, seed, sample, *rest = unit
-    approach_height, slices_per_phase = rest[0] if rest else (APPROACH, SLICES_PER_PHASE)
-    return effort_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    approach_height, slices_per_phase, *search = rest[0] if rest else (APPROACH, SLICES_PER_PHASE)
+    planner, budget = search if search else ("paper", None)
+    return effort_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase,
+                            planner=planner, budget=budget)
 
 
 def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
     """The tidy (trial, sample) table from the rows of a trial's units (any order);
-    a trial whose A is not random has its one row repeated for every sample."""
+    a trial whose A is not random has its one row repeated for every sample.
+    Columns COLUMNS, or SEARCH_COLUMNS for rows of planner="search"."""
     if not trial.initial.is_random:
         rows = [{**rows[0], "sample": i} for i in range(samples)]
-    return pd.DataFrame(rows, columns=COLUMNS).sort_values("sample").reset_index(drop=True)
+    columns = SEARCH_COLUMNS if rows and "bound" in rows[0] else COLUMNS
+    return pd.DataFrame(rows, columns=columns).sort_values("sample").reset_index(drop=True)
 
 
 def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
                     progress: Callable[[int, int], None] | None = None, executor=None, *,
-                    approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE) -> EffortResult:
+                    approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE,
+                    planner: str = "paper", budget: Budget | None = None) -> EffortResult:
     """Physical effort of `trial` over `samples` random layouts: an `EffortResult`
     with ``.mean`` (J s) and ``.table`` (one row per layout: trial, sample, effort,
     n_actions, solve_time, solver, status).
@@ -183,7 +214,9 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
     once and its row repeated: every sample would draw the same layout.
     `approach_height` (m; 0.05 default, 0 = clearance constraint instead of the
     legs) and `slices_per_phase` (20 default) are passed to the planner
-    (lgp.planner.plan; docs/effort.md, "Modelling choices").
+    (lgp.planner.plan; docs/effort.md, "Modelling choices"). `planner` is "paper"
+    (the paper's pipeline, default) or "search" (lgp.search within `budget`; the
+    table then has SEARCH_COLUMNS: bound, gap, set-asides, solves, paper_effort).
     """
     if isinstance(trial, str):
         import stimuli
@@ -191,7 +224,8 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
         trial = stimuli.load_trial(trial)
     if samples < 1:
         raise ValueError(f"physical_effort needs samples >= 1, got {samples}")
-    units = effort_units(trial, samples, seed, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    units = effort_units(trial, samples, seed, approach_height=approach_height, slices_per_phase=slices_per_phase,
+                         planner=planner, budget=budget)
     done = 0
 
     def record(_, row):
@@ -206,38 +240,13 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
     return EffortResult(float(table["effort"].mean()), table)
 
 
-PROG = "python -m models.effort"
-
-
-def main(argv=None) -> int:
-    parser = cli.parser(PROG, description="Physical effort of every trial.")
-    parser.add_argument("trials", nargs="*", type=cli.trial_id, help="trial ids (default: all 24; case-insensitive)")
-    parser.add_argument("--samples", type=cli.positive_int, default=SAMPLES, help="layouts per trial (default %(default)s)")
-    parser.add_argument("--seed", type=cli.seed, default=0)
-    parser.add_argument("--jobs", type=cli.positive_int, default=1)
-    parser.add_argument("--out", type=cli.output_file, help="write the per-sample table (CSV) here")
-    parser.add_argument("--approach-height", type=cli.approach_height, default=APPROACH,
-                        help="vertical approach/retreat leg (m) at every grasp and place; 0 = clearance constraint "
-                             "instead (default %(default)s)")
-    parser.add_argument("--slices", type=cli.positive_int, default=SLICES_PER_PHASE,
-                        help="KOMO slices per 1 s phase (default %(default)s)")
-    args = parser.parse_args(argv)
-
-    import stimuli
-
-    trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
-    tables = []
-    for trial in trials:
-        mean, table = physical_effort(trial, samples=args.samples, seed=args.seed, jobs=args.jobs,
-                                      approach_height=args.approach_height, slices_per_phase=args.slices)
-        tables.append(table)
-        print(f"{trial.id:>4}  effort {mean:8.4f} J s  sd {table['effort'].std(ddof=1) if len(table) > 1 else 0.0:7.4f}  "
-              f"actions {table['n_actions'].iloc[0]:3d}  {table['solve_time'].mean():6.3f} s/plan", flush=True)
-    table = pd.concat(tables, ignore_index=True)
-    if args.out:
-        table.to_csv(args.out, index=False)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(cli.run_cli(main, prog=PROG))
+def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
+    """One row per trial (in the order of `trials`) from the tidy (trial, sample)
+    table: trial, pair, level, effort (the mean over layouts, J s), effort_sd
+    (ddof 1) and samples. `pair` is empty for a trial of no pair."""
+    order = {t.id: i for i, t in enumerate(trials)}
+    g = samples.groupby("trial")["effort"]
+    df = pd.DataFrame({"effort": g.mean(), "effort_sd": g.std(ddof=1), "samples": g.size()}).reset_index()
+    df["pair"] = df["trial"].map({t.id: t.pair for t in trials}).astype("Int64")  # empty for a trial of no pair
+    df["level"] = df["trial"].map({t.id: t.level for t in trials})
+    return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]
