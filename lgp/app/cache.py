@@ -268,6 +268,9 @@ class Cache:
         self.enabled = enabled
         self.dtype = {"trial": str} if dtype is None else dtype
         self.counts: Counter = Counter()  # (kind, outcome) -> lookups
+        #: (kind, "hit" | "miss") of files kept beside the tables (the page's pictures
+        #: and replays), counted apart from `counts`, which are about computed results.
+        self.files: Counter = Counter()
         self.damaged: list[Path] = []
 
     def count(self, outcome: str, kind: str | None = None) -> int:
