@@ -121,16 +121,16 @@ def plan_stages(trial, seed: int = 0, sample: int = 0, approach_height: float | 
     a_index = {name: i for i, name in enumerate(initial.names)}
     weights = _carry_weights(initial, target, plan, approach_height)
     total = sum(weights.values())
-    placed: set[str] = set()
+    placed: dict[str, None] = {}  # in placement order: the shares add up in that order, whatever the hash seed
     grasped: set[str] = set()
     stages = []
     for k, (action, state) in enumerate(zip(plan.actions, plan.states()), start=1):
         grasped.add(action.block)
         if not isinstance(action, Place):
             continue
-        placed.add(action.block)
+        placed[action.block] = None
         scene = state.scene
-        structure = tuple(b for b in target.names if owner.get(b) in placed | stays)
+        structure = tuple(b for b in target.names if owner.get(b) in placed.keys() | stays)
         graph = support_graph(scene)
         above = supported_by(graph)
         blocks = set(scene.names)
