@@ -124,6 +124,7 @@ class SearchResult:
     paper_effort: float | None = None
     paper_symbolic: SymbolicPlan | None = None
     tried: list = field(default_factory=list)  # (skeleton bound, effort or failure) per KOMO solve
+    komo_seconds: float = 0.0  # of `seconds`, the time in lgp.planner.plan_symbolic (IK seeding + KOMO)
 
     @property
     def gap(self) -> float:
@@ -504,10 +505,6 @@ def _symbolic(problem: _Problem, carries) -> SymbolicPlan:
     return plan
 
 
-def _signature(symbolic: SymbolicPlan) -> tuple:
-    return tuple((a.block, tuple(np.round(a.p_WB, 6))) for a in symbolic.actions if isinstance(a, Place))
-
-
 def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | None = None,
            approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE, formulation: str = "reduced",
            solver: str = "snopt", arm=None, spots_per_set_aside: int = SPOTS_PER_SET_ASIDE,
@@ -535,20 +532,23 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     options = dict(formulation=formulation, solver=solver, slices_per_phase=slices_per_phase,
                    approach_height=approach_height, arm=arm)
     best: tuple[float, Plan, float] | None = None  # (effort, plan, skeleton bound)
-    solved: set = set()
     tried: list = []
     solves = 0
     paper_effort, paper_symbolic = None, None
 
+    komo_seconds = 0.0
+
     def solve(symbolic: SymbolicPlan, bound: float) -> None:
-        nonlocal best, solves
+        nonlocal best, solves, komo_seconds
         solves += 1
-        solved.add(_signature(symbolic))
+        t0 = time.perf_counter()
         try:
             result = plan_symbolic(symbolic, rng, **options)
         except PlanningError as e:
             tried.append((bound, f"failed: {e}"))
             return
+        finally:
+            komo_seconds += time.perf_counter() - t0
         sweep = first_sweep(result)
         if sweep is not None:
             tried.append((bound, f"rejected: {sweep}"))
@@ -658,7 +658,7 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     effort, result, bound = best
     result.planning_time = seconds
     return SearchResult(result, effort, min(float(lowest_open), effort), bound, solves, expansions, seconds, stopped,
-                        paper_effort, paper_symbolic, tried)
+                        paper_effort, paper_symbolic, tried, komo_seconds)
 
 
 # ----------------------------------------------------------------------------- planner="paper" | "search"
