@@ -112,6 +112,31 @@ def random_spots(name: str, draws: int = 5):
     return r.effort, efforts, float(np.median(rank_times))
 
 
+def profile(trial, top: int = 8) -> list[str]:
+    """cProfile of one search (layout 0 of seed 0): the project's functions by cumulative time."""
+    import cProfile
+    import io
+    import pstats
+
+    rng = sample_rng(0, 0)
+    A = trial.sample_initial(rng)
+    search(A, trial.target, rng)  # warm (arm loaded, imports done)
+    rng = sample_rng(0, 0)
+    A = trial.sample_initial(rng)
+    prof = cProfile.Profile()
+    prof.enable()
+    search(A, trial.target, rng)
+    prof.disable()
+    stats = pstats.Stats(prof, stream=io.StringIO())
+    total = stats.total_tt
+    rows = []
+    for (path, line, name), (_, _, _, cum, _) in stats.stats.items():
+        if "/lgp/" in path and name not in ("<module>",):
+            rows.append((cum, f"{Path(path).parent.name}/{Path(path).name}:{name}"))
+    rows.sort(reverse=True)
+    return [f"{where} {cum:.3f} s ({100 * cum / total:.0f} %)" for cum, where in rows[:top]]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--samples", type=int, default=2, help="layouts per paper trial (default 2)")
@@ -121,6 +146,7 @@ def main(argv=None) -> int:
     paper = paper_side_by_side(args.samples)
     rear = rearrangements()
     spots = {n: random_spots(n) for n in ("REV", "SWAP")}
+    profiles = {t: profile(stimuli.load_trial(t)) for t in ("3E", "12E")}
     end = machine()
     cpu_model = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")), "?")
 
