@@ -699,7 +699,7 @@ PLANNERS = ("paper", "search")
 
 
 def check_planner(planner: str) -> str:
-    """`planner` if it is one of PLANNERS, else ValueError naming them."""
+    """`planner` if it is one of PLANNERS, else InputError naming them."""
     if planner not in PLANNERS:
         raise InputError(f"planner must be one of {', '.join(PLANNERS)}, got {planner!r}")
     return planner
