@@ -42,7 +42,8 @@ from lgp.errors import InputError
 
 PROG = "python -m lgp.reproduce"
 
-QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
+QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200, "n_perm": 200,
+         "recovery_studies": 50}
 
 
 def _log(msg: str) -> None:
@@ -99,6 +100,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
+    p.add_argument("--n-perm", type=cli.positive_int,
+                   help="with --human-data: permutations per permutation test of the risk term (default 1000; --quick 200)")
+    p.add_argument("--recovery", action="store_true",
+                   help="model recovery on SIMULATED studies from our effort and risk tables (recovery/; analysis.recovery)")
+    p.add_argument("--recovery-studies", type=cli.positive_int,
+                   help="with --recovery: simulated studies per cell (default 200; --quick 50)")
     p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
                    help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
     sensitivity.add_arguments(p)
@@ -129,6 +136,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.n_sims = args.n_sims if args.n_sims is not None else q.get("n_sims", N_SIMS)
     args.sigmas = tuple(dict.fromkeys(args.sigmas or q.get("sigmas", SIGMA_GRID)))
     args.n_boot = args.n_boot if args.n_boot is not None else q.get("n_boot", N_BOOT)
+    from analysis.permutation import N_PERM
+    from analysis.recovery import N_STUDIES
+
+    args.n_perm = args.n_perm if args.n_perm is not None else q.get("n_perm", N_PERM)
+    args.recovery_studies = args.recovery_studies if args.recovery_studies is not None else q.get("recovery_studies", N_STUDIES)
     from lgp.planner import APPROACH, SLICES_PER_PHASE
 
     args.approach_height = APPROACH if args.approach_height is None else args.approach_height
@@ -246,8 +258,18 @@ def run(args, argv=None) -> int:
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
                                 build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
-                                risk_measure=args.risk_measure)
+                                risk_measure=args.risk_measure, n_perm=args.n_perm)
         written += [Path(path) for path in analysis["files"]["path"]]
+        if args.recovery:
+            from lgp.app.recovery import recovery_outputs
+
+            paths, section = recovery_outputs(analysis if human is not None else None, e_samples, r, out,
+                                              args.recovery_studies, args.seed, args.jobs)
+            written += paths
+            sections.append(section)
+            analysis["files"] = pd.concat([analysis["files"], pd.DataFrame(
+                [("figure" if p.suffix in (".png", ".pdf") else "table", str(p)) for p in paths],
+                columns=["kind", "path"])], ignore_index=True)
         if args.per_participant_sigma:
             from lgp.app.participant_sigma import participant_sigma_outputs
 
@@ -261,6 +283,8 @@ def run(args, argv=None) -> int:
         pairs = declared_pair_orderings(effort, risk, sigma, {t.pair: t.dimension for t in trials}, declared) if declared else None
         if pairs is not None:
             written.append(write_csv_atomic(pairs_csv_table(pairs), out / "pairs.csv"))
+        if args.recovery:
+            _log("--recovery simulates studies of the paper's 24 trials; not all are in this run, so it is skipped")
         _log("not all of the paper's 24 trials: no figures or fits (they need all 24); "
              + (f"pair table for the {len(pairs)} pair(s) whose E and H trials are both in the run" if pairs is not None
                 else "no pair table (no trial files declare both trials of a pair)"))
@@ -281,6 +305,7 @@ def run(args, argv=None) -> int:
                   "engine": args.engine, "seed": args.seed, "n_boot": args.n_boot, "quick": args.quick,
                   "no_cache": args.no_cache, "build_risk": args.build_risk, "build_sigmas": args.build_sigmas,
                   "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
+                  "n_perm": args.n_perm, "recovery": args.recovery, "recovery_studies": args.recovery_studies,
                   "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
                   "sensitivity": args.sensitivity, "approach_height": args.approach_height,
                   "slices_per_phase": args.slices, **{k: repr(v) if k == "budget" else v for k, v in planner_choice(args).items()}}
