@@ -60,7 +60,8 @@ def test_one_rule_for_the_design_in_the_planner_the_units_the_command_lines_and_
 
     from lgp import cli
     from lgp.planner import MAX_APPROACH_HEIGHT, DesignError, check_approach_height
-    from lgp.reproduce import effort_key, parse_args
+    from lgp.app.stages import effort_key
+    from lgp.reproduce import parse_args
 
     assert MAX_APPROACH_HEIGHT == 0.5
     assert Design(0.0, 1) == Design("0", 1.0) and Design(0.4999, 40).legs and not Design(0.0).legs
@@ -96,7 +97,7 @@ def test_the_design_and_the_planners_entry_points_load_no_drake():
 
 
 def test_the_design_is_part_of_the_effort_cache_key():
-    from lgp.reproduce import effort_key
+    from lgp.app.stages import effort_key
 
     trial = stimuli.load_trial("2E")
     default = effort_key(trial, 3, 0)
