@@ -417,6 +417,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
+    p.add_argument("--allow-simulated", action="store_true",
+                   help="with --human-data: accept datasets of SIMULATED participants (simulated-*, tests only); "
+                        "every table and figure made from them says SIMULATED")
     p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
                    help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
     sensitivity.add_arguments(p)
@@ -434,6 +437,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--risk-measure needs --build-risk and --human-data")
     if args.per_participant_sigma and not args.human_data:
         p.error("--per-participant-sigma needs --human-data FILE")
+    if args.allow_simulated and not args.human_data:
+        p.error("--allow-simulated needs --human-data FILE")
     args.command = "python -m lgp.reproduce " + " ".join(argv if argv is not None else sys.argv[1:])
     q = QUICK if args.quick else {}
     args.samples = args.samples if args.samples is not None else q.get("samples", SAMPLES)
@@ -494,7 +499,7 @@ def run(args, argv=None) -> int:
     if args.human_data:
         from analysis import load_human_data
 
-        human = load_human_data(args.human_data)
+        human = load_human_data(args.human_data, allow_simulated=args.allow_simulated)
         if not {t.id for t in trials} >= set(TRIAL_IDS):
             raise ValueError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)

@@ -1,6 +1,6 @@
 """Pictures of the trials as photographs of wooden blocks on a table: Start (A) and Finish (B).
 
-    python -m stimuli.render --out DIR [--stimuli DIR] [--seed 0] [--size 960x720] [--trials 7E 7H] [--jobs 2]
+    python -m stimuli.render --out DIR [--stimuli DIR] [--seed 0] [--size 960x640] [--trials 7E 7H] [--jobs 2]
 
 For every trial it writes ``DIR/<id>-A.png`` (the layout of A that effort reports
 first: sample 0 of `--seed`, drawn by ``models.effort.sample_rng(seed, 0)``) and
@@ -38,7 +38,7 @@ from lgp.paper import BLOCK_SIZE, DISPLAY_RGB
 
 PROG = "python -m stimuli.render"
 #: Picture size (pixels) unless --size says otherwise.
-DEFAULT_SIZE = (960, 720)
+DEFAULT_SIZE = (960, 640)
 #: Vertical field of view of the camera (degrees) and its elevation above the table.
 FOV_Y_DEG = 36.0
 ELEVATION_DEG = 48.0
@@ -389,7 +389,7 @@ def parse_size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v, 10) for v in str(text).lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels such as 960x720, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels such as 960x640, got {text!r}") from None
     if not (64 <= w <= 4096 and 64 <= h <= 4096):
         raise argparse.ArgumentTypeError(f"width and height must be 64..4096 pixels, got {text!r}")
     return w, h
@@ -403,7 +403,7 @@ def main(argv=None) -> int:
     parser.add_argument("--stimuli", metavar="DIR", type=cli.input_dir, help="folder of trial files (default: stimuli/trials)")
     parser.add_argument("--trials", nargs="+", type=cli.trial_id, help="trial ids (default: every trial file of the folder)")
     parser.add_argument("--seed", type=cli.seed, default=0, help="A is sample 0 of this seed, as effort's (default 0)")
-    parser.add_argument("--size", type=parse_size, default=DEFAULT_SIZE, help="WIDTHxHEIGHT in pixels (default 960x720)")
+    parser.add_argument("--size", type=parse_size, default=DEFAULT_SIZE, help="WIDTHxHEIGHT in pixels (default 960x640)")
     parser.add_argument("--jobs", type=cli.positive_int, default=2, help="rendering processes (default 2)")
     parser.add_argument("--sheet", metavar="PNG", type=cli.output_file, help="also write a contact sheet of all pictures")
     args = parser.parse_args(argv)

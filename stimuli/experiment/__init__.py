@@ -191,7 +191,7 @@ class StudyPlan:
 
     task: str
     trials: list  # stimuli.Trial
-    anchors: list  # stimuli.Trial (empty for the build task)
+    anchors: list  # stimuli.Trial (rendered for every task, shown in the estimation tasks)
     seed: int
     order_seed: int
     has_pairs: bool
@@ -233,11 +233,11 @@ def plan_study(task: str, stimuli_dir=None, anchor_files=DEFAULT_ANCHORS, seed: 
         raise StudyError(f"--stimuli {stimuli_dir}: no trial files (*.yaml) there")
     trials = stimuli.load_all(stimuli_dir)
     ids = {t.id for t in trials}
-    anchors = []
-    if task != "build":
-        anchors = [load_anchor(f, role, ids) for f, role in zip(anchor_files, ("easy", "hard"))]
-        if anchors[0].id == anchors[1].id:
-            raise StudyError(f"--anchor-easy and --anchor-hard have the same id {anchors[0].id}")
+    # The build console shows no anchors, but its pictures are rendered with them, so
+    # that every task of a study shows the same pictures (one camera fitted to all).
+    anchors = [load_anchor(f, role, ids) for f, role in zip(anchor_files, ("easy", "hard"))]
+    if anchors[0].id == anchors[1].id:
+        raise StudyError(f"--anchor-easy and --anchor-hard have the same id {anchors[0].id}")
     _, has_pairs = units_of([_trial_entry(t) for t in trials])
     return StudyPlan(task, trials, anchors, seed, order_seed, has_pairs)
 
@@ -289,8 +289,10 @@ def build_study(plan: StudyPlan, out: str | Path, size=None, jobs: int = 2, jato
     (tmp / "lib" / "README.txt").write_text(
         f"jsPsych {jspsych_version()} and its plugins (MIT license, https://www.jspsych.org), copied by\n"
         "python -m stimuli.experiment from the npm packages pinned in stimuli/experiment/package-lock.json.\n")
+    shown = {t.id for t in plan.trials} | ({t.id for t in plan.anchors} if plan.task != "build" else set())
     for p in record["pictures"]:
-        shutil.copyfile(renders / p["file"], tmp / "img" / p["file"])
+        if p["trial"] in shown:
+            shutil.copyfile(renders / p["file"], tmp / "img" / p["file"])
     sid = study_id(plan.trials, plan.anchors, plan.seed, plan.order_seed)
     config = {
         "study": sid,
@@ -306,7 +308,7 @@ def build_study(plan: StudyPlan, out: str | Path, size=None, jobs: int = 2, jato
         "layout_seed": plan.seed,
         "pair_counterbalancing": plan.has_pairs,
         "trials": [_trial_entry(t) for t in plan.trials],
-        "anchors": [{**_trial_entry(t), "role": role} for t, role in zip(plan.anchors, ("easy", "hard"))],
+        "anchors": [] if plan.task == "build" else [{**_trial_entry(t), "role": role} for t, role in zip(plan.anchors, ("easy", "hard"))],
         "columns": list(COLUMNS),
         "jspsych": jspsych_version(),
         "jatos": jatos,

@@ -24,7 +24,7 @@ def main(argv=None) -> int:
                    help="trial file of the hard anchor shown second (default: stimuli/experiment/anchors/ANCHOR-HARD.yaml)")
     p.add_argument("--seed", type=cli.seed, default=0, help="layout of A: sample 0 of this seed, as effort's (default 0)")
     p.add_argument("--order-seed", type=cli.seed, default=0, help="seed of the trial orders (docs/experiment.md; default 0)")
-    p.add_argument("--size", type=parse_size, default=DEFAULT_SIZE, help="picture size WIDTHxHEIGHT (default 960x720)")
+    p.add_argument("--size", type=parse_size, default=DEFAULT_SIZE, help="picture size WIDTHxHEIGHT (default 960x640)")
     p.add_argument("--time-max", type=cli.positive_int, default=ex.TIME_MAX_S, help="time task: slider from 0 to this many seconds (default 180)")
     p.add_argument("--jatos", action="store_true", help="load JATOS's jatos.js and submit the CSV to JATOS at the end")
     p.add_argument("--jobs", type=cli.positive_int, default=2, help="rendering processes (default 2)")
