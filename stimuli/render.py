@@ -28,7 +28,7 @@ import os
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -245,15 +245,30 @@ class Renderer:
 # ----------------------------------------------------------------------------- a run
 
 
+def finished_table(A, B):
+    """What the table holds when B is built from A: B's blocks, and every block of A
+    that B does not use where A left it (lgp.assignment: unassigned blocks stay put;
+    pair 12's bucket keeps its other 15 blocks)."""
+    from lgp.assignment import assign_blocks
+    from lgp.scene import Scene
+
+    used = set(assign_blocks(A, B))
+    taken = {b.name for b in B.blocks}
+    left = [b if b.name not in taken else replace(b, name=f"{b.name} (left)") for b in A.blocks if b.name not in used]
+    return Scene(tuple(B.blocks) + tuple(left), B.fixed, B.label)
+
+
 def pictures_of(trials, seed: int):
     """(trial id, state, scene) of every picture: A is sample 0 of `seed` (the layout
-    effort reports first, models.effort.sample_rng(seed, 0)), B the target."""
+    effort reports first, models.effort.sample_rng(seed, 0)), B the finished table
+    (the target and whatever of A it leaves)."""
     from models.effort import sample_rng
 
     out = []
     for t in trials:
-        out.append((t.id, "A", t.sample_initial(sample_rng(seed, 0))))
-        out.append((t.id, "B", t.target))
+        A = t.sample_initial(sample_rng(seed, 0))
+        out.append((t.id, "A", A))
+        out.append((t.id, "B", finished_table(A, t.target)))
     return out
 
 

@@ -180,6 +180,55 @@ def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None)
     return paths
 
 
+
+#: Size (pixels) of each half of a rendered trial card picture.
+CARD_PICTURE = (480, 320)
+
+
+def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None, jobs: int = 2) -> dict[str, Path]:
+    """Picture of every trial under `out_dir`: A (sample 0 of `seed`) | B rendered like
+    photographs (stimuli.render: one camera for every trial, so a relocated tower looks
+    relocated), kept in the cache folder (``renders/``) between runs. Where the
+    renderer cannot run (no OpenGL), the sketch of `trial_pictures` instead, saying why."""
+    import tempfile
+
+    from PIL import Image, ImageDraw
+
+    from stimuli.render import render_trials
+
+    scratch = None
+    if cache is not None and cache.enabled:
+        where = cache.root / "renders" / f"{CARD_PICTURE[0]}x{CARD_PICTURE[1]}-seed{seed}"
+    else:
+        scratch = tempfile.TemporaryDirectory(prefix="lgp-page-renders-")
+        where = Path(scratch.name)
+    try:
+        record = render_trials(trials, where, seed, CARD_PICTURE, jobs, log=lambda m: None)
+    except Exception as e:  # noqa: BLE001 - any failure of VTK/OpenGL: the sketch still serves
+        print(f"lgp.reproduce: trial pictures: rendering failed ({type(e).__name__}: {e}); drawing sketches instead",
+              file=sys.stderr, flush=True)
+        return trial_pictures(trials, seed, out_dir, cache)
+    if cache is not None:
+        page_files(cache)["picture", "miss"] += record["rendered"]
+        page_files(cache)["picture", "hit"] += len(record["pictures"]) - record["rendered"]
+    w, h = CARD_PICTURE
+    paths = {}
+    for trial in trials:
+        card = Image.new("RGB", (2 * w + 4, h + 18), "white")
+        draw = ImageDraw.Draw(card)
+        for j, (state, label) in enumerate((("A", "A: start (sample 0)"), ("B", "B: finish"))):
+            card.paste(Image.open(where / f"{trial.id}-{state}.png").convert("RGB"), (j * (w + 4), 18))
+            draw.text((j * (w + 4) + 4, 3), label, fill="black")
+        path = Path(out_dir) / f"{trial.id}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            card.save(tmp, format="PNG")
+        paths[trial.id] = path
+    if scratch is not None:
+        scratch.cleanup()
+    return paths
+
+
 # ----------------------------------------------------------------------------- sections
 
 
@@ -450,7 +499,7 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
     from models.risk import DEFAULT_ENGINE, get_engine
 
     out = Path(args.out) if out is None else Path(out)
-    pictures = trial_pictures(trials, args.seed, out / "page", cache)
+    pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=getattr(args, "jobs", 2) or 2)
     clock.lap("trial pictures")
     figures = []
     if analysis is not None and "files" in analysis:
