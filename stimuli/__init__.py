@@ -493,3 +493,28 @@ def load_paper(directory: str | Path | None = None) -> list[Trial]:
 def extra_ids(directory: str | Path | None = None) -> list[str]:
     """Ids of the trial files in `directory` that are not among the paper's 24."""
     return [t for t in trial_ids(directory) if t not in TRIAL_IDS]
+
+
+def select_trials(ids: list[str] | None = None, directory: str | Path | None = None) -> tuple[list[Trial], list[str]]:
+    """The trials of a run and the ids of the trial files it leaves out.
+
+    With no `ids`: the paper's 24 from the default folder (the other trial files
+    there are left out and returned, for the caller to name), or every trial file
+    of `directory` when one is given. ``["all"]``: every trial file. Otherwise the
+    trials named. Raises StimulusError for a `directory` with no trial files.
+    """
+    if not ids and directory is not None:  # a user's stimulus set: every trial file in it
+        if not trial_ids(directory):
+            raise StimulusError(f"--stimuli {directory}: no trial files (*.yaml) there")
+        return load_all(directory), []
+    if not ids:
+        return load_paper(directory), extra_ids(directory)
+    if [t.lower() for t in ids] == ["all"]:
+        return load_all(directory), []
+    return [load_trial(t, directory) for t in ids], []
+
+
+def declared_pairs(trials) -> list[int]:
+    """The pairs whose easy and hard trials (ids ``<pair>E``, ``<pair>H``) are both among `trials`."""
+    ids = {t.id for t in trials}
+    return sorted({t.pair for t in trials if t.pair is not None and {f"{t.pair}E", f"{t.pair}H"} <= ids})

@@ -23,17 +23,17 @@ import ast
 import hashlib
 import io
 import json
-import os
 import platform
 import re
 import sys
-import tempfile
 from collections import Counter
 from importlib import metadata
 from pathlib import Path
 from typing import Callable, Iterable
 
 import pandas as pd
+
+from lgp.app.files import write_bytes_atomic, write_csv_atomic  # noqa: F401  (the one atomic writer)
 
 ROOT = Path(__file__).resolve().parents[2]  # lgp/app/cache.py -> the repository
 #: The project's top-level packages: imports of anything else are libraries.
@@ -190,45 +190,6 @@ def files_digest(*patterns: str, root: Path = ROOT) -> str:
 def input_key(**inputs) -> str:
     """Stable hash of JSON-serialisable inputs."""
     return hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()[:20]
-
-
-# ----------------------------------------------------------------------------- files
-
-
-def _umask() -> int:
-    """The process umask, read without changing it where Linux allows
-    (os.umask can only be read by setting it, which races with other threads)."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("Umask:"):
-                return int(line.split()[1], 8)
-    except (OSError, ValueError, IndexError):
-        pass
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def write_bytes_atomic(data: bytes, path: str | Path) -> Path:
-    """Write `data` to `path` whole or not at all, with the mode a new file gets
-    from the user's umask (0644 under the usual 022), not mkstemp's private 0600."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
-def write_csv_atomic(df: pd.DataFrame, path: str | Path) -> Path:
-    """Write `df` as CSV (no index) to `path` atomically (see write_bytes_atomic)."""
-    return write_bytes_atomic(df.to_csv(index=False).encode(), path)
 
 
 # ----------------------------------------------------------------------------- entries

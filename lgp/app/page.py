@@ -15,29 +15,22 @@ from __future__ import annotations
 
 import datetime
 import html
-import importlib.metadata
 import os
 import platform
 import shlex
 import shutil
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from lgp.app.cache import Cache, input_key, modules_digest
+from lgp.app.cache import Cache, input_key, library_versions, modules_digest
+from lgp.app.files import atomic_path, write_text_atomic
+from lgp.app.report import ratio_text
 from lgp.app.replays import page_files
 
-#: |(H - E) / E| below this is a solver-level tie of effort (docs/results.md, pair 6).
-EFFORT_TIE = 1e-4
-
-#: Pairs the paper's fitted full model ordered E < H ("correct rank order ... in all
-#: of the pairs. The only exception is the pair 11E and 11H, where humans did not show
-#: any difference"; Results, Figure 3).
-PAPER_ORDERED = {pair: pair != 11 for pair in range(1, 13)}
-
+#: Libraries named on the page (the cache keys name their own).
 LIBRARIES = ("drake", "mujoco", "numpy", "scipy", "pandas", "matplotlib", "pyyaml")
 
 CAPTIONS = {
@@ -133,27 +126,22 @@ def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height:
 
 def trial_picture(trial, seed: int, path: Path) -> Path:
     """A (the layout of sample 0 of `seed`, as the replay shows it) and B, side by side."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     from models.effort import sample_rng
     from stimuli.sheet import draw_scene
 
     A = trial.sample_initial(sample_rng(seed, 0))
-    fig = plt.figure(figsize=(4.4, 2.2))
+    fig = Figure(figsize=(4.4, 2.2))
+    FigureCanvasAgg(fig)
     for j, (scene, state) in enumerate(((A, "A: start (sample 0)"), (trial.target, "B: finish"))):
         ax = fig.add_subplot(1, 2, j + 1, projection="3d")
         draw_scene(ax, scene, state)
     fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.92, wspace=0.0)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100)
     return path
-
 
 
 def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None) -> dict[str, Path]:
@@ -232,19 +220,9 @@ def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | Non
 # ----------------------------------------------------------------------------- sections
 
 
-def library_versions() -> dict[str, str]:
-    out = {"python": platform.python_version()}
-    for name in LIBRARIES:
-        try:
-            out[name] = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            out[name] = "not installed"
-    return out
-
-
 def _run_section(run: dict) -> str:
     chips = " ".join(f"<code>{_e(k)}={_e(v)}</code>" for k, v in run.get("parameters", {}).items())
-    versions = pd.DataFrame(list(library_versions().items()), columns=["library", "version"])
+    versions = pd.DataFrame(list(library_versions(LIBRARIES).items()), columns=["library", "version"])
     stages = pd.DataFrame(list(run.get("stages", {}).items()), columns=["stage", "wall time (s)"])
     settings = pd.DataFrame(list(run.get("engine_settings", {}).items()), columns=["setting", "value"])
     cache = run.get("cache", {})
@@ -264,24 +242,27 @@ def _run_section(run: dict) -> str:
 
 
 def pair_verdicts(pairs: pd.DataFrame) -> pd.DataFrame:
-    """The pair table with the paper's claim beside ours and whether they differ.
+    """The pair table with the paper's claim beside ours and whether they differ
+    (analysis.pairs.pair_verdicts), in words.
 
     Ours: whether Eq. 1 (b1 > 0) can order the pair E < H for some b2/b1 >= 0, from
-    the ratio range of `lgp.reproduce.pair_orderings`; an effort difference below
-    EFFORT_TIE with equal risks is a tie.
+    the ratio range of analysis.pairs.pair_orderings; a pair tied in effort and in
+    risk (the tie rule, analysis.pairs.TIE_REL) is a tie.
     """
+    from analysis.pairs import pair_verdicts as verdicts, ratio_ranges
+
+    v = verdicts(pairs)
     df = pairs.copy()
-    tie = (df["effort_rel_diff"].abs() < EFFORT_TIE) & np.isclose(df["risk_E"], df["risk_H"])
-    rng = df["full_E_lt_H_for_b2_over_b1"].astype(str)
-    ours_ordered = (~tie) & (rng != "none")
-    df["paper (full model)"] = [("E < H" if PAPER_ORDERED[int(p)] else "not ordered (humans: no difference)") for p in df["pair"]]
-    df["ours (Eq. 1)"] = [("tie" if t else ("E < H for b2/b1 " + r if r not in ("any", "none") else ("E < H for any b2/b1" if r == "any" else "not ordered")))
-                          for t, r in zip(tie, rng)]
-    df["differs"] = [PAPER_ORDERED[int(p)] != bool(o) for p, o in zip(df["pair"], ours_ordered)]
+    df["paper (full model)"] = ["E < H" if o else "not ordered (humans: no difference)" for o in v["paper_ordered"]]
+    df["ours (Eq. 1)"] = ["tie" if r.tie else "E < H for any b2/b1" if r.every else "not ordered" if r.empty
+                          else f"E < H for b2/b1 {ratio_text(r)}" for r in ratio_ranges(pairs)]
+    df["differs"] = v["differs"].to_numpy()
     return df
 
 
 def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None) -> str:
+    from analysis.pairs import TIE_REL
+
     if pairs is None:
         return '<section id="pairs"><h2>Easy/hard pairs</h2><p>A subset of trials was run: the pair table needs all 24.</p></section>'
     df = pair_verdicts(pairs)
@@ -305,7 +286,8 @@ def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None) -> str:
 <section id="pairs"><h2>Easy/hard pairs</h2>
 <p>Effort in J s (mean over layouts), risk at sigma = {sigma:g} d. The paper's fitted full model ordered 11 of 12 pairs
 E &lt; H, pair 11 the exception. Without fitted betas ours says for which ratios b2/b1 (b1 &gt; 0) Eq. 1 would order
-the pair E &lt; H; |(H-E)/E| &lt; {EFFORT_TIE:g} with equal risks is a solver-level tie.
+the pair E &lt; H; a pair tied in effort and in risk (|H - E| &le; {TIE_REL:g} max(E, H), the tie rule of
+every table) is a tie.
 <strong>{n_diff} of {len(df)} pairs differ from the paper</strong> (marked <span class="differs-key">&#x2260;</span>).</p>
 {table_html(show.assign(differs=show["differs"].map(lambda v: "≠" if v else "")), row_attrs=attrs)}
 </section>"""
@@ -470,30 +452,12 @@ Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over 
 <script>{_SCRIPT}</script>
 </body></html>
 """
-    path = out / "index.html"
-    tmp = out / ".index.html.tmp"
-    tmp.write_text(body)
-    os.replace(tmp, path)
-    return path
+    return write_text_atomic(body, out / "index.html")
 
-
-
-class Stopwatch:
-    """Wall time per stage of a run: ``lap(name)`` closes the stage that ended now."""
-
-    def __init__(self):
-        self.laps: dict[str, float] = {}
-        self._t = time.perf_counter()
-
-    def lap(self, name: str) -> float:
-        now = time.perf_counter()
-        self.laps[name] = self.laps.get(name, 0.0) + now - self._t
-        self._t = now
-        return self.laps[name]
 
 
 def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
-                pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock: Stopwatch,
+                pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock,
                 replays: dict | None = None, argv=None) -> Path:
     """The page of a `lgp.reproduce` run (its parsed `args`): pictures, run record, index.html."""
     from models.risk import DEFAULT_ENGINE, get_engine

@@ -9,12 +9,12 @@ design and code is copied from the run's cache.
 from __future__ import annotations
 
 import logging
-import os
 import shutil
 from collections import Counter
 from pathlib import Path
 
 from lgp.app.cache import Cache, files_digest, input_key, library_versions, modules_digest
+from lgp.app.files import write_text_atomic
 
 
 def page_files(cache: Cache) -> Counter:
@@ -40,13 +40,6 @@ def split_library(page: str) -> tuple[str, str | None]:
     return page[:start] + f'<script src="{REPLAY_LIBRARY}"></script>' + page[end + len("</script>"):], page[start + len(_LIB_TAG):end]
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def _replay_job(item) -> float:
     """Plan sample 0 of a trial and write its replay; returns the wall time (s)."""
     import time
@@ -62,8 +55,8 @@ def _replay_job(item) -> float:
     page, library = split_library(replay_html(plan, title))
     path = Path(path)
     if library is not None and not (path.parent / REPLAY_LIBRARY).exists():
-        _write_atomic(path.parent / REPLAY_LIBRARY, library)
-    _write_atomic(path, page)
+        write_text_atomic(library, path.parent / REPLAY_LIBRARY)
+    write_text_atomic(page, path)
     return time.perf_counter() - t0
 
 
