@@ -186,10 +186,10 @@ class Renderer:
         _write_png(tex / "table.png", _table_texture())
         self._tex = tex
         key = np.array([0.25, 0.30, -1.0])  # the key light: high above, a little behind and right of the agent
-        lights = [LightParameter(type="directional", direction=(key + np.array(j)).tolist(), intensity=0.17, frame="world")
-                  for j in ((0.04, 0.04, 0), (-0.04, 0.04, 0), (0.04, -0.04, 0), (-0.04, -0.04, 0))]
+        lights = [LightParameter(type="directional", direction=(key + np.array(j)).tolist(), intensity=0.15, frame="world")
+                  for j in ((0.025, 0.025, 0), (-0.025, 0.025, 0), (0.025, -0.025, 0), (-0.025, -0.025, 0))]
         # Fill from the camera: its shadows lie behind the blocks, out of sight.
-        lights.append(LightParameter(type="directional", direction=[0.0, 0.0, 1.0], intensity=0.42, frame="camera"))
+        lights.append(LightParameter(type="directional", direction=[0.0, 0.0, 1.0], intensity=0.56, frame="camera"))
         params = RenderEngineVtkParams(cast_shadows=True, shadow_map_size=2048, lights=lights,
                                        default_clear_color=list(BACKGROUND_RGB),
                                        ssao=SsaoParameter(radius=0.03, bias=0.002, sample_count=32))
@@ -348,7 +348,8 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
     t0 = time.perf_counter()
     seconds: list[float] = []
     if todo:
-        jobs = max(1, min(jobs, len(todo)))
+        # A process costs a second or two to start (pydrake, shaders): worth it for many pictures only.
+        jobs = max(1, min(jobs, len(todo) // 8))
         log(f"{PROG}: rendering {len(todo)} of {len(rows)} pictures ({size[0]}x{size[1]}, RenderEngineVtk) with {jobs} process(es)")
         chunks = [todo[i::jobs] for i in range(jobs)]
         if jobs == 1:
@@ -373,6 +374,24 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
     tmp.write_text(json.dumps(record, indent=1) + "\n")
     os.replace(tmp, record_path)
     return record
+
+
+def render_cache_dir() -> Path:
+    """Where rendered pictures are kept between runs: $LGP_RENDER_CACHE, else
+    $XDG_CACHE_HOME/lgp-difficulty/renders (~/.cache/...). A picture is found again by
+    the hash of its scene, camera and this module's code (renders.json), so a stale
+    one is never used."""
+    base = os.environ.get("LGP_RENDER_CACHE")
+    if base:
+        return Path(base)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lgp-difficulty" / "renders"
+
+
+def cache_folder(trials, seed: int, size) -> Path:
+    """The render cache's folder for one set of trials, seed and picture size (one
+    camera is fitted per set)."""
+    key = hashlib.sha256(json.dumps([[t.id, t.digest] for t in trials] + [seed, list(size)]).encode()).hexdigest()[:16]
+    return render_cache_dir() / key
 
 
 def contact_sheet(out_dir: str | Path, path: str | Path, columns: int = 4, thumb: int = 320) -> Path:

@@ -176,20 +176,15 @@ CARD_PICTURE = (480, 320)
 def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None, jobs: int = 2) -> dict[str, Path]:
     """Picture of every trial under `out_dir`: A (sample 0 of `seed`) | B rendered like
     photographs (stimuli.render: one camera for every trial, so a relocated tower looks
-    relocated), kept in the cache folder (``renders/``) between runs. Where the
+    relocated), kept in the render cache (stimuli.render.render_cache_dir) between runs. Where the
     renderer cannot run (no OpenGL), the sketch of `trial_pictures` instead, saying why."""
-    import tempfile
-
     from PIL import Image, ImageDraw
 
-    from stimuli.render import render_trials
+    from stimuli.render import cache_folder, render_trials
 
-    scratch = None
-    if cache is not None and cache.enabled:
-        where = cache.root / "renders" / f"{CARD_PICTURE[0]}x{CARD_PICTURE[1]}-seed{seed}"
-    else:
-        scratch = tempfile.TemporaryDirectory(prefix="lgp-page-renders-")
-        where = Path(scratch.name)
+    # The render cache is shared by every run (and by stimuli.experiment): pictures are
+    # keyed by scene, camera and renderer code, so a picture is drawn once per machine.
+    where = cache_folder(trials, seed, CARD_PICTURE)
     try:
         record = render_trials(trials, where, seed, CARD_PICTURE, jobs, log=lambda m: None)
     except Exception as e:  # noqa: BLE001 - any failure of VTK/OpenGL: the sketch still serves
@@ -212,8 +207,6 @@ def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | Non
         with atomic_path(path) as tmp:
             card.save(tmp, format="PNG")
         paths[trial.id] = path
-    if scratch is not None:
-        scratch.cleanup()
     return paths
 
 

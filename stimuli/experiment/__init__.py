@@ -247,17 +247,11 @@ def _trial_entry(t) -> dict:
             "description": t.description}
 
 
-def render_cache_dir() -> Path:
-    base = os.environ.get("LGP_RENDER_CACHE") or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lgp-difficulty" / "renders"
-    return Path(base)
-
-
 def _render(plan: StudyPlan, size, jobs: int, log) -> tuple[Path, dict]:
-    from stimuli.render import render_trials
+    from stimuli.render import cache_folder, render_trials
 
     every = [*plan.trials, *plan.anchors]
-    key = hashlib.sha256(json.dumps([[t.id, t.digest] for t in every] + [plan.seed, list(size)]).encode()).hexdigest()[:16]
-    where = render_cache_dir() / key
+    where = cache_folder(every, plan.seed, size)
     return where, render_trials(every, where, plan.seed, size, jobs, log=log)
 
 
