@@ -276,3 +276,25 @@ def test_a_rendered_block_lies_where_the_camera_model_projects_it(tmp_path):
         assert corners[:, 0].min() - 2 <= us.min() and us.max() <= corners[:, 0].max() + 2
         assert corners[:, 1].min() - 2 <= vs.min() and vs.max() <= corners[:, 1].max() + 2
         assert abs(np.median(us) - top_centre[0]) < 4
+
+
+@pytest.mark.slow
+def test_a_stimulus_folder_without_pairs_builds_with_pair_counterbalancing_off(tmp_path, monkeypatch):
+    """Generated trials (G0001 ...) form no easy/hard pair: the study says so and
+    gives each participant their own shuffle."""
+    import subprocess
+    import sys
+
+    from stimuli.generate import main as generate
+
+    monkeypatch.setenv("LGP_RENDER_CACHE", str(tmp_path / "renders"))
+    assert generate(["--out", str(tmp_path / "gen"), "--count", "3", "--seed", "1"]) == 0
+    run = subprocess.run([sys.executable, "-m", "stimuli.experiment", "--task", "difficulty", "--out", str(tmp_path / "study"),
+                          "--stimuli", str(tmp_path / "gen"), "--size", "96x64"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "pair counterbalancing is off" in run.stderr
+    config = json.loads((tmp_path / "study" / "study.json").read_text())
+    assert config["pair_counterbalancing"] is False and [t["id"] for t in config["trials"]] == ["G0001", "G0002", "G0003"]
+    pictures = sorted(p.name for p in (tmp_path / "study" / "img").iterdir())
+    assert pictures == sorted(f"{t}-{s}.png" for t in ("G0001", "G0002", "G0003", "ANCHOR-EASY", "ANCHOR-HARD") for s in "AB")
+    assert (tmp_path / "study" / "lib" / "jspsych.js").stat().st_size > 10_000
