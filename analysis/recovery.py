@@ -188,6 +188,7 @@ def recovery(effort, grid: RiskGrid, *, participants: Sequence[int] = PARTICIPAN
     confusion = pd.DataFrame(conf, columns=cols + ["procedure", "chosen_model", "count", "n_studies", "rate"])
     summary = pd.DataFrame(summ, columns=cols + ["procedure", "p_right", "p_full_beats_effort", "noise_sd", "betas",
                                                  "skipped"])
+    summary.attrs["noise"] = noise
     return confusion, summary
 
 
@@ -217,7 +218,10 @@ def write_recovery(confusion: pd.DataFrame, summary: pd.DataFrame, out: str | Pa
     confusion.to_csv(paths[0], index=False)
     summary.to_csv(paths[1], index=False)
     if figures:
-        paths += plot_recovery(summary, out, paper_sigma=paper_sigma, stem=f"{SIMULATED_PREFIX}recovery")
+        n = int(confusion["n_studies"].max()) if len(confusion) else 0
+        ratio = (f"noise {summary.attrs['noise']:g} x SD of the true cost, " if "noise" in summary.attrs else "")
+        paths += plot_recovery(summary, out, paper_sigma=paper_sigma, stem=f"{SIMULATED_PREFIX}recovery",
+                               note=f"parameters stated: {ratio}{n} studies per cell")
     return paths
 
 

@@ -16,117 +16,38 @@ half way resumes with nothing lost.
 from __future__ import annotations
 
 import argparse
-from collections import Counter
 import signal
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 import stimuli
 from lgp import cli
+from lgp.planner.design import check_approach_height
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
-from lgp.app.progress import Progress
 from lgp.app.progress import log as progress_log
-from lgp.app.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
+from lgp.app.cache import library_versions, write_csv_atomic
 from lgp.app.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 from lgp.app.page import write_index
 from lgp.app.progress import Stopwatch
 from lgp.app.replays import write_replays
 from lgp.app.report import append_report, engine_description, pairs_csv_table, write_report
-from lgp.app.stages import check_targets, risk_key_inputs, risk_tables
+from lgp.app.stages import check_targets, effort_tables, risk_key_inputs, risk_tables
 from lgp.app import sensitivity
 from lgp.app.sensitivity import planner_choice
+from lgp.errors import InputError
 
 PROG = "python -m lgp.reproduce"
 
-QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200}
+QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200, "n_perm": 200,
+         "recovery_studies": 50}
 
 
 def _log(msg: str) -> None:
     progress_log(msg)  # stderr; above the progress bar on a terminal
-
-
-def effort_key_inputs() -> dict:
-    """What an effort table depends on besides the trial and the parameters: the
-    source of every project module physical_effort can run (stimuli draws the
-    layouts of A), the arm's model files, and the numerical libraries (SNOPT is Drake's)."""
-    return {"code": modules_digest("models.effort", "stimuli"),
-            "data": files_digest("models/*.sdf", "models/*.urdf", "models/*.yaml"),
-            "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
-
-
-def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
-               slices_per_phase: int | None = None, planner: str = "paper", budget=None) -> str:
-    """The cache key of one trial's effort table: the trial file, M, the seed, the
-    planner's design (approach height, slices per phase), for planner="search"
-    the planner and its budget (lgp.search.Budget), and effort_key_inputs()."""
-    from lgp.planner import APPROACH, SLICES_PER_PHASE, check_design
-    from lgp.search import Budget, check_planner
-
-    h, S = check_design(APPROACH if approach_height is None else approach_height,
-                        SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase)
-    searched = {"planner": planner, "budget": repr(budget or Budget())} if check_planner(planner) == "search" else {}
-    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=h,
-                     slices_per_phase=S, **searched, **effort_key_inputs())
-
-
-def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
-                  slices_per_phase: int | None = None, log: bool = True, planner: str = "paper",
-                  budget=None) -> pd.DataFrame:
-    """Per (trial, sample) effort, one cached file per trial (and design: the
-    planner's `approach_height` and `slices_per_phase`, defaults when None; the
-    `planner`, "paper" or "search" with its `budget`).
-
-    The layouts of every uncached trial are one stream of work units on the run's
-    one executor (warm workers plan across trial boundaries); a trial's file is
-    written as soon as its last layout arrives, so an interruption loses at most
-    the trials still in flight.
-    """
-    from models.effort import effort_of_unit, effort_table, effort_units
-
-    from lgp.planner import APPROACH, SLICES_PER_PHASE
-
-    design = {"approach_height": APPROACH if approach_height is None else approach_height,
-              "slices_per_phase": SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase}
-    if planner != "paper":
-        design |= {"planner": planner, "budget": budget}
-    keys = {t.id: effort_key(t, samples, seed, **design) for t in trials}
-    tables: dict[str, pd.DataFrame] = {}
-    for t in trials:
-        cached = cache.get("effort", keys[t.id])
-        if cached is not None:
-            tables[t.id] = cached
-    todo = [t for t in trials if t.id not in tables]
-    units = [u for t in todo for u in effort_units(t, samples, seed, **design)]
-    owner = [u[0] for u in units]
-    pending = Counter(t.id for t in owner)
-    rows: dict[str, list[dict]] = {t.id: [] for t in todo}
-    t0 = time.perf_counter()
-    bar = Progress("effort", len(units), "plans")
-
-    def arrived(k, row):
-        bar.advance()
-        trial = owner[k]
-        rows[trial.id].append(row)
-        pending[trial.id] -= 1
-        if pending[trial.id] == 0:
-            tables[trial.id] = cache.put("effort", keys[trial.id], effort_table(trial, samples, rows[trial.id]))
-            df = tables[trial.id]
-            if log:
-                _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
-                     f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
-
-    for t in trials:
-        if log and t.id in tables and t.id not in rows:
-            _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
-                 f" over {len(tables[t.id])} layouts  (cached)")
-    with bar:
-        executor.map(effort_of_unit, units, arrived)
-    return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -150,7 +71,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
     p.add_argument("--fall-rule", default=DEFAULT_FALL_RULE, help="a run falls by horizontal (default) or 3d displacement")
     p.add_argument("--fall-threshold", type=float, default=FALL_THRESHOLD, help="fall threshold in units of d (default %(default)s)")
-    p.add_argument("--approach-height", type=cli.approach_height, default=None,
+    p.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=None,
                    help="effort: vertical approach/retreat leg (m) at every grasp and place; 0 = a clearance constraint "
                         "instead (default 0.05; docs/effort.md)")
     p.add_argument("--slices", type=cli.positive_int, default=None,
@@ -182,6 +103,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--allow-simulated", action="store_true",
                    help="with --human-data: accept datasets of SIMULATED participants (simulated-*, tests only); "
                         "every table and figure made from them says SIMULATED")
+    p.add_argument("--n-perm", type=cli.positive_int,
+                   help="with --human-data: permutations per permutation test of the risk term (default 1000; --quick 200)")
+    p.add_argument("--recovery", action="store_true",
+                   help="model recovery on SIMULATED studies from our effort and risk tables (recovery/; analysis.recovery)")
+    p.add_argument("--recovery-studies", type=cli.positive_int,
+                   help="with --recovery: simulated studies per cell (default 200; --quick 50)")
     p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
                    help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
     sensitivity.add_arguments(p)
@@ -214,6 +141,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.n_sims = args.n_sims if args.n_sims is not None else q.get("n_sims", N_SIMS)
     args.sigmas = tuple(dict.fromkeys(args.sigmas or q.get("sigmas", SIGMA_GRID)))
     args.n_boot = args.n_boot if args.n_boot is not None else q.get("n_boot", N_BOOT)
+    from analysis.permutation import N_PERM
+    from analysis.recovery import N_STUDIES
+
+    args.n_perm = args.n_perm if args.n_perm is not None else q.get("n_perm", N_PERM)
+    args.recovery_studies = args.recovery_studies if args.recovery_studies is not None else q.get("recovery_studies", N_STUDIES)
     from lgp.planner import APPROACH, SLICES_PER_PHASE
 
     args.approach_height = APPROACH if args.approach_height is None else args.approach_height
@@ -255,7 +187,7 @@ def run(args, argv=None) -> int:
 
         human = load_human_data(args.human_data, allow_simulated=args.allow_simulated)
         if not {t.id for t in trials} >= set(TRIAL_IDS):
-            raise ValueError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
+            raise InputError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     removed = clear_previous(out)  # this folder describes this run only (lgp/app/manifest.py)
@@ -331,8 +263,18 @@ def run(args, argv=None) -> int:
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
                                 build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
-                                risk_measure=args.risk_measure)
+                                risk_measure=args.risk_measure, n_perm=args.n_perm)
         written += [Path(path) for path in analysis["files"]["path"]]
+        if args.recovery:
+            from lgp.app.recovery import recovery_outputs
+
+            paths, section = recovery_outputs(analysis if human is not None else None, e_samples, r, out,
+                                              args.recovery_studies, args.seed, args.jobs)
+            written += paths
+            sections.append(section)
+            analysis["files"] = pd.concat([analysis["files"], pd.DataFrame(
+                [("figure" if p.suffix in (".png", ".pdf") else "table", str(p)) for p in paths],
+                columns=["kind", "path"])], ignore_index=True)
         if args.per_participant_sigma:
             from lgp.app.participant_sigma import participant_sigma_outputs
 
@@ -346,6 +288,8 @@ def run(args, argv=None) -> int:
         pairs = declared_pair_orderings(effort, risk, sigma, {t.pair: t.dimension for t in trials}, declared) if declared else None
         if pairs is not None:
             written.append(write_csv_atomic(pairs_csv_table(pairs), out / "pairs.csv"))
+        if args.recovery:
+            _log("--recovery simulates studies of the paper's 24 trials; not all are in this run, so it is skipped")
         _log("not all of the paper's 24 trials: no figures or fits (they need all 24); "
              + (f"pair table for the {len(pairs)} pair(s) whose E and H trials are both in the run" if pairs is not None
                 else "no pair table (no trial files declare both trials of a pair)"))
@@ -366,6 +310,7 @@ def run(args, argv=None) -> int:
                   "engine": args.engine, "seed": args.seed, "n_boot": args.n_boot, "quick": args.quick,
                   "no_cache": args.no_cache, "build_risk": args.build_risk, "build_sigmas": args.build_sigmas,
                   "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
+                  "n_perm": args.n_perm, "recovery": args.recovery, "recovery_studies": args.recovery_studies,
                   "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
                   "sensitivity": args.sensitivity, "approach_height": args.approach_height,
                   "slices_per_phase": args.slices, **{k: repr(v) if k == "budget" else v for k, v in planner_choice(args).items()}}

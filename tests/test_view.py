@@ -150,7 +150,7 @@ def test_drawing_a_figure_leaves_the_callers_matplotlib_backend_alone(tmp_path):
     notebook's backend off; they draw on their own Figure now."""
     import matplotlib
 
-    from lgp.app.page import trial_picture
+    from lgp.app.pictures import trial_picture
     from lgp.app.sensitivity import risk_sensitivity_figure
     from stimuli.sheet import contact_sheet
 

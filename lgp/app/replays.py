@@ -10,19 +10,10 @@ from __future__ import annotations
 
 import logging
 import shutil
-from collections import Counter
 from pathlib import Path
 
 from lgp.app.cache import Cache, files_digest, input_key, library_versions, modules_digest
 from lgp.app.files import write_text_atomic
-
-
-def page_files(cache: Cache) -> Counter:
-    """(kind, "hit" | "miss") counts of the page's files (pictures, replays) kept beside
-    `cache`'s own table counts, which are about computed results only."""
-    if not hasattr(cache, "page_files"):
-        cache.page_files = Counter()
-    return cache.page_files
 
 
 #: The viewer's JavaScript library, shared by the replays of a run (3 MB; each replay
@@ -92,7 +83,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
         c = cached.get(trial.id)
         if c is not None and c.exists() and lib.exists():
             shutil.copyfile(c, paths[trial.id])
-            page_files(cache)["replay", "hit"] += 1
+            cache.files["replay", "hit"] += 1
         else:
             todo.append(trial)
     if todo:
@@ -104,7 +95,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
             if trial.id in cached:
                 cached[trial.id].parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(paths[trial.id], cached[trial.id])
-                page_files(cache)["replay", "miss"] += 1
+                cache.files["replay", "miss"] += 1
         if lib_cache is not None and lib.exists():
             lib_cache.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(lib, lib_cache)

@@ -140,9 +140,13 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         lines += ["No human data given (`--human-data FILE`, format in docs/human-data.md): the fits of Eq. 1, "
                   "the sigma profile and the bootstrap need the responses, which are not public.", ""]
     else:
+        from analysis.compare_report import comparison_lines
+
         for key in ("sigma_choice", "fits", "bootstrap_summary", "bootstrap_tests"):
             if key in analysis and isinstance(analysis[key], pd.DataFrame) and len(analysis[key]):
-                lines += [f"## {key.replace('_', ' ')}", "", _markdown(analysis[key]), ""]
+                label = " (in-sample)" if key != "sigma_choice" else ""
+                lines += [f"## {key.replace('_', ' ')}{label}", "", _markdown(analysis[key]), ""]
+        lines += comparison_lines(analysis, _markdown)
         if "orderings" in analysis:
             lines += ["## Pair orderings by source (orderings.csv)", "", _markdown(analysis["orderings"]), ""]
     if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers

@@ -69,6 +69,18 @@ def camera_frame(plan) -> tuple[np.ndarray, np.ndarray]:
     return p_WC, p_WT
 
 
+def script_json(data) -> str:
+    """JSON safe to put inside a <script> element of an HTML page: ``<``, ``>`` and
+    ``&`` as \\u escapes (so text such as ``</script><script>...`` from a trial
+    file cannot close the element and run), and U+2028/U+2029 too (line
+    terminators in older JavaScript). The value a script reads is unchanged."""
+    text = json.dumps(data)
+    for char, escape in (("<", "\\u003c"), (">", "\\u003e"), ("&", "\\u0026"),
+                         ("\u2028", "\\u2028"), ("\u2029", "\\u2029")):
+        text = text.replace(char, escape)
+    return text
+
+
 def _caption_data(plan, title: str) -> dict:
     from lgp.planner import PHASE_DURATION
     from models.effort import cumulative_effort, kinetic_energy_by_action
@@ -110,7 +122,7 @@ def caption_html(plan, title: str) -> str:
 </div>
 <script>
 (function () {{
-  var D = {json.dumps(data)};
+  var D = {script_json(data)};
   var action = document.getElementById('lgp-action'), effort = document.getElementById('lgp-effort');
   function update() {{
     var t = (typeof viewer !== 'undefined' && viewer.animator) ? viewer.animator.time : 0;
