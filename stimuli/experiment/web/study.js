@@ -195,8 +195,10 @@
             "Your answers were saved as a CSV file (" + esc(fileName()) + ") in your downloads; " +
             'the button below saves them again.</p><p class="lgp-note">' + rows.length + " responses recorded.") + "</p></div>";
       },
-      choices: ["Save the answers again"],
-      on_finish: function () { window.LGP_DOWNLOAD(); },
+      choices: function () { return [S.jatos && typeof jatos !== "undefined" ? "Finish" : "Save the answers again"]; },
+      on_finish: function () {
+        if (S.jatos && typeof jatos !== "undefined") { jatos.endStudy(); } else { window.LGP_DOWNLOAD(); }
+      },
       response_ends_trial: true
     };
   }
