@@ -315,7 +315,7 @@ def cross_validate(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray]
     batched = {s: np.asarray(r, float).ndim == 3 for s, r in risks.items()}
     for s, r in risks.items():
         if batched[s] and np.asarray(r).shape[0] not in (B,):
-            raise ValueError(f"risk source {s}: {np.asarray(r).shape[0]} risk draws for {B} resamples")
+            raise ModelInputError(f"risk source {s}: {np.asarray(r).shape[0]} risk draws for {B} resamples")
     preds: dict[str, list] = {m: [] for m in models}
     chosen: dict[str, list] = {}
     for lo in range(0, B, chunk):

@@ -20,6 +20,7 @@ from typing import Iterable, Mapping
 import numpy as np
 import pandas as pd
 
+from lgp.errors import InputError
 from lgp.paper import PAIRS, TRIAL_IDS  # noqa: F401  (re-exported)
 
 #: The 24 trial ids in the paper's order: pair 1 easy, pair 1 hard, ..., 12H.
@@ -308,7 +309,7 @@ def zscore_responses(responses: pd.DataFrame, ddof: int = 0) -> pd.DataFrame:
     flat = responses.loc[constant, ["dataset", "participant"]].drop_duplicates()
     if len(flat):
         d, p = flat.iloc[0]
-        raise ValueError(f"participant {p!r} in dataset {d!r} gave the same response on every "
+        raise InputError(f"participant {p!r} in dataset {d!r} gave the same response on every "
                          "trial, so their z-scores are undefined; use exclude_constant_participants")
     with np.errstate(over="ignore", invalid="ignore"):
         z = (responses["response"] - mean) / sd
@@ -329,7 +330,7 @@ def participant_matrices(zscored: pd.DataFrame) -> dict[str, tuple[list[str], np
             index="participant", columns="trial", values="z")
         wide = wide.reindex(columns=list(TRIAL_IDS))
         if wide.isna().any().any():
-            raise ValueError(f"dataset {dataset!r}: some participants lack z-scores for some "
+            raise InputError(f"dataset {dataset!r}: some participants lack z-scores for some "
                              "trials; validate the data with validate_human_data first")
         out[dataset] = (list(wide.index), wide.to_numpy(dtype=float))
     return out

@@ -30,6 +30,7 @@ import pandas as pd
 from analysis.crossval import RiskGrid, cross_validate, pairs_of, scores
 from analysis.data import TRIAL_IDS, ordered_datasets
 from analysis.models import effort_per_trial
+from lgp.errors import InputError
 
 KINDS: tuple[str, ...] = ("shuffle", "within-pair")
 #: Default permutations per test.
@@ -44,7 +45,7 @@ def check_count(value, what: str) -> int:
     """`value` as an int if it is a whole number >= 1, else ValueError naming `what`."""
     if isinstance(value, bool) or not isinstance(value, (numbers.Integral, numbers.Real)) \
             or not np.isfinite(value) or value != int(value) or value < 1:
-        raise ValueError(f"{what} must be a whole number >= 1, got {value!r}")
+        raise InputError(f"{what} must be a whole number >= 1, got {value!r}")
     return int(value)
 
 
@@ -64,7 +65,7 @@ def draw_permutations(kind: str, n_perm: int, rng: np.random.Generator, trials=T
         out[:, pairs[:, 0]] = np.where(swap, pairs[:, 1], pairs[:, 0])
         out[:, pairs[:, 1]] = np.where(swap, pairs[:, 0], pairs[:, 1])
         return out
-    raise ValueError(f"unknown permutation kind {kind!r}; expected one of {', '.join(KINDS)}")
+    raise InputError(f"unknown permutation kind {kind!r}; expected one of {', '.join(KINDS)}")
 
 
 def cv_gain(Y: np.ndarray, E: np.ndarray, risk: np.ndarray, scheme: str = SCHEME, pool: bool = True) -> np.ndarray:

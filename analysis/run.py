@@ -22,6 +22,7 @@ from analysis.models import (MEASURE_BASES, MODELS, RISK_MEASURES, effort_per_tr
                              measure_at_sigma, measure_model, risk_at_sigma, risk_inputs, risk_sigmas)
 from analysis.pairs import pair_table
 from analysis.sigma import PAPER_SIGMA, choose_sigma, sigma_profile
+from lgp.errors import InputError
 
 
 def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
@@ -92,7 +93,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     check_count(n_boot, "the number of bootstrap resamples")
     check_count(n_perm, "the number of permutations")
     if risk_draw not in RISK_DRAWS:
-        raise ValueError(f"unknown risk draw {risk_draw!r}; expected one of {', '.join(RISK_DRAWS)}")
+        raise InputError(f"unknown risk draw {risk_draw!r}; expected one of {', '.join(RISK_DRAWS)}")
     E = effort_per_trial(effort_by_trial)
     available = risk_sigmas(risk_table)
     results: dict[str, pd.DataFrame] = {}
@@ -138,7 +139,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     R = risk_at_sigma(risk_table, sigma)
     models, comparisons, build_sigma = list(MODELS), list(COMPARISONS), None
     if risk_measure is not None and risk_measure not in RISK_MEASURES:
-        raise ValueError(f"unknown risk measure {risk_measure!r}; expected one of {', '.join(RISK_MEASURES)}")
+        raise InputError(f"unknown risk measure {risk_measure!r}; expected one of {', '.join(RISK_MEASURES)}")
     if build_risk is not None:
         have = np.unique(np.round(build_risk["sigma"].astype(float), 9))
         build_sigma = float(have[np.argmin(np.abs(have - sigma))])
@@ -148,7 +149,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         models += [measure_model(b, m) for m in RISK_MEASURES for b in MEASURE_BASES]
         comparisons += [(measure_model("full", m), "full") for m in RISK_MEASURES]
     elif risk_measure is not None:
-        raise ValueError(f"risk measure {risk_measure!r} needs the build-risk table (build_risk=...)")
+        raise InputError(f"risk measure {risk_measure!r} needs the build-risk table (build_risk=...)")
     else:
         inputs = R
     fits, predictions = fit_models(means, E, inputs, sigma, models=models)

@@ -27,6 +27,7 @@ import pandas as pd
 
 import stimuli
 from lgp import cli
+from lgp.planner.design import check_approach_height
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import WorkerDied, default_jobs, executor_for_scheduler, stop_signals
 from lgp.app.progress import Progress
@@ -40,6 +41,7 @@ from lgp.app.report import append_report, engine_description, pairs_csv_table, w
 from lgp.app.stages import check_targets, risk_key_inputs, risk_tables
 from lgp.app import sensitivity
 from lgp.app.sensitivity import planner_choice
+from lgp.errors import InputError
 
 PROG = "python -m lgp.reproduce"
 
@@ -60,18 +62,18 @@ def effort_key_inputs() -> dict:
 
 
 def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
-               slices_per_phase: int | None = None, planner: str = "paper", budget=None) -> str:
+               slices_per_phase: int | None = None, planner: str = "paper", budget=None, design=None) -> str:
     """The cache key of one trial's effort table: the trial file, M, the seed, the
-    planner's design (approach height, slices per phase), for planner="search"
-    the planner and its budget (lgp.search.Budget), and effort_key_inputs()."""
-    from lgp.planner import APPROACH, SLICES_PER_PHASE, check_design
+    planner's design (approach height, slices per phase: `design` or its two
+    values), for planner="search" the planner and its budget (lgp.search.Budget),
+    and effort_key_inputs()."""
+    from lgp.planner import Design
     from lgp.search import Budget, check_planner
 
-    h, S = check_design(APPROACH if approach_height is None else approach_height,
-                        SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase)
+    design = Design.of(design, approach_height, slices_per_phase)
     searched = {"planner": planner, "budget": repr(budget or Budget())} if check_planner(planner) == "search" else {}
-    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=h,
-                     slices_per_phase=S, **searched, **effort_key_inputs())
+    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=design.approach_height,
+                     slices_per_phase=design.slices_per_phase, **searched, **effort_key_inputs())
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
@@ -88,20 +90,18 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
     """
     from models.effort import effort_of_unit, effort_table, effort_units
 
-    from lgp.planner import APPROACH, SLICES_PER_PHASE
+    from lgp.planner import Design
 
-    design = {"approach_height": APPROACH if approach_height is None else approach_height,
-              "slices_per_phase": SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase}
-    if planner != "paper":
-        design |= {"planner": planner, "budget": budget}
-    keys = {t.id: effort_key(t, samples, seed, **design) for t in trials}
+    design = Design.of(None, approach_height, slices_per_phase)  # checked once for the stage
+    searched = {"planner": planner, "budget": budget} if planner != "paper" else {}
+    keys = {t.id: effort_key(t, samples, seed, design=design, **searched) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
         cached = cache.get("effort", keys[t.id])
         if cached is not None:
             tables[t.id] = cached
     todo = [t for t in trials if t.id not in tables]
-    units = [u for t in todo for u in effort_units(t, samples, seed, **design)]
+    units = [u for t in todo for u in effort_units(t, samples, seed, design=design, **searched)]
     owner = [u[0] for u in units]
     pending = Counter(t.id for t in owner)
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
@@ -150,7 +150,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
     p.add_argument("--fall-rule", default=DEFAULT_FALL_RULE, help="a run falls by horizontal (default) or 3d displacement")
     p.add_argument("--fall-threshold", type=float, default=FALL_THRESHOLD, help="fall threshold in units of d (default %(default)s)")
-    p.add_argument("--approach-height", type=cli.approach_height, default=None,
+    p.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=None,
                    help="effort: vertical approach/retreat leg (m) at every grasp and place; 0 = a clearance constraint "
                         "instead (default 0.05; docs/effort.md)")
     p.add_argument("--slices", type=cli.positive_int, default=None,
@@ -267,7 +267,7 @@ def run(args, argv=None) -> int:
 
         human = load_human_data(args.human_data, max_participants=args.max_participants or MAX_PARTICIPANTS)
         if not {t.id for t in trials} >= set(TRIAL_IDS):
-            raise ValueError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
+            raise InputError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     with OutputLock(out, args.command):  # one run per output folder, for the whole run

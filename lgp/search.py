@@ -53,8 +53,9 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from lgp.assignment import assign_blocks
+from lgp.errors import InputError
 from lgp.planner import (APPROACH, APPROACH_TIME, PHASE_DURATION, SEED_MARGIN, SLICES_PER_PHASE, SWIVELS, Plan,
-                         PlanningError, check_design, default_arm, plan_symbolic)
+                         PlanningError, Design, default_arm, plan_symbolic)
 from lgp.scene import (CONTACT_TOLERANCE, MIN_SUPPORT_AREA, TABLE, Scene, footprint_overlap_area, support_graph,
                        supported_by)
 from lgp.symbolic import (Grasp, Place, SymbolicPlan, SymbolicPlanningError, _enters_any, _near, same_pose,
@@ -96,9 +97,9 @@ class Budget:
         for name in ("solves", "seconds", "expansions"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-                raise ValueError(f"Budget.{name} must be a positive number, got {value!r}")
+                raise InputError(f"Budget.{name} must be a positive number, got {value!r}")
         if not float(self.solves).is_integer() or not float(self.expansions).is_integer():
-            raise ValueError(f"Budget.solves and .expansions must be whole numbers, got {self.solves!r}, {self.expansions!r}")
+            raise InputError(f"Budget.solves and .expansions must be whole numbers, got {self.solves!r}, {self.expansions!r}")
 
 
 @dataclass
@@ -190,7 +191,8 @@ def carry_bound(p_from, p_to, *, approach_height: float = APPROACH, slices_per_p
     adds for certain. (KOMO's motions are rest to rest and curved; the rest-to-rest
     cubic would be 0.6 m L^2 / T, 1.2 times this.)
     """
-    h, S = check_design(approach_height, slices_per_phase)
+    design = Design.of(None, approach_height, slices_per_phase)
+    h, S = design.approach_height, design.slices_per_phase
     D2 = np.sum((np.asarray(p_to, float) - np.asarray(p_from, float)) ** 2, axis=-1)
     tau = PHASE_DURATION / S
     if h > 0:
@@ -527,7 +529,8 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     """
     start = time.perf_counter()
     budget = budget or Budget()
-    approach_height, slices_per_phase = check_design(approach_height, slices_per_phase)
+    design = Design.of(None, approach_height, slices_per_phase)
+    approach_height, slices_per_phase = design.approach_height, design.slices_per_phase
     arm = arm or default_arm()
     rng = rng_or_seed if isinstance(rng_or_seed, np.random.Generator) else np.random.default_rng(rng_or_seed)
     label = f"{initial.label} -> {target.label}"
@@ -671,7 +674,7 @@ PLANNERS = ("paper", "search")
 def check_planner(planner: str) -> str:
     """`planner` if it is one of PLANNERS, else ValueError naming them."""
     if planner not in PLANNERS:
-        raise ValueError(f"planner must be one of {', '.join(PLANNERS)}, got {planner!r}")
+        raise InputError(f"planner must be one of {', '.join(PLANNERS)}, got {planner!r}")
     return planner
 
 
@@ -685,7 +688,7 @@ def plan(initial: Scene, target: Scene, rng_or_seed=0, *, planner: str = "paper"
 
     if check_planner(planner) == "paper":
         if budget is not None:
-            raise ValueError("a budget applies to planner='search' only")
+            raise InputError("a budget applies to planner='search' only")
         return paper.plan(initial, target, rng_or_seed, **options)
     result = search(initial, target, rng_or_seed, budget=budget, **options)
     result.plan.search = result

@@ -183,7 +183,7 @@ def test_editing_the_planner_keeps_the_risk_key(tmp_path):
     root = _copy_project(tmp_path)
     risk = modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli", root=root)
     effort = modules_digest("models.effort", "stimuli", root=root)
-    for module in ("lgp/planner.py", "lgp/komo/solve.py", "models/risk/build.py"):
+    for module in ("lgp/planner/__init__.py", "lgp/planner/clearance.py", "lgp/komo/solve.py", "models/risk/build.py"):
         (root / module).write_text((root / module).read_text() + "\n# edited\n")
     assert modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli", root=root) == risk
     assert modules_digest("models.effort", "stimuli", root=root) != effort

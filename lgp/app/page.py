@@ -28,6 +28,7 @@ from lgp.app.cache import Cache, library_versions
 from lgp.app.files import write_text_atomic
 from lgp.app.report import ratio_text
 from lgp.app.pictures import trial_pictures
+from lgp.errors import InputError
 
 #: Libraries named on the page (the cache keys name their own).
 LIBRARIES = ("drake", "mujoco", "numpy", "scipy", "pandas", "matplotlib", "pyyaml")
@@ -334,7 +335,7 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
         s = effort_samples[effort_samples["trial"] == trial.id]
         r = risk[risk["trial"] == trial.id]
         if not len(s) or not len(r):
-            raise ValueError(f"results page: trial {trial.id} has no effort or no risk rows")
+            raise InputError(f"results page: trial {trial.id} has no effort or no risk rows")
         cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out))
     nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
     title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"

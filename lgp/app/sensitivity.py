@@ -341,6 +341,7 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
     """(per design and trial, per design and pair, notes on designs that failed)."""
     from analysis import pair_table
     from lgp.paper import TRIAL_IDS
+    from models.effort import converged
 
     args = ctx.args
     samples = EFFORT_QUICK_SAMPLES if getattr(args, "quick", False) else args.samples
@@ -366,7 +367,7 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
         for trial, df in g:
             rows.append({"design": label, "approach_height": h, "slices_per_phase": S, "trial": trial,
                          "effort": float(df["effort"].mean()), "samples": len(df),
-                         "not_converged": int((~df["status"].astype(str).str.contains("SolutionFound|failed")).sum())})
+                         "not_converged": int((~converged(df["status"]) & (df["status"] != "failed")).sum())})
     table = pd.DataFrame(rows, columns=["design", "approach_height", "slices_per_phase", "trial", "effort", "samples",
                                         "not_converged"])
     pairs = []

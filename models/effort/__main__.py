@@ -19,7 +19,7 @@ import pandas as pd
 
 from lgp import cli
 from lgp.paper import SAMPLES
-from lgp.planner import APPROACH, SLICES_PER_PHASE
+from lgp.planner import APPROACH, SLICES_PER_PHASE, check_approach_height
 from lgp.search import PLANNERS, Budget
 from models.effort import physical_effort
 
@@ -35,7 +35,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=cli.seed, default=0)
     parser.add_argument("--jobs", type=cli.positive_int, default=1)
     parser.add_argument("--out", type=cli.output_file, help="write the per-sample table (CSV) here")
-    parser.add_argument("--approach-height", type=cli.approach_height, default=APPROACH,
+    parser.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=APPROACH,
                         help="vertical approach/retreat leg (m) at every grasp and place; 0 = clearance constraint "
                              "instead (default %(default)s)")
     parser.add_argument("--slices", type=cli.positive_int, default=SLICES_PER_PHASE,
