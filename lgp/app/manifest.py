@@ -134,8 +134,10 @@ class OutputLock:
     """An exclusive lock on an output folder for a whole run: ``<out>/.lgp-run.lock``,
     locked with flock (so the kernel releases it on any exit, ``kill -9``
     included) and holding the holder's pid and command. A second run in the same
-    folder raises OutputFolderBusy naming that process. The file stays (an
-    unlocked lock file is free: removing it would let two runs lock two files)."""
+    folder raises OutputFolderBusy naming that process. The holder removes the
+    file on its way out, while still holding the lock; a run that locks a file
+    checks that it is still the one at that path (else it retries), so two runs
+    never hold two files. A killed run leaves an unlocked file: it is free."""
 
     NAME = ".lgp-run.lock"
 
@@ -147,16 +149,24 @@ class OutputLock:
     def __enter__(self):
         import fcntl
 
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0), 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 4096, 0).decode("utf-8", "replace").strip().splitlines()
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0), 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.pread(fd, 4096, 0).decode("utf-8", "replace").strip().splitlines()
+                os.close(fd)
+                pid = holder[0] if holder else "?"
+                what = f": {holder[1]}" if len(holder) > 1 else ""
+                raise OutputFolderBusy(f"{self.path.parent} is in use by another run (process {pid}{what}); "
+                                       "wait for it to end or give another --out") from None
+            try:  # the holder we waited on may have removed the file as we opened it: lock the one on disk
+                same = os.stat(self.path, follow_symlinks=False).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
             os.close(fd)
-            pid = holder[0] if holder else "?"
-            what = f": {holder[1]}" if len(holder) > 1 else ""
-            raise OutputFolderBusy(f"{self.path.parent} is in use by another run (process {pid}{what}); "
-                                   "wait for it to end or give another --out") from None
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n{self.command}\n".encode(), 0)
         self._fd = fd
@@ -164,6 +174,10 @@ class OutputLock:
 
     def __exit__(self, *exc):
         if self._fd is not None:
+            try:
+                os.unlink(self.path)  # while still locked, so no one can lock the old file after us
+            except FileNotFoundError:
+                pass
             os.close(self._fd)  # closing releases the flock
             self._fd = None
         return False
