@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.crossval import (RISK_DRAW_STREAM, RISK_DRAWS, SCHEMES, bootstrap_comparison, comparison_tests,
+from analysis.crossval import (RISK_DRAW_STREAM, RISK_DRAWS, SCHEMES, bootstrap_comparison, comparison_tests, gain_over_effort,
                                measure_grid, model_comparison, redraw_risk, risk_grid, summarize_comparison)
 from analysis.permutation import N_PERM, PERMUTATION_STREAM, check_count, permutation_test
 from analysis.bootstrap import COMPARISONS, bootstrap_model_correlations, bootstrap_tests, summarize_bootstrap
@@ -85,7 +85,8 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     fits, predictions, bootstrap_correlations, bootstrap_summary,
     bootstrap_tests (these in-sample, column scheme "in-sample"); with
     `compare`, model_comparison (in-sample and out-of-sample scores of every
-    model side by side, with bootstrap intervals), model_comparison_tests,
+    model side by side, with bootstrap intervals), model_comparison_gain (RMSE
+    below effort-only's, with intervals), model_comparison_tests,
     cv_predictions, cv_bootstrap, permutation_test and permutation_null; plus
     files (kind, path) listing everything written.
     """
@@ -205,7 +206,8 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         figure_paths += plot_sigma_profile(profile, out_dir, choice, stem=f"{prefix}sigma_profile")
         if compare:
             figure_paths += plot_model_comparison(results["model_comparison"], out_dir,
-                                                  stem=f"{prefix}fig4_model_comparison")
+                                                  stem=f"{prefix}fig4_model_comparison",
+                                                  gain=results["model_comparison_gain"])
         figure_paths += plot_effort_risk(
             E, risk_table, sigma, out_dir,
             betas={d: tuple(full.loc[d]) for d in ordered_datasets(full.index)},  # the paper's order, as every figure
@@ -235,7 +237,9 @@ def _comparison(means: pd.DataFrame, boot_means, E: pd.Series, grids, models, co
         tests = comparison_tests(point, fixed, comparisons)
         cv_boot = fixed.assign(risk_draw="none")
     perm, null = permutation_test(y, E, grids["R"], n_perm, np.random.default_rng([seed, PERMUTATION_STREAM]))
-    return {"model_comparison": summary, "model_comparison_tests": tests, "cv_predictions": cv_pred,
+    gain = gain_over_effort(point, boot if risk_draw == "binomial" else fixed)
+    return {"model_comparison": summary, "model_comparison_gain": gain, "model_comparison_tests": tests,
+            "cv_predictions": cv_pred,
             "cv_bootstrap": cv_boot, "permutation_test": perm, "permutation_null": null}
 
 

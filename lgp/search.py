@@ -58,8 +58,8 @@ from lgp.planner import (APPROACH, APPROACH_TIME, PHASE_DURATION, SEED_MARGIN, S
                          PlanningError, Design, default_arm, plan_symbolic)
 from lgp.scene import (CONTACT_TOLERANCE, MIN_SUPPORT_AREA, TABLE, Scene, footprint_overlap_area, support_graph,
                        supported_by)
-from lgp.symbolic import (Grasp, Place, SymbolicPlan, SymbolicPlanningError, _enters_any, _near, same_pose,
-                          symbolic_plan)
+from lgp.symbolic import (Grasp, Place, PlanState, SymbolicPlan, SymbolicPlanningError, _enters_any, _near,
+                          _support_memo, apply, same_pose, symbolic_plan)
 
 #: Mass of a unit block (kg) [paper: "a unit mass to a unit block"]; models.effort.BLOCK_MASS.
 BLOCK_MASS = 1.0
@@ -125,6 +125,7 @@ class SearchResult:
     paper_effort: float | None = None
     paper_symbolic: SymbolicPlan | None = None
     tried: list = field(default_factory=list)  # (skeleton bound, effort or failure) per KOMO solve
+    komo_seconds: float = 0.0  # of `seconds`, the time in lgp.planner.plan_symbolic (IK seeding + KOMO)
 
     @property
     def gap(self) -> float:
@@ -225,24 +226,49 @@ def first_sweep(plan: Plan) -> str | None:
     SWEEP_TOLERANCE along the plan (lgp.scene.penetration at every slice it
     moves), None when none does. The legs design has no collision constraint
     between its waypoints: an order or assignment the paper never tried can carry
-    a block through a neighbour (7H), and the search then rejects the plan."""
+    a block through a neighbour (7H), and the search then rejects the plan.
+    Every (moving block, slice, solid) pair is screened at once by the
+    vectorised separating-axis depth (lgp.geometry.rectangle_overlap); pairs
+    not well below the tolerance are decided by the scalar test."""
+    from lgp.geometry import rectangle_overlap, yaw_direction
     from lgp.scene import penetration
 
     initial = plan.initial
     names = initial.names
-    P = np.array([plan.p_WB[n] for n in names])  # (blocks, slices, 3)
-    yaw = np.array([np.arctan2(plan.R_WB[n][:, 1, 0], plan.R_WB[n][:, 0, 0]) for n in names])
-    reach = np.array([np.linalg.norm(b.size) / 2 for b in initial.blocks])
-    moving = np.any(np.diff(P, axis=1) != 0, axis=2)  # (blocks, slices - 1): moved into slice i + 1
-    for k, i in zip(*np.nonzero(moving)):
-        i = i + 1
-        me = initial.blocks[k].moved_to(P[k, i], yaw[k, i])
-        near = np.flatnonzero(np.linalg.norm(P[:, i] - P[k, i], axis=1) <= reach + reach[k])
-        others = [initial.blocks[j].moved_to(P[j, i], yaw[j, i]) for j in near if j != k] + list(initial.fixed)
-        for o in others:
-            depth = penetration(me, o)
+    P = np.array([plan.p_WB[n] for n in names]).reshape(len(names), len(plan.t), 3)  # (blocks, slices, 3)
+    yaw = np.array([np.arctan2(plan.R_WB[n][:, 1, 0], plan.R_WB[n][:, 0, 0]) for n in names]).reshape(len(names), -1)
+    half = np.array([np.asarray(b.size, float) / 2 for b in initial.blocks]).reshape(-1, 3)
+    k, i = np.nonzero(np.any(np.diff(P, axis=1) != 0, axis=2))  # block k moved into slice i + 1
+    i = i + 1
+    order = np.lexsort((k, i))  # first in time
+    k, i = k[order], i[order]
+    if not len(k):
+        return None
+    nb, nf = len(names), len(initial.fixed)
+    # solids per moving entry: every block at that slice (itself masked out), then the fixed boxes
+    c_b = np.concatenate([P[:, i, :].transpose(1, 0, 2),
+                          np.broadcast_to(np.array([f.p_WO for f in initial.fixed]).reshape(nf, 3), (len(k), nf, 3))], axis=1)
+    h_b = np.concatenate([np.broadcast_to(half, (len(k), nb, 3)),
+                          np.broadcast_to(np.array([f.size / 2 for f in initial.fixed]).reshape(nf, 3), (len(k), nf, 3))], axis=1)
+    y_b = np.concatenate([yaw[:, i].T, np.zeros((len(k), nf))], axis=1)
+    n = nb + nf
+    c_a = np.repeat(P[k, i][:, None], n, axis=1)
+    h_a = np.repeat(half[k][:, None], n, axis=1)
+    y_a = np.repeat(yaw[k, i][:, None], n, axis=1)
+    flat = lambda x: x.reshape(len(k) * n, *x.shape[2:])  # noqa: E731
+    horizontal, _ = rectangle_overlap(flat(c_a)[:, :2], flat(h_a)[:, :2], yaw_direction(flat(y_a)),
+                                      flat(c_b)[:, :2], flat(h_b)[:, :2], yaw_direction(flat(y_b)))
+    vertical = (np.minimum(flat(c_a)[:, 2] + flat(h_a)[:, 2], flat(c_b)[:, 2] + flat(h_b)[:, 2])
+                - np.maximum(flat(c_a)[:, 2] - flat(h_a)[:, 2], flat(c_b)[:, 2] - flat(h_b)[:, 2]))
+    maybe = (np.minimum(vertical, horizontal) > SWEEP_TOLERANCE - 1e-7).reshape(len(k), n)
+    maybe[np.arange(len(k)), k] = False  # not itself
+    for m in np.flatnonzero(maybe.any(axis=1)):
+        me = initial.blocks[k[m]].moved_to(P[k[m], i[m]], yaw[k[m], i[m]])
+        for j in np.flatnonzero(maybe[m]):
+            other = (initial.blocks[j].moved_to(P[j, i[m]], yaw[j, i[m]]) if j < nb else initial.fixed[j - nb])
+            depth = penetration(me, other)
             if depth > SWEEP_TOLERANCE:
-                return f"carried block {names[k]} enters {o.name} by {depth * 1000:.1f} mm at t = {plan.t[i]:g} s"
+                return f"carried block {names[k[m]]} enters {other.name} by {depth * 1000:.1f} mm at t = {plan.t[i[m]]:g} s"
     return None
 
 
@@ -502,12 +528,10 @@ def _symbolic(problem: _Problem, carries) -> SymbolicPlan:
         where[i] = w
     assignment = {names[i]: problem.slots[j].name for i, j in slot_of.items()}
     plan = SymbolicPlan(problem.initial, problem.target, assignment, tuple(actions))
-    plan.states()  # every action legal (lgp.symbolic.apply), or IllegalActionError
+    state, support = PlanState(problem.initial), _support_memo()
+    for action in plan.actions:  # every action legal (lgp.symbolic.apply), or IllegalActionError
+        state = apply(action, state, support=support)
     return plan
-
-
-def _signature(symbolic: SymbolicPlan) -> tuple:
-    return tuple((a.block, tuple(np.round(a.p_WB, 6))) for a in symbolic.actions if isinstance(a, Place))
 
 
 def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | None = None,
@@ -538,20 +562,23 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     options = dict(formulation=formulation, solver=solver, slices_per_phase=slices_per_phase,
                    approach_height=approach_height, arm=arm)
     best: tuple[float, Plan, float] | None = None  # (effort, plan, skeleton bound)
-    solved: set = set()
     tried: list = []
     solves = 0
     paper_effort, paper_symbolic = None, None
 
+    komo_seconds = 0.0
+
     def solve(symbolic: SymbolicPlan, bound: float) -> None:
-        nonlocal best, solves
+        nonlocal best, solves, komo_seconds
         solves += 1
-        solved.add(_signature(symbolic))
+        t0 = time.perf_counter()
         try:
             result = plan_symbolic(symbolic, rng, **options)
         except PlanningError as e:
             tried.append((bound, f"failed: {e}"))
             return
+        finally:
+            komo_seconds += time.perf_counter() - t0
         sweep = first_sweep(result)
         if sweep is not None:
             tried.append((bound, f"rejected: {sweep}"))
@@ -661,7 +688,7 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     effort, result, bound = best
     result.planning_time = seconds
     return SearchResult(result, effort, min(float(lowest_open), effort), bound, solves, expansions, seconds, stopped,
-                        paper_effort, paper_symbolic, tried)
+                        paper_effort, paper_symbolic, tried, komo_seconds)
 
 
 # ----------------------------------------------------------------------------- planner="paper" | "search"
@@ -672,7 +699,7 @@ PLANNERS = ("paper", "search")
 
 
 def check_planner(planner: str) -> str:
-    """`planner` if it is one of PLANNERS, else ValueError naming them."""
+    """`planner` if it is one of PLANNERS, else InputError naming them."""
     if planner not in PLANNERS:
         raise InputError(f"planner must be one of {', '.join(PLANNERS)}, got {planner!r}")
     return planner

@@ -274,3 +274,10 @@ def test_plan_of_none_is_a_named_error(which):
     args = (None, B) if which == "initial" else (B, None)
     with pytest.raises(InputError, match=rf"lgp.plan: {which} \(state [AB]\) must be an lgp.scene.Scene.*got NoneType"):
         lgp.plan(*args)
+
+
+def test_the_participant_limit_default_is_one_number():
+    from analysis.data import MAX_PARTICIPANTS
+    from lgp.app.config import RunConfig
+
+    assert RunConfig().max_participants == MAX_PARTICIPANTS

@@ -60,7 +60,8 @@ def test_one_rule_for_the_design_in_the_planner_the_units_the_command_lines_and_
 
     from lgp import cli
     from lgp.planner import MAX_APPROACH_HEIGHT, DesignError, check_approach_height
-    from lgp.reproduce import effort_key, parse_args
+    from lgp.app.stages import effort_key
+    from lgp.reproduce import parse_args
 
     assert MAX_APPROACH_HEIGHT == 0.5
     assert Design(0.0, 1) == Design("0", 1.0) and Design(0.4999, 40).legs and not Design(0.0).legs
@@ -96,7 +97,7 @@ def test_the_design_and_the_planners_entry_points_load_no_drake():
 
 
 def test_the_design_is_part_of_the_effort_cache_key():
-    from lgp.reproduce import effort_key
+    from lgp.app.stages import effort_key
 
     trial = stimuli.load_trial("2E")
     default = effort_key(trial, 3, 0)
@@ -235,12 +236,11 @@ def test_straight_carry_bound_is_the_effort_of_a_constant_speed_carry():
 def test_effort_sensitivity_section_ratios_and_order_changes(tmp_path):
     # The section's arithmetic on known tables: per design, H/E of every pair and
     # whether its order (tie rule) differs from the run's design.
-    from types import SimpleNamespace
-
     import pandas as pd
 
     from lgp.app import sensitivity
     from lgp.app.cache import Cache
+    from lgp.app.config import RunConfig
     from lgp.executor import SerialExecutor
     from lgp.paper import TRIAL_IDS
 
@@ -264,7 +264,7 @@ def test_effort_sensitivity_section_ratios_and_order_changes(tmp_path):
             rows += [{"trial": t.id, "sample": s, "effort": e, "status": "kSolutionFound"} for s in range(samples)]
         return pd.DataFrame(rows)
 
-    args = SimpleNamespace(seed=0, samples=3, quick=True, approach_height=None, slices=None)
+    args = RunConfig(seed=0, samples=3, quick=True)
     ctx = sensitivity.Context(args, trials, SerialExecutor(), Cache(tmp_path / "c"), tmp_path, None, lambda m: None,
                               effort_tables=effort_tables)
     section = sensitivity.effort_section(ctx)

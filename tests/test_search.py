@@ -203,3 +203,15 @@ def test_search_plans_a_generated_set_of_20_rearrangements_and_each_plan_passes_
         # the lower bound is below KOMO's effort on every generated task
         assert skeleton_bound(result.symbolic) <= result.effort, trial.id
         assert result.bound <= result.effort
+
+
+@pytest.mark.slow
+def test_search_never_returns_more_effort_than_the_paper_planner_on_any_paper_trial():
+    # layout 0 of seed 0 of all 24 trials (docs/results.md has all 30 layouts)
+    for trial_id in stimuli.trial_ids():
+        trial = stimuli.load_trial(trial_id)
+        paper = kinetic_energy(_paper_plan(trial_id))
+        rng = sample_rng(0, 0)
+        result = search(trial.sample_initial(rng), trial.target, rng)
+        assert result.effort <= paper, trial_id
+        assert check_plan(result.plan, trial.target) == [], trial_id

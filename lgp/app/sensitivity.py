@@ -38,8 +38,10 @@ import numpy as np
 import pandas as pd
 
 from lgp.app.cache import Cache, input_key
+from lgp.app.config import RunConfig
 from lgp.app.files import atomic_path, write_csv_atomic
 from lgp.paper import BLOCK_SIZE, PAPER_SIGMA, RISK_PAIRS
+from lgp.planner.design import APPROACH
 from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
 
 #: The noise levels of the risk section: the paper's sigma and the top of its grid.
@@ -50,7 +52,7 @@ RISK_SIGMAS = (PAPER_SIGMA, 0.10)
 RISK_RULES = ((DEFAULT_FALL_RULE, FALL_THRESHOLD), ("3d", FALL_THRESHOLD), ("3d", 0.1))
 #: Approach heights (m) of the effort section: the default legs, shorter legs, and
 #: none (the clearance design of lgp.planner).
-EFFORT_HEIGHTS = (0.05, 0.02, 0.0)
+EFFORT_HEIGHTS = (APPROACH, 0.02, 0.0)
 #: Layouts per trial of the effort section with --quick (the clearance design
 #: re-solves its carries and is the slow one).
 EFFORT_QUICK_SAMPLES = 1
@@ -62,28 +64,20 @@ DEFAULT_RISK_ENGINES = ("mujoco", "physx", "physx:game-defaults")
 COLUMNS = ["engine", "faithful", "fall_rule", "fall_threshold", "trial", "sigma", "risk", "falls", "n", "stands_unperturbed"]
 
 
-def planner_choice(args) -> dict:
-    """The planner of a run's effort (lgp.reproduce --planner): {} for the paper's
-    pipeline (its cache keys and manifests as before the search existed), else
-    {"planner": "search", "budget": lgp.search.Budget}."""
-    planner = getattr(args, "planner", "paper")
-    return {} if planner == "paper" else {"planner": planner, "budget": getattr(args, "budget", None)}
-
-
 @dataclass
 class Context:
-    """What a section may use: parsed arguments of lgp.reproduce, its trials, the
-    run's executor and cache, the output folder, and `risk_key(engine, rule,
-    threshold)` -> the risk cache-key inputs of lgp.reproduce."""
+    """What a section may use: the run's settings (lgp.app.config.RunConfig), its
+    trials, executor and cache, the output folder, and `risk_key(engine, rule,
+    threshold)` -> the risk cache-key inputs (lgp.app.stages.risk_key_inputs)."""
 
-    args: object
+    args: RunConfig
     trials: list
     executor: object
     cache: Cache
     out: Path
     risk_key: Callable[..., dict]
     log: Callable[[str], None] = field(default=lambda m: print(m, file=sys.stderr, flush=True))
-    #: lgp.reproduce.effort_tables (trials, samples, seed, executor, cache, approach_height=, slices_per_phase=)
+    #: lgp.app.stages.effort_tables (trials, samples, seed, executor, cache, approach_height=, slices_per_phase=)
     effort_tables: Callable[..., pd.DataFrame] | None = None
 
 
@@ -109,7 +103,7 @@ def check_arguments(args) -> None:
     """ValueError for an unknown or uninstalled engine of --sensitivity-engines."""
     from models.risk import engine_name
 
-    for name in getattr(args, "sensitivity_engines", None) or ():
+    for name in args.sensitivity_engines or ():
         engine_name(name)
 
 
@@ -124,8 +118,8 @@ def risk_engines(args) -> tuple[list[str], list[str]]:
     """(engines to run, notes on engines left out)."""
     from models.risk import ENGINES, EngineUnavailableError, engine_name
 
-    wanted = list(getattr(args, "sensitivity_engines", None) or DEFAULT_RISK_ENGINES)
-    if getattr(args, "engine", None) == "drake" and "drake" not in wanted:
+    wanted = list(args.sensitivity_engines or DEFAULT_RISK_ENGINES)
+    if args.engine == "drake" and "drake" not in wanted:
         wanted.insert(1, "drake")
     names, notes = [], []
     for name in wanted:
@@ -319,11 +313,7 @@ def risk_section(ctx: Context) -> Section:
 def effort_designs(args) -> list[tuple[str, float, int]]:
     """(label, approach_height, slices_per_phase) of the effort section; the run's
     design first."""
-    from lgp.planner import APPROACH, SLICES_PER_PHASE
-
-    h = getattr(args, "approach_height", None)
-    h = APPROACH if h is None else float(h)
-    S = getattr(args, "slices", None) or SLICES_PER_PHASE
+    h, S = float(args.approach_height), args.slices
 
     def label(height, slices):
         legs = f"legs {height * 100:g} cm" if height > 0 else "clearance (no legs)"
@@ -344,19 +334,19 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
     from models.effort import converged
 
     args = ctx.args
-    samples = EFFORT_QUICK_SAMPLES if getattr(args, "quick", False) else args.samples
+    samples = EFFORT_QUICK_SAMPLES if args.quick else args.samples
     rows, notes = [], []
     for label, h, S in effort_designs(args):
         t0 = time.perf_counter()
         try:
             table = ctx.effort_tables(ctx.trials, samples, args.seed, ctx.executor, ctx.cache,
-                                      approach_height=h, slices_per_phase=S, **planner_choice(args))
+                                      approach_height=h, slices_per_phase=S, **args.planner_choice())
         except Exception:  # a trial the planner cannot do with this design: the others, one by one (cached ones at once)
             parts = []
             for t in ctx.trials:
                 try:
                     parts.append(ctx.effort_tables([t], samples, args.seed, ctx.executor, ctx.cache,
-                                                   approach_height=h, slices_per_phase=S, **planner_choice(args)))
+                                                   approach_height=h, slices_per_phase=S, **args.planner_choice()))
                 except Exception as e:  # said in the report and the table (effort NaN), not hidden
                     notes.append(f"{label}, {t.id}: {type(e).__name__}: {e}")
                     ctx.log(f"[sensitivity] effort, {label}, {t.id}: failed ({type(e).__name__})")
