@@ -244,15 +244,13 @@ def run(args: RunConfig, argv=None) -> int:
                                 risk_measure=args.risk_measure, n_perm=args.n_perm)
         written += [Path(path) for path in analysis["files"]["path"]]
         if args.recovery:
-            from lgp.app.recovery import recovery_outputs
+            from lgp.app.recovery import list_files, recovery_outputs
 
             paths, section = recovery_outputs(analysis if human is not None else None, e_samples, r, out,
                                               args.recovery_studies, args.seed, args.jobs)
             written += paths
             sections.append(section)
-            analysis["files"] = pd.concat([analysis["files"], pd.DataFrame(
-                [("figure" if p.suffix in (".png", ".pdf") else "table", str(p)) for p in paths],
-                columns=["kind", "path"])], ignore_index=True)
+            list_files(analysis, paths)
         if args.per_participant_sigma:
             from lgp.app.participant_sigma import participant_sigma_outputs
 
