@@ -4,7 +4,7 @@
     python -m lgp.reproduce --quick                 # a small version, about a minute
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
-    python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/app/sensitivity.py)
+    python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule, effort by design (lgp/app/sensitivity/)
     python -m lgp.reproduce --fall-rule 3d --fall-threshold 0.1   # the risk model with another fall rule
     python -m lgp.reproduce --approach-height 0 --slices 40       # effort with another motion design (docs/effort.md)
 
@@ -238,7 +238,7 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
     if replays:
         written += [Path(p) for p in replays.values()]
     sections, build = [], None
-    for s in sensitive:  # --sensitivity (lgp/app/sensitivity.py)
+    for s in sensitive:  # --sensitivity (lgp/app/sensitivity/)
         written += s.files
         sections.append("\n".join(s.lines))
     if args.build_risk:

@@ -5,7 +5,7 @@ removes what an earlier run left in the folder (the files its manifest lists,
 and the pipeline's own names for a folder written before manifests existed:
 effort_samples.csv, effort.csv, risk.csv, pairs.csv, report.md, index.html,
 build_risk*.csv, [simulated_]participant_sigma.csv, risk_sensitivity*.csv,
-effort_sensitivity*.csv, figures/, analysis/, replays/, page/); the cache
+effort_sensitivity*.csv, figures/, analysis/, replays/, page/, recovery/); the cache
 (``<out>/cache``) is kept, so nothing expensive is lost and a rerun of the earlier command rewrites its outputs in seconds. At the end it
 writes ``manifest.json``: the command's parameters, a hash of its inputs, the
 engine, both times (see below) and every file it wrote (path, bytes, sha256).
@@ -35,7 +35,7 @@ OUTPUT_NAMES = ("effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv", "re
                 "simulated_participant_sigma.csv",
                 "risk_sensitivity.csv", "risk_sensitivity_summary.csv", "effort_sensitivity.csv",
                 "effort_sensitivity_pairs.csv",
-                "figures", "analysis", "replays", "page")
+                "figures", "analysis", "replays", "page", "recovery")
 TIMES = "compute_times.json"
 
 
