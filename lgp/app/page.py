@@ -17,7 +17,6 @@ import datetime
 import html
 import os
 import platform
-import shlex
 import sys
 from pathlib import Path
 
@@ -404,10 +403,18 @@ Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over 
 
 
 
+def _parameter(v) -> str:
+    """A setting of the run as the page's chips show it."""
+    if isinstance(v, tuple):
+        return ", ".join(f"{x:g}" if isinstance(x, float) else str(x) for x in v)
+    return "(default)" if v is None else str(v)
+
+
 def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                 pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock,
-                replays: dict | None = None, argv=None) -> Path:
-    """The page of a `lgp.reproduce` run (its parsed `args`): pictures, run record, index.html."""
+                replays: dict | None = None) -> Path:
+    """The page of a `lgp.reproduce` run (its lgp.app.config.RunConfig `args`):
+    pictures, run record, index.html."""
     from models.risk import DEFAULT_ENGINE, get_engine
 
     out = Path(args.out) if out is None else Path(out)
@@ -421,16 +428,9 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         settings = get_engine(engine).settings()
     except Exception as e:  # an engine that cannot load here still ran elsewhere: say so
         settings = {"error": str(e)}
-    if argv is None and Path(sys.argv[0]).name == "reproduce.py":
-        argv = sys.argv[1:]
-    if argv is not None:
-        command = "python -m lgp.reproduce " + shlex.join(str(a) for a in argv)
-    else:  # as recorded by the caller (lgp.reproduce sets args.command), or said so
-        command = getattr(args, "command", None) or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below"
     run = {
-        "command": command,
-        "parameters": {k: (", ".join(f"{x:g}" for x in v) if isinstance(v, tuple) else ("(default)" if v is None else str(v)))
-                       for k, v in vars(args).items() if k != "command"},
+        "command": args.command or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below",
+        "parameters": {k: _parameter(v) for k, v in args.parameters().items()},
         "engine": engine,
         "engine_settings": settings,
         "stages": dict(clock.laps),
@@ -444,5 +444,5 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         "load": "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),
     }
     return write_page(out, run=run, trials=trials, effort_samples=effort_samples, risk=risk, sigma=sigma, pairs=pairs,
-                      analysis=analysis if getattr(args, "human_data", None) else None, figures=figures,
+                      analysis=analysis if args.human_data else None, figures=figures,
                       pictures=pictures, replays=replays)
