@@ -55,6 +55,8 @@ class RunConfig:
     seed: int = 0
     n_boot: int = N_BOOT
     human_data: str | None = None
+    #: --max-participants: most participants a human-data file may hold (analysis.data.MAX_PARTICIPANTS)
+    max_participants: int = 5_000
     quick: bool = False
     no_cache: bool = False
     no_replays: bool = False
@@ -63,6 +65,8 @@ class RunConfig:
     build_sigmas: tuple[float, ...] | None = None
     risk_measure: str | None = None
     per_participant_sigma: bool = False
+    #: --allow-simulated: a human-data file of SIMULATED participants (simulated-*) is read (tests only)
+    allow_simulated: bool = False
     n_perm: int = N_PERM
     recovery: bool = False
     recovery_studies: int = N_STUDIES
