@@ -101,6 +101,9 @@ def parse_args(argv=None) -> RunConfig:
     p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
+    p.add_argument("--allow-simulated", action="store_true",
+                   help="with --human-data: accept datasets of SIMULATED participants (simulated-*, tests only); "
+                        "every table and figure made from them says SIMULATED")
     p.add_argument("--n-perm", type=cli.positive_int,
                    help=f"with --human-data: permutations per permutation test of the risk term (default {D('n_perm')}; "
                         f"--quick {QUICK['n_perm']})")
@@ -132,6 +135,8 @@ def parse_args(argv=None) -> RunConfig:
         p.error("--risk-measure needs --build-risk and --human-data")
     if args.per_participant_sigma and not args.human_data:
         p.error("--per-participant-sigma needs --human-data FILE")
+    if args.allow_simulated and not args.human_data:
+        p.error("--allow-simulated needs --human-data FILE")
     if args.trials and "all" in args.trials and len(set(args.trials)) > 1:
         p.error("--trials all runs every trial file; give it alone")
     args.command = "python -m lgp.reproduce " + shlex.join(str(a) for a in (argv if argv is not None else sys.argv[1:]))
@@ -178,7 +183,7 @@ def run(args: RunConfig, argv=None) -> int:
     if args.human_data:
         from analysis import load_human_data
 
-        human = load_human_data(args.human_data, max_participants=args.max_participants)
+        human = load_human_data(args.human_data, max_participants=args.max_participants, allow_simulated=args.allow_simulated)
         if not {t.id for t in trials} >= set(TRIAL_IDS):
             raise InputError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)

@@ -65,6 +65,8 @@ class RunConfig:
     build_sigmas: tuple[float, ...] | None = None
     risk_measure: str | None = None
     per_participant_sigma: bool = False
+    #: --allow-simulated: a human-data file of SIMULATED participants (simulated-*) is read (tests only)
+    allow_simulated: bool = False
     n_perm: int = N_PERM
     recovery: bool = False
     recovery_studies: int = N_STUDIES
