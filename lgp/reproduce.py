@@ -28,11 +28,11 @@ import stimuli
 from lgp import cli
 from lgp.planner.design import check_approach_height
 from lgp.paper import PAPER_SIGMA, TRIAL_IDS
-from lgp.executor import executor_for_scheduler, stop_signals
+from lgp.executor import WorkerDied, executor_for_scheduler, stop_signals
 from lgp.app.progress import log as progress_log
 from lgp.app.cache import library_versions, write_csv_atomic
 from lgp.app.config import RunConfig
-from lgp.app.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
+from lgp.app.manifest import OutputLock, TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 from lgp.app.page import write_index
 from lgp.app.progress import Stopwatch
 from lgp.app.replays import write_replays
@@ -88,6 +88,9 @@ def parse_args(argv=None) -> RunConfig:
     p.add_argument("--seed", type=cli.seed, default=D("seed"))
     p.add_argument("--n-boot", type=cli.positive_int, help=f"bootstrap resamples (default {D('n_boot')}; --quick {QUICK['n_boot']})")
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
+    p.add_argument("--max-participants", type=cli.positive_int, default=None,
+                   help="with --human-data: most participants the file may hold (default 5000; memory grows with "
+                        "participants x bootstrap resamples, docs/human-data.md)")
     p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
@@ -140,14 +143,26 @@ def main(argv=None) -> int:
     with stop_signals() as stop:  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
         try:
             return run(args, argv)
+        except WorkerDied as e:  # one line that also says what is kept
+            print(f"{PROG}: error: {e}; {_resume_note(args)}", file=sys.stderr)
+            return cli.EXIT_DATA
         except BaseException as e:
             if stop.received is None and not isinstance(e, KeyboardInterrupt):
                 raise
             sig = stop.received or getattr(e, "signal", signal.SIGINT)
             how = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
-            resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
-            print(f"{PROG}: {how}; {resume}", file=sys.stderr)
+            print(f"{PROG}: {how}; {_resume_note(args)}", file=sys.stderr)
             return 128 + int(sig)
+
+
+def _resume_note(args) -> str:
+    """What a stopped run leaves to resume from: the cache, only if there is one."""
+    cache = Path(args.out) / "cache"
+    if args.no_cache:
+        return "nothing cached (--no-cache)"
+    if cache.is_dir() and any(p.name.endswith(".csv") and not p.name.startswith(".") for p in cache.iterdir()):
+        return f"finished trials are cached in {cache}, rerun to resume"
+    return "nothing was cached yet (stopped before the first result)"
 
 
 def run(args: RunConfig, argv=None) -> int:
@@ -163,12 +178,18 @@ def run(args: RunConfig, argv=None) -> int:
     if args.human_data:
         from analysis import load_human_data
 
-        human = load_human_data(args.human_data)
+        human = load_human_data(args.human_data, max_participants=args.max_participants)
         if not {t.id for t in trials} >= set(TRIAL_IDS):
             raise InputError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    removed = clear_previous(out)  # this folder describes this run only (lgp/app/manifest.py)
+    with OutputLock(out, args.command):  # one run per output folder, for the whole run
+        return _run_in(out, args, argv, trials, human, t0, clock)
+
+
+def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
+    """`run` once the inputs are validated and the output folder is locked."""
+    removed = clear_previous(out, _log)  # this folder describes this run only (lgp/app/manifest.py)
     if removed:
         _log(f"removed the outputs of an earlier run from {out}: {', '.join(removed)} (the cache is kept)")
     cache = TimedCache(out / "cache", enabled=not args.no_cache)

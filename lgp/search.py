@@ -713,6 +713,10 @@ def plan(initial: Scene, target: Scene, rng_or_seed=0, *, planner: str = "paper"
     (formulation, solver, slices_per_phase, approach_height, arm)."""
     from lgp import planner as paper
 
+    for name, scene in (("initial (state A)", initial), ("target (state B)", target)):
+        if not isinstance(scene, Scene):
+            raise InputError(f"lgp.plan: {name} must be an lgp.scene.Scene (e.g. a trial's sample_initial(rng) "
+                             f"and .target), got {type(scene).__name__}")
     if check_planner(planner) == "paper":
         if budget is not None:
             raise InputError("a budget applies to planner='search' only")

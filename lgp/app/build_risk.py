@@ -5,6 +5,8 @@ stage and a report section.
 """
 from __future__ import annotations
 
+from lgp.app.files import atomic_path
+
 import time
 from pathlib import Path
 

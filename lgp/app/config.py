@@ -55,6 +55,8 @@ class RunConfig:
     seed: int = 0
     n_boot: int = N_BOOT
     human_data: str | None = None
+    #: --max-participants: most participants a human-data file may hold (analysis.data.MAX_PARTICIPANTS)
+    max_participants: int = 5_000
     quick: bool = False
     no_cache: bool = False
     no_replays: bool = False
