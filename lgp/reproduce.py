@@ -89,7 +89,7 @@ def parse_args(argv=None) -> RunConfig:
     p.add_argument("--n-boot", type=cli.positive_int, help=f"bootstrap resamples (default {D('n_boot')}; --quick {QUICK['n_boot']})")
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
     p.add_argument("--max-participants", type=cli.positive_int, default=None,
-                   help="with --human-data: most participants the file may hold (default 5000; memory grows with "
+                   help=f"with --human-data: most participants the file may hold (default {D('max_participants')}; memory grows with "
                         "participants x bootstrap resamples, docs/human-data.md)")
     p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
@@ -101,6 +101,9 @@ def parse_args(argv=None) -> RunConfig:
     p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
+    p.add_argument("--allow-simulated", action="store_true",
+                   help="with --human-data: accept datasets of SIMULATED participants (simulated-*, tests only); "
+                        "every table and figure made from them says SIMULATED")
     p.add_argument("--n-perm", type=cli.positive_int,
                    help=f"with --human-data: permutations per permutation test of the risk term (default {D('n_perm')}; "
                         f"--quick {QUICK['n_perm']})")
@@ -132,6 +135,8 @@ def parse_args(argv=None) -> RunConfig:
         p.error("--risk-measure needs --build-risk and --human-data")
     if args.per_participant_sigma and not args.human_data:
         p.error("--per-participant-sigma needs --human-data FILE")
+    if args.allow_simulated and not args.human_data:
+        p.error("--allow-simulated needs --human-data FILE")
     if args.trials and "all" in args.trials and len(set(args.trials)) > 1:
         p.error("--trials all runs every trial file; give it alone")
     args.command = "python -m lgp.reproduce " + shlex.join(str(a) for a in (argv if argv is not None else sys.argv[1:]))
@@ -178,7 +183,7 @@ def run(args: RunConfig, argv=None) -> int:
     if args.human_data:
         from analysis import load_human_data
 
-        human = load_human_data(args.human_data, max_participants=args.max_participants)
+        human = load_human_data(args.human_data, max_participants=args.max_participants, allow_simulated=args.allow_simulated)
         if not {t.id for t in trials} >= set(TRIAL_IDS):
             raise InputError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)

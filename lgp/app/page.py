@@ -27,7 +27,7 @@ from lgp.app.cache import Cache, library_versions
 from lgp.app.files import write_text_atomic
 from lgp.app.report import ratio_text
 from lgp.app.charts import histogram_svg, risk_svg
-from lgp.app.pictures import trial_pictures
+from lgp.app.pictures import rendered_trial_pictures
 from lgp.errors import InputError
 
 #: Libraries named on the page (the cache keys name their own).
@@ -370,7 +370,7 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
     from models.risk import DEFAULT_ENGINE, get_engine
 
     out = Path(args.out) if out is None else Path(out)
-    pictures = trial_pictures(trials, args.seed, out / "page", cache)
+    pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=args.jobs)
     clock.lap("trial pictures")
     figures = []
     if analysis is not None and "files" in analysis:
