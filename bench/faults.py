@@ -337,7 +337,7 @@ def main(argv=None) -> int:
                 if run == "crowded":
                     run = lambda: crowded(tmp)  # noqa: E731
                 verdict, what = judge(run, accept)
-                rows.append((group, name, verdict, what.replace("|", "/").replace(str(tmp), "TMP")))
+                rows.append((group, name, verdict, what.replace("|", "\\|").replace(str(tmp), "TMP")))
                 print(f"{verdict:>22}  {group}: {name}: {what[:150]}", flush=True)
     bad = [r for r in rows if not r[2].startswith("accepted")]
     refused = [r for r in bad if r[2] in ("refused", "recomputed")]
@@ -349,7 +349,8 @@ def main(argv=None) -> int:
              f"By kind: " + ", ".join(f"{g} {sum(1 for r in refused if r[0] == g)}/{sum(1 for r in bad if r[0] == g)}"
                                       for g in ("trial file", "human data", "API", "cache entry")) + ".", "",
              "| kind | input | verdict | what the project does |", "|---|---|---|---|"]
-    lines += [f"| {g} | {n} | {v} | {w[:220]} |" for g, n, v, w in rows]
+    bar = "\\|"
+    lines += [f"| {g} | {n.replace('|', bar)} | {v} | {w[:220]} |" for g, n, v, w in rows]
     write_section(args.out, "Bad inputs tried", "\n".join(lines) + "\n")
     print(f"{len(refused)}/{len(bad)} bad inputs refused; {len(accepted)} accepted by design")
     return 0 if len(refused) == len(bad) else 1
