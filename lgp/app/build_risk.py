@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from lgp.app.cache import Cache, input_key
-from lgp.app.files import write_csv_atomic
+from lgp.app.files import atomic_path, write_csv_atomic
 from lgp.app.progress import log as _log
 from lgp.paper import PAIRS, PAPER_SIGMA
 
