@@ -80,12 +80,12 @@ def main(argv=None) -> int:
     import argparse
 
     parser = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", default="stimuli.png", type=cli.output_file, help="PNG to write (its folder must exist)")
+    parser.add_argument("--out", default="stimuli.png", type=cli.output_file, help="PNG to write (a missing folder is created)")
     parser.add_argument("--seed", type=cli.seed, default=0)
     parser.add_argument("--trials", nargs="+", type=cli.trial_id, help="trial ids (default: all; case-insensitive)")
     args = parser.parse_args(argv)
     trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
-    print(contact_sheet(trials, args.seed, args.out))
+    print(contact_sheet(trials, args.seed, cli.make_parent(args.out)))
     return 0
 
 

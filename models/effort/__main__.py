@@ -50,7 +50,7 @@ def main(argv=None) -> int:
               f"actions {table['n_actions'].iloc[0]:3d}  {table['solve_time'].mean():6.3f} s/plan", flush=True)
     table = pd.concat(tables, ignore_index=True)
     if args.out:
-        table.to_csv(args.out, index=False)
+        table.to_csv(cli.make_parent(args.out), index=False)
     return 0
 
 
