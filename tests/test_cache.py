@@ -9,8 +9,8 @@ import sys
 import pandas as pd
 import pytest
 
-from lgp import cache as cache_module
-from lgp.cache import (PACKAGES, ROOT, Cache, import_closure, input_key, library_versions, module_imports,
+from lgp.app import cache as cache_module
+from lgp.app.cache import (PACKAGES, ROOT, Cache, import_closure, input_key, library_versions, module_imports,
                        modules_digest, write_csv_atomic)
 
 
@@ -229,7 +229,7 @@ def test_editing_a_module_the_computation_imports_changes_the_key(tmp_path):
     assert modules_digest("models.effort", root=root) == before
 
     # files the effort computation never imports do not invalidate it
-    for module in ("lgp/reproduce.py", "lgp/view.py", "analysis/models.py", "models/risk/core.py"):
+    for module in ("lgp/reproduce.py", "lgp/app/view.py", "analysis/models.py", "models/risk/core.py"):
         (root / module).write_text((root / module).read_text() + "\n# edited\n")
     assert modules_digest("models.effort", root=root) == before
 

@@ -22,7 +22,7 @@ clearance constraint instead) and `slices_per_phase` (default
 lgp.planner.SLICES_PER_PHASE = 20). docs/effort.md says how much each moves effort.
 
 The command line (the table of docs/effort.md) is models/effort/__main__.py,
-kept out of this module so that the effort cache key (lgp.cache.modules_digest of
+kept out of this module so that the effort cache key (lgp.app.cache.modules_digest of
 ``models.effort``) does not hash the CLI or its argument helpers::
 
     python -m models.effort --samples 30 --jobs 2 --out effort_samples.csv

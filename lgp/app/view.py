@@ -1,6 +1,6 @@
 """Looking at a solved plan (lgp.planner.Plan): a self-contained 3-D replay and a figure.
 
-    from lgp.view import write_html, write_png
+    from lgp.app.view import write_html, write_png
     write_html(plan, "7H.html"); write_png(plan, "7H.png")
 
 `write_html` records the arm and blocks into a Drake Meshcat animation
