@@ -247,7 +247,7 @@ def _env():
     return {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 
 
-@pytest.mark.parametrize("argv, code", [(["-m", "lgp.show", "99X"], 2), (["-m", "stimuli.sheet", "--out", "/nodir/s.png"], 2),
+@pytest.mark.parametrize("argv, code", [(["-m", "lgp.show", "99X"], 2), (["-m", "stimuli.sheet", "--out", "/proc/nodir/s.png"], 2),
                                         (["-m", "lgp.reproduce", "--sigmas", "-0.05", "--out", "{tmp}/r"], 2)])
 def test_python_dash_m_commands_exit_with_one_line(argv, code, tmp_path):
     argv = [a.format(tmp=tmp_path) for a in argv]
@@ -273,3 +273,14 @@ def test_ctrl_c_during_a_run_prints_one_line_and_exits_130(tmp_path, after):
     assert "Traceback" not in rest
     last = rest.strip().splitlines()[-1]
     assert last == "python -m lgp.reproduce: interrupted; nothing cached (--no-cache)"
+
+
+def test_show_creates_missing_folders_and_prints_no_meshcat_server_line(tmp_path):
+    """The replay is a static HTML file: Drake's "Meshcat listening for connections"
+    log line would send a user to a server that is not needed (and gone at exit)."""
+    html, png = tmp_path / "new" / "a" / "9E.html", tmp_path / "new" / "b" / "9E.png"
+    proc = subprocess.run([sys.executable, "-m", "lgp.show", "9E", "--html", str(html), "--png", str(png)],
+                          capture_output=True, text=True, env=_env(), cwd=tmp_path, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert html.stat().st_size > 0 and png.stat().st_size > 0
+    assert "listening" not in proc.stdout + proc.stderr and "localhost" not in proc.stdout + proc.stderr, proc.stderr

@@ -129,6 +129,21 @@ def caption_html(plan, title: str) -> str:
 """
 
 
+def _quiet_meshcat(Meshcat):
+    """A Meshcat server without its "Meshcat listening for connections at
+    http://localhost:7000" log line: the replay is saved as a static HTML file and
+    needs no server, so the line would only mislead (issue 26)."""
+    import logging
+
+    logger = logging.getLogger("drake")
+    level = logger.level
+    logger.setLevel(max(level, logging.WARNING))
+    try:
+        return Meshcat()
+    finally:
+        logger.setLevel(level)
+
+
 def replay_html(plan, title: str = "") -> str:
     """The replay of `plan` as one HTML string (see the module docstring)."""
     from pydrake.geometry import Box, Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba, Role
@@ -144,7 +159,7 @@ def replay_html(plan, title: str = "") -> str:
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
     add_arm(plant, arm.config)
     plant.Finalize()
-    meshcat = Meshcat()
+    meshcat = _quiet_meshcat(Meshcat)
     MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, MeshcatVisualizerParams(role=Role.kIllustration, prefix="arm"))
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
