@@ -1,7 +1,7 @@
 """The paper's pipeline end to end: stimuli -> physical effort -> physical risk ->
 (analysis, when human data are given) -> tidy CSVs, figures, report.md and the results page index.html (lgp/app/page.py).
 
-    python -m lgp.reproduce --quick                 # a small version, about a minute
+    python -m lgp.reproduce --quick                 # a low-precision preview (time: README, docs/benchmarks.md)
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
     python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/app/sensitivity.py)
@@ -84,7 +84,7 @@ def effort_key(trial, samples: int, seed: int, approach_height: float | None = N
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
-                  slices_per_phase: int | None = None, log: bool = True) -> pd.DataFrame:
+                  slices_per_phase: int | None = None, log: bool = True, verbose: bool = True) -> pd.DataFrame:
     """Per (trial, sample) effort, one cached file per trial (and design: the
     planner's `approach_height` and `slices_per_phase`, defaults when None).
 
@@ -111,7 +111,13 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
     pending = Counter(t.id for t in owner)
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
     t0 = time.perf_counter()
-    bar = Progress("effort", len(units), "plans")
+    if units:
+        fixed = sum(1 for t in todo if not t.initial.is_random)
+        _log(f"effort: {len(units)} plans to make for {len(todo)} trial(s)"
+             + (f" ({len(todo) - fixed} x {samples} random layouts of A, and {fixed} trial(s) whose A has no random "
+                "blocks, planned once)" if fixed and samples > 1 else f" x {samples} layouts of A")
+             + (f"; {len(trials) - len(todo)} trial(s) reused from the cache" if len(todo) < len(trials) else ""))
+    bar = Progress("effort", len(units), "plans", what="motion plans")
 
     def arrived(k, row):
         bar.advance()
@@ -121,12 +127,12 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
         if pending[trial.id] == 0:
             tables[trial.id] = cache.put("effort", keys[trial.id], effort_table(trial, samples, rows[trial.id]))
             df = tables[trial.id]
-            if log:
+            if log and verbose:
                 _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
                      f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
 
     for t in trials:
-        if log and t.id in tables and t.id not in rows:
+        if log and verbose and t.id in tables and t.id not in rows:
             _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
                  f" over {len(tables[t.id])} layouts  (cached)")
     with bar:
@@ -135,7 +141,7 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
 
 
 def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6,
-                fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> pd.DataFrame:
+                fall_rule: str = "horizontal", fall_threshold: float = 0.25, verbose: bool = True) -> pd.DataFrame:
     """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
 
     Uncached trials are simulated a few at a time on the run's one executor, so
@@ -147,7 +153,10 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
     tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
-    bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs")
+    if todo:
+        _log(f"risk: {len(todo) * len(sigmas) * n_sims} simulations of B ({len(todo)} trial(s) x {len(sigmas)} sigma(s) "
+             f"x {n_sims} noisy runs)" + (f"; {len(trials) - len(todo)} trial(s) reused from the cache" if len(todo) < len(trials) else ""))
+    bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs", what="noisy runs of B")
     for k in range(0, len(todo), chunk):
         group = todo[k:k + chunk]
         t0 = time.perf_counter()
@@ -157,14 +166,16 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
                            progress=lambda done, total: bar.advance(base + done - bar.done))
         for t in group:
             tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
-        _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
+        if verbose:
+            _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     if todo:
         bar.close()
     out = []
     for k, trial in enumerate(trials, 1):
         df = tables[trial.id]
         curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
-        _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
+        if verbose:
+            _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)
     return pd.concat(out, ignore_index=True)
 
@@ -378,6 +389,12 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
 
 
 
+def _took(command: str) -> str:
+    """'; took 16 s cold, ... [machine]' from bench/commands.py's last run (lgp.cli.measured_time), or ''."""
+    text = cli.measured_time(command)
+    return f"; took {text}".replace("%", "%%") if text else ""
+
+
 def parse_args(argv=None) -> argparse.Namespace:
     """The command line, checked: every count, sigma, trial id and path is refused
     here, in one line, before any work (lgp.cli)."""
@@ -394,7 +411,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
     p.add_argument("--engine", help="physics engine for risk: mujoco, drake, physx (optional extra) (default: mujoco)")
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
-    p.add_argument("--fall-rule", default="horizontal", help="a run falls by horizontal (default) or 3d displacement")
+    from models.risk.engine import FALL_RULES
+
+    p.add_argument("--fall-rule", default="horizontal", type=cli.one_of(FALL_RULES, "fall rule"),
+                   help="a run falls by horizontal (default) or 3d displacement (case-insensitive)")
     p.add_argument("--fall-threshold", type=float, default=0.25, help="fall threshold in units of d (default %(default)s)")
     p.add_argument("--approach-height", type=cli.approach_height, default=None,
                    help="effort: vertical approach/retreat leg (m) at every grasp and place; 0 = a clearance constraint "
@@ -408,7 +428,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--seed", type=cli.seed, default=0)
     p.add_argument("--n-boot", type=cli.positive_int, help="bootstrap resamples (default 1000; --quick 200)")
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
-    p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
+    p.add_argument("--quick", action="store_true",
+                   help="a low-precision preview: M = 3, N = 20, 4 sigmas" + _took("python -m lgp.reproduce --quick"))
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=cli.positive_int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
@@ -419,6 +440,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
     p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
                    help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
+    p.add_argument("--verbose", action="store_true",
+                   help="print a line per trial and stage as it finishes, and every file written at the end")
     sensitivity.add_arguments(p)
     args = p.parse_args(argv)
     try:  # bad engine, profile, rule or threshold: one line, before any work
@@ -517,11 +540,11 @@ def run(args, argv=None) -> int:
             import models.risk  # noqa: F401
         from models.effort import summarise_effort
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
-        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache,
+        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache, verbose=args.verbose,
                                        approach_height=args.approach_height, slices_per_phase=args.slices)
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
-        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
+        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk, verbose=args.verbose,
                            fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
         clock.lap("risk")
         sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log,
@@ -599,7 +622,8 @@ def run(args, argv=None) -> int:
     written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
     if (out / "page").is_dir():
         written.append(out / "page")
-    _log(f"cache: {cache.summary()}")
+    if args.verbose:
+        _log(f"cache: {cache.summary()}")
     parameters = {"trials": [t.id for t in trials], "samples": args.samples, "n_sims": args.n_sims,
                   "sigmas": list(args.sigmas), "sigma_of_pairs": sigma if pairs is not None else None,
                   "engine": args.engine, "seed": args.seed, "n_boot": args.n_boot, "quick": args.quick,
@@ -616,10 +640,28 @@ def run(args, argv=None) -> int:
                               engine=engine_description(args.engine, software["engine"]), software=software,
                               run_time_s=round(time.perf_counter() - t0, 1),
                               compute_time_s=round(compute[0], 1), compute_time_unknown_results=compute[1])
-    print(f"Outputs of this run in {out.resolve()} (listed in {manifest.name}):")
-    for path in files + [manifest]:
-        print(f"  {path}")
+    if args.verbose:
+        print(f"Outputs of this run in {out.resolve()} (listed in {manifest.name}):")
+        for path in files + [manifest]:
+            print(f"  {path}")
+    print(end_of_run(time.perf_counter() - t0, cache, out, len(files)))
     return 0
+
+
+def end_of_run(seconds: float, cache, out: Path, n_files: int) -> str:
+    """The two lines a run ends with: how long, what was computed or reused, and
+    where to look ("done in 16 s (120 results computed, 0 reused from the cache);
+    open results/index.html")."""
+    from lgp.app.replays import page_files
+
+    extra = page_files(cache)
+    computed = cache.misses + sum(n for (_, o), n in extra.items() if o == "miss")
+    reused = cache.hits + sum(n for (_, o), n in extra.items() if o == "hit")
+    took = f"{seconds:.0f} s" if seconds >= 10 else f"{seconds:.1f} s"
+    if seconds >= 120:
+        took = f"{int(seconds // 60)} min {seconds % 60:02.0f} s"
+    return (f"done in {took} ({computed} results computed, {reused} reused from the cache); open {out / 'index.html'}\n"
+            f"the {n_files} files written are listed in {out / 'manifest.json'} (--verbose prints them)")
 
 
 if __name__ == "__main__":
