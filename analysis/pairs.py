@@ -20,6 +20,11 @@ from analysis.models import ModelInputError
 #: tied by the same rule only when (all but) equal.
 TIE_REL = 1e-4
 
+#: Pairs whose easy and hard trial the paper's participants judged alike ("The only
+#: exception is the pair 11E and 11H, where humans did not show any difference"):
+#: a tie there is expected, not a disagreement with the paper.
+PAPER_NO_DIFFERENCE = frozenset({11})
+
 
 def pair_order(cost_E: float, cost_H: float, tie_rel: float = TIE_REL) -> str:
     """'E<H', 'tie' or 'H<E' under the tie rule (see TIE_REL)."""

@@ -373,6 +373,9 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         lines += ["No human data given (`--human-data FILE`, format in docs/human-data.md): the fits of Eq. 1, "
                   "the sigma profile and the bootstrap need the responses, which are not public.", ""]
     else:
+        from lgp.app.page import sigma_edge_warnings
+
+        lines += [f"**Warning**: {w}." for w in sigma_edge_warnings(analysis)] + ([""] if sigma_edge_warnings(analysis) else [])
         for key in ("sigma_choice", "fits", "bootstrap_summary", "bootstrap_tests"):
             if key in analysis and isinstance(analysis[key], pd.DataFrame) and len(analysis[key]):
                 lines += [f"## {key.replace('_', ' ')}", "", _markdown(analysis[key]), ""]
@@ -593,7 +596,7 @@ def run(args, argv=None) -> int:
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
                                 build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
-                                risk_measure=args.risk_measure)
+                                risk_measure=args.risk_measure, pair_names={t.pair: t.dimension for t in paper})
         written += [Path(path) for path in analysis["files"]["path"]]
         if args.per_participant_sigma:
             from lgp.app import build_risk

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import datetime
 import html
+from collections import Counter
 import importlib.metadata
 import os
 import platform
@@ -32,6 +33,9 @@ from lgp.app.replays import page_files
 
 #: |(H - E) / E| below this is a solver-level tie of effort (docs/results.md, pair 6).
 EFFORT_TIE = 1e-4
+#: A spread of effort over layouts below this fraction of the mean is round-off of
+#: one and the same plan (a fixed layout of A: 10E's 4.2e-17 on 0.1159 J s), not variation.
+PLAN_NOISE = 1e-9
 
 #: Pairs the paper's fitted full model ordered E < H ("correct rank order ... in all
 #: of the pairs. The only exception is the pair 11E and 11H, where humans did not show
@@ -42,10 +46,12 @@ LIBRARIES = ("drake", "mujoco", "numpy", "scipy", "pandas", "matplotlib", "pyyam
 
 CAPTIONS = {
     "effort_risk_pairs": "Physical effort (J s, mean over layouts) and physical risk (fraction of noisy runs "
-                         "that fall) of every trial, easy and hard of each pair joined.",
-    "fig3_trial_means": "Figure 3 of the paper: mean z-scored judgments per trial (large points, 95% bootstrap "
+                         "that fall) of every trial, easy and hard of each pair joined, pairs named by what they vary. "
+                         "Red: E not lower than H, though the paper's participants found H harder; blue hatched: "
+                         "pair 11, where they saw no difference (a tie is expected).",
+    "fig3_trial_means": "Analogue of the paper's Figure 3, from the data given: mean z-scored judgments per trial (large points, 95% bootstrap "
                         "intervals) and the fitted full model (small points), per dataset.",
-    "fig4_model_correlations": "Figure 4 of the paper: correlation of the full model, effort alone and risk alone "
+    "fig4_model_correlations": "Analogue of the paper's Figure 4, from the data given: correlation of the full model, effort alone and risk alone "
                                "with each dataset, 95% intervals from the bootstrap over participants.",
     "sigma_profile": "RMSE of the fitted full model (Eq. 1) over the noise level sigma, per dataset; "
                      "the chosen sigma marked.",
@@ -56,14 +62,57 @@ def _e(x) -> str:
     return html.escape(str(x))
 
 
+#: No number on the page prints more than this many significant digits.
+DIGITS = 4
+
+
+def num(v, digits: int = DIGITS) -> str:
+    """A number for a reader: at most `digits` significant digits, no exponent below
+    1e-4 or above 1e6 unless needed ("0.1159", "2124", "1.5e-05"); nan/None -> "n/a"."""
+    if v is None:
+        return "n/a"
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return str(v)
+    if not np.isfinite(x):
+        return "n/a" if np.isnan(x) else ("inf" if x > 0 else "-inf")
+    if x == int(x) and abs(x) < 10 ** digits:
+        return str(int(x))
+    return f"{x:.{digits}g}"
+
+
 def _fmt(v) -> str:
     if isinstance(v, (bool, np.bool_)):
         return "yes" if v else "no"
     if isinstance(v, (float, np.floating)):
-        if not np.isfinite(v):
-            return str(v)
-        return f"{v:.4g}"
+        return num(v)
+    if v is None or (isinstance(v, str) and v.strip().lower() == "nan"):
+        return "n/a"
     return str(v)
+
+
+def plus_minus(mean: float, sd: float, unit: str, n: int) -> str:
+    """"0.1159 &plusmn; 0.0021 J s", the sd rounded to 2 digits and the mean to the
+    sd's last digit; a spread below the plan noise (all layouts give the same plan up
+    to round-off, e.g. 4.2e-17) reads "fixed layout" or "same for every layout"."""
+    if n <= 1 or not np.isfinite(sd) or sd <= PLAN_NOISE * max(abs(mean), 1e-12):
+        return f"{num(mean)} {unit} <small>(same for every layout)</small>" if n > 1 else f"{num(mean)} {unit}"
+    decimals = max(0, 1 - int(np.floor(np.log10(sd))))
+    return f"{num(round(mean, decimals))} &plusmn; {num(float(f'{sd:.2g}'))} {unit}"
+
+
+def p_value(p, n_resamples: int | None) -> str:
+    """A bootstrap p value: "< 1/200" when no resample of 200 crossed, else at most 2 digits."""
+    try:
+        p = float(p)
+    except (TypeError, ValueError):
+        return "n/a"
+    if not np.isfinite(p):
+        return "n/a"
+    if p == 0 and n_resamples:
+        return f"< 1/{int(n_resamples)}"
+    return num(p, 2)
 
 
 def table_html(df: pd.DataFrame, cls: str = "sortable", row_attrs=None, max_rows: int | None = None) -> str:
@@ -101,10 +150,23 @@ def histogram_svg(values, width: int = 150, height: int = 44, bins: int = 10) ->
             f'<text x="0" y="{height - 1}">{lo:.3g}</text><text x="{width}" y="{height - 1}" text-anchor="end">{hi:.3g}</text></svg>')
 
 
+#: Tops of the risk mini-plot's y axis: the smallest that holds the curve.
+RISK_TOPS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
+
+
+def risk_top(risks) -> float:
+    """The y-axis top of a risk curve: the smallest of RISK_TOPS at or above its
+    maximum (a curve of 0.02 is not drawn flat on 0..1); 1 for an all-zero curve."""
+    peak = float(np.nanmax(np.asarray(risks, dtype=float))) if len(risks) else 0.0
+    return 1.0 if peak <= 0 else next(t for t in RISK_TOPS if t >= peak - 1e-12)
+
+
 def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height: int = 70) -> str:
-    """Risk over sigma as inline SVG: y from 0 to 1, x over the run's sigma grid."""
+    """Risk over sigma as inline SVG: y from 0 to the curve's `risk_top` (written on
+    the axis), x over the run's sigma grid."""
     s = np.asarray(sigmas, dtype=float)
     r = np.asarray(risks, dtype=float)
+    y_top = risk_top(r)
     left, bottom, top = 22, 14, 4
     pw, ph = width - left - 4, height - bottom - top
     s0, s1 = float(s.min()), float(s.max())
@@ -114,7 +176,7 @@ def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height:
         return left + pw * ((x - s0) / span if s1 > s0 else 0.5)
 
     def Y(y):
-        return top + ph * (1 - y)
+        return top + ph * (1 - y / y_top)
 
     pts = " ".join(f"{X(a):.1f},{Y(b):.1f}" for a, b in zip(s, r))
     dots = "".join(f'<circle cx="{X(a):.1f}" cy="{Y(b):.1f}" r="2"><title>sigma {a:g} d: risk {b:.2f}</title></circle>' for a, b in zip(s, r))
@@ -124,7 +186,7 @@ def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height:
     return (f'<svg class="risk" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img" aria-label="risk over sigma">'
             f'<rect class="frame" x="{left}" y="{top}" width="{pw}" height="{ph}"/>{marker}'
             f'<polyline points="{pts}"/>{dots}'
-            f'<text x="{left - 2}" y="{top + 7}" text-anchor="end">1</text><text x="{left - 2}" y="{top + ph}" text-anchor="end">0</text>'
+            f'<text x="{left - 2}" y="{top + 7}" text-anchor="end">{num(y_top)}</text><text x="{left - 2}" y="{top + ph}" text-anchor="end">0</text>'
             f'<text x="{left}" y="{height - 2}">{s0:g}</text><text x="{left + pw}" y="{height - 2}" text-anchor="end">{s1:g} d</text></svg>')
 
 
@@ -139,13 +201,12 @@ def trial_picture(trial, seed: int, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     from models.effort import sample_rng
-    from stimuli.sheet import draw_scene
+    from stimuli.sheet import draw_trial
 
     A = trial.sample_initial(sample_rng(seed, 0))
     fig = plt.figure(figsize=(4.4, 2.2))
-    for j, (scene, state) in enumerate(((A, "A: start (sample 0)"), (trial.target, "B: finish"))):
-        ax = fig.add_subplot(1, 2, j + 1, projection="3d")
-        draw_scene(ax, scene, state)
+    # one world frame for A and B (the table, the build site as a dashed ring): a moved structure is seen to move
+    draw_trial(fig, trial, A, ("A: start (sample 0)", "B: finish"))
     fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.92, wspace=0.0)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp.png")
@@ -158,7 +219,7 @@ def trial_picture(trial, seed: int, path: Path) -> Path:
 
 def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None) -> dict[str, Path]:
     """Picture of every trial under `out_dir`, copied from `cache` when drawn before."""
-    version = modules_digest("stimuli.sheet", "stimuli", "models.effort")
+    version = modules_digest("stimuli.sheet", "stimuli", "models.effort", "lgp.app.page")
     paths = {}
     for trial in trials:
         path = Path(out_dir) / f"{trial.id}.png"
@@ -193,25 +254,122 @@ def library_versions() -> dict[str, str]:
     return out
 
 
+#: What a cache entry of each kind is, in words (the page's run section).
+CACHE_WORDS = {"effort": "effort tables (one per trial)", "risk": "risk curves (one per trial)",
+               "stable": "checks that B stands", "picture": "trial pictures", "replay": "3-D replays"}
+
+
+def cache_words(counts: dict) -> str:
+    """{(kind, outcome): n} as "reused from the cache: 24 effort tables ...; computed: ..."."""
+    parts = []
+    for outcome, word in (("hit", "reused from the cache"), ("miss", "computed")):
+        items = [f"{n} {CACHE_WORDS.get(kind, kind.replace('_', ' '))}" for (kind, o), n in sorted(counts.items()) if o == outcome and n]
+        if items:
+            parts.append(f"{word}: {', '.join(items)}")
+    return "; ".join(parts) or "nothing looked up"
+
+
+def _seconds(s) -> str:
+    s = float(s)
+    return f"{num(s, 2)} s" if s < 10 else (f"{s:.0f} s" if s < 120 else f"{int(s // 60)} min {s % 60:02.0f} s")
+
+
 def _run_section(run: dict) -> str:
+    key = run.get("key", {})
+    rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in key.items())
     chips = " ".join(f"<code>{_e(k)}={_e(v)}</code>" for k, v in run.get("parameters", {}).items())
     versions = pd.DataFrame(list(library_versions().items()), columns=["library", "version"])
-    stages = pd.DataFrame(list(run.get("stages", {}).items()), columns=["stage", "wall time (s)"])
+    stages = pd.DataFrame([(k, num(v, 3)) for k, v in run.get("stages", {}).items()], columns=["stage", "wall time (s)"])
     settings = pd.DataFrame(list(run.get("engine_settings", {}).items()), columns=["setting", "value"])
     cache = run.get("cache", {})
     total = sum(run.get("stages", {}).values())
+    compute = run.get("compute_s")
+    times = f"this run took {_seconds(total)} of wall time"
+    if compute is not None:
+        times += (f"; computing its effort and risk results took {_seconds(compute)} (the time each part took "
+                  "when it was computed, cached parts included)")
     return f"""
 <section id="run"><h2>The run</h2>
 <p class="cmd"><code>{_e(run.get("command", ""))}</code></p>
-<p>Finished {_e(run.get("finished", ""))}; wall time {total:.1f} s in all on {_e(run.get("machine", platform.node()))}
-({_e(run.get("load", ""))}). Cache: {cache.get("hits", 0)} results reused, {cache.get("misses", 0)} computed
-(<code>{_e(cache.get("root", ""))}</code>: {_e(cache.get("summary", ""))}).</p>
-<p class="params"><b>Parameters</b> {chips}</p>
+<table class="plain key"><caption>The settings that define these results</caption>{rows}</table>
+<p>Finished {_e(run.get("finished", ""))}: {_e(times)}, on {_e(run.get("machine", platform.node()))}
+({_e(run.get("load", ""))}). {cache.get("hits", 0)} results reused from the cache, {cache.get("misses", 0)} computed
+({_e(cache.get("words", ""))}).</p>
+<details><summary>Every parameter, wall time per stage, the risk engine's settings, library versions</summary>
+<p class="params">{chips}</p>
+<p>Cache folder <code>{_e(cache.get("root", ""))}</code>.</p>
 <div class="grid4">
 <div><h3>Wall time per stage</h3>{table_html(stages)}</div>
 <div><h3>Risk engine: {_e(run.get("engine", ""))}</h3>{table_html(settings, "plain")}</div>
 <div><h3>Libraries</h3>{table_html(versions, "plain")}</div>
-</div></section>"""
+</div></details></section>"""
+
+
+def _quick_banner(run: dict) -> str:
+    if not run.get("quick"):
+        return ""
+    key = run.get("key", {})
+    return (f'<p class="banner" id="quick">Low-precision preview (<code>--quick</code>: M = {_e(key.get("M, layouts of A per trial", 3))} '
+            f'layouts, N = {_e(key.get("N, noisy runs per trial and sigma", 20))} runs, sigmas {_e(key.get("sigmas (units of d)", ""))}): '
+            "numbers are noisier than the paper's; run without <code>--quick</code> for the full reproduction.</p>")
+
+
+def _docs_link(name: str, out: Path, text: str) -> str:
+    """A link to docs/<name> of this checkout, relative to the page (text only when
+    the page lives where the docs cannot be reached, e.g. an installed copy)."""
+    from lgp.app.cache import ROOT
+
+    target = ROOT / "docs" / name
+    if not target.exists():
+        return f"{_e(text)} (docs/{_e(name)})"
+    return f'<a href="{_e(os.path.relpath(target, out))}">{_e(text)}</a>'
+
+
+def risk_explanation(risk: pd.DataFrame, sigma: float, trials, out: Path) -> str:
+    """One sentence on what a reader sees in the risk numbers: how many trials never
+    fall at the pairs' sigma, and which trials have the very same curve (equal
+    structures perturbed with the same random numbers), with the link to docs/risk.md."""
+    at = risk[np.isclose(risk["sigma"].astype(float), sigma)]
+    zero = sorted(at.loc[at["risk"] == 0, "trial"].astype(str), key=[t.id for t in trials].index)
+    curves: dict[tuple, list[str]] = {}
+    for tid, g in risk.groupby("trial", sort=False):
+        c = tuple(np.round(g.sort_values("sigma")["risk"].to_numpy(dtype=float), 12))
+        if any(c):
+            curves.setdefault(c, []).append(str(tid))
+    same = [ids for ids in curves.values() if len(ids) > 1]
+    text = (f"At sigma = {num(sigma)} d, B of {len(zero)} of the {at['trial'].nunique()} trials stood in every noisy run "
+            f"(risk 0): noise of sd {num(sigma)} d per block seldom shifts a block the ~0.5 d past its support's edge that tipping needs. ")
+    if same:
+        text += ("Trials with the same structure have identical risk curves ("
+                 + "; ".join(" = ".join(ids) for ids in same)
+                 + ") because every trial is perturbed with the same random numbers (common random numbers: equal "
+                   "structures get equal risks, and a difference between trials is not blurred by independent noise). ")
+    else:
+        text += "Every trial is perturbed with the same random numbers (common random numbers): equal structures get equal curves. "
+    return _e(text) + "Why: " + _docs_link("risk.md", out, "docs/risk.md") + "."
+
+
+def key_settings(args, trials) -> dict:
+    """The few settings that define a run's results (the rest are folded on the page)."""
+    from lgp.paper import TRIAL_IDS
+
+    ids = [t.id for t in trials]
+    shown = "the paper's 24" if sorted(ids) == sorted(TRIAL_IDS) else (", ".join(ids) if len(ids) <= 12 else f"{', '.join(ids[:10])} ...")
+    sigmas = getattr(args, "sigmas", ()) or ()
+    engine = getattr(args, "engine", None) or "mujoco"
+    design = getattr(args, "approach_height", None)
+    return {
+        "trials": f"{len(ids)} ({shown})",
+        "M, layouts of A per trial": getattr(args, "samples", ""),
+        "N, noisy runs per trial and sigma": getattr(args, "n_sims", ""),
+        "sigmas (units of d)": ", ".join(num(x) for x in sigmas) if len(sigmas) <= 6 else
+                               f"{len(sigmas)} from {num(min(sigmas))} to {num(max(sigmas))}",
+        "risk engine": engine + (f" ({args.profile} profile)" if getattr(args, "profile", None) else ""),
+        "fall rule": f"{getattr(args, 'fall_rule', 'horizontal')} displacement > {num(getattr(args, 'fall_threshold', 0.25))} d",
+        "effort design": (f"approach leg {num(design)} m" if design else "no approach leg (clearance constraint)")
+                         + f", {getattr(args, 'slices', '')} slices per phase",
+        "seed": getattr(args, "seed", ""),
+    }
 
 
 def pair_verdicts(pairs: pd.DataFrame) -> pd.DataFrame:
@@ -232,13 +390,43 @@ def pair_verdicts(pairs: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
-def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None) -> str:
+def percent(x) -> str:
+    """A relative difference as a percentage of at most 4 significant digits; below
+    the effort tie rule's 1e-4 it is round-off, written 0 %."""
+    x = float(x)
+    if not np.isfinite(x):
+        return "n/a"
+    if abs(x) < EFFORT_TIE / 100:
+        return "0 %"
+    return f"{'+' if x > 0 else ''}{num(100 * x, 3)} %"
+
+
+def sigma_edge_warnings(analysis: dict | None) -> list[str]:
+    """A warning for every chosen sigma (per dataset, pooled) at the edge of the
+    grid it was chosen from: the best fit may lie outside the grid (widen --sigmas)."""
+    if not isinstance(analysis, dict):
+        return []
+    choice, profile = analysis.get("sigma_choice"), analysis.get("sigma_profile")
+    if not isinstance(choice, pd.DataFrame) or not isinstance(profile, pd.DataFrame) or not len(profile):
+        return []
+    lo, hi = float(profile["sigma"].min()), float(profile["sigma"].max())
+    out = []
+    for _, row in choice.iterrows():
+        s = float(row["sigma"])
+        if lo < hi and (np.isclose(s, lo) or np.isclose(s, hi)):
+            out.append(f"the sigma chosen for {row['dataset']} ({num(s)} d) is at the {'lower' if np.isclose(s, lo) else 'upper'} "
+                       f"edge of the grid ({num(lo)} to {num(hi)} d): the best fit may lie outside it; widen --sigmas to find it")
+    return out
+
+
+def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None, figure_sigma=None) -> str:
     if pairs is None:
         return '<section id="pairs"><h2>Easy/hard pairs</h2><p>A subset of trials was run: the pair table needs all 24.</p></section>'
     df = pair_verdicts(pairs)
     sigma = df["sigma"].iloc[0]
     show = df[["pair", "dimension", "effort_E", "effort_H", "effort_rel_diff", "risk_E", "risk_H",
                "paper (full model)", "ours (Eq. 1)", "differs"]].rename(columns={"effort_rel_diff": "(H-E)/E"})
+    show["(H-E)/E"] = [percent(x) for x in show["(H-E)/E"]]
     extra = ""
     if analysis is not None and "pairs" in analysis:
         fitted = analysis["pairs"]
@@ -252,9 +440,14 @@ def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None) -> str:
         return f' class="pair-row{" differs" if row["differs"] else ""}" id="pair-{int(row["pair"])}"'
 
     n_diff = int(df["differs"].sum())
+    note = ""
+    if figure_sigma is not None and not np.isclose(figure_sigma[0], sigma):
+        note = (f" (this table's one sigma; the figures of the fits use the fitted sigma = {num(figure_sigma[0])} d, "
+                "so their pair orderings can differ from this table's)")
+    warn = "".join(f'<p class="warn">Warning: {_e(w)}.</p>' for w in sigma_edge_warnings(analysis))
     return f"""
 <section id="pairs"><h2>Easy/hard pairs</h2>
-<p>Effort in J s (mean over layouts), risk at sigma = {sigma:g} d. The paper's fitted full model ordered 11 of 12 pairs
+{warn}<p>Effort in J s (mean over layouts), risk at sigma = {num(sigma)} d{note}. The paper's fitted full model ordered 11 of 12 pairs
 E &lt; H, pair 11 the exception. Without fitted betas ours says for which ratios b2/b1 (b1 &gt; 0) Eq. 1 would order
 the pair E &lt; H; |(H-E)/E| &lt; {EFFORT_TIE:g} with equal risks is a solver-level tie.
 <strong>{n_diff} of {len(df)} pairs differ from the paper</strong> (marked <span class="differs-key">&#x2260;</span>).</p>
@@ -262,13 +455,19 @@ the pair E &lt; H; |(H-E)/E| &lt; {EFFORT_TIE:g} with equal risks is a solver-le
 </section>"""
 
 
-def _figures_section(figures: list[Path], out: Path) -> str:
+def _figures_section(figures: list[Path], out: Path, sigma: float | None = None, rule: str | None = None) -> str:
+    """Every figure with its caption; a figure of risk names the one sigma it shows
+    (`sigma`, chosen by `rule`)."""
     if not figures:
         return ""
     items = []
     for f in figures:
         stem = f.stem.removeprefix("simulated_")
         caption = CAPTIONS.get(stem, stem.replace("_", " "))
+        if stem == "effort_risk_pairs" and sigma is not None:
+            if rule == "given by caller":
+                rule = "the pair table's sigma"
+            caption += f" Risk at sigma = {num(sigma)} d" + (f" ({rule})." if rule else ".")
         if f.stem.startswith("simulated_"):
             caption = "SIMULATED participants, not human data. " + caption
         rel = os.path.relpath(f, out)
@@ -298,6 +497,12 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
     sd = float(np.std(e, ddof=1)) if len(e) > 1 else 0.0
     curve = risk.sort_values("sigma")
     at = curve.loc[np.isclose(curve["sigma"], sigma), "risk"]
+    if not trial.initial.is_random:
+        effort_text = f"{num(e.mean())} J s"
+        effort_note = "fixed layout: A has no random blocks, so it is planned once"
+    else:
+        effort_text = plus_minus(e.mean(), sd, "J s", len(e))
+        effort_note = f"mean &plusmn; sd over {len(e)} layouts"
     if "n_actions" not in samples:
         plan_len = "length not recorded"
     else:
@@ -320,8 +525,8 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
 <p class="desc">{_e(trial.description)}</p>
 {pic}
 <div class="stats">
-<div><b>effort</b> {e.mean():.4g} &plusmn; {sd:.2g} J s<br><small>mean &plusmn; sd over {len(e)} layouts</small><br>{histogram_svg(e)}</div>
-<div><b>risk</b> {(f"{float(at.iloc[0]):.2f}" if len(at) else "n/a")} at sigma {sigma:g} d<br><small>over sigma (line: {sigma:g})</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma)}</div>
+<div><b>effort</b> {effort_text}<br><small>{effort_note}</small><br>{histogram_svg(e)}</div>
+<div><b>risk</b> {(num(float(at.iloc[0])) if len(at) else "n/a")} at sigma {num(sigma)} d<br><small>over sigma (line: {num(sigma)}; top of the axis: {num(risk_top(curve["risk"]))})</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma)}</div>
 </div>
 <p><b>plan</b> {plan_len} &middot; {link}</p>
 {more}
@@ -338,12 +543,16 @@ def _human_section(analysis: dict | None, out: Path) -> str:
     parts = ['<section id="human"><h2>Human data: fits, sigma profile, bootstrap</h2>']
     if simulated:
         parts.append('<p class="warn">SIMULATED participants, not human data.</p>')
+    parts += [f'<p class="warn">Warning: {_e(w)}.</p>' for w in sigma_edge_warnings(analysis)]
     if settings is not None:
         parts.append(table_html(settings.T.reset_index().set_axis(["setting", "value"], axis=1), "plain"))
     for key, title in (("fits", "Fits of Eq. 1 and its lesions"), ("sigma_choice", "Sigma chosen by RMSE"),
                        ("sigma_profile", "RMSE profile over sigma"), ("bootstrap_summary", "Bootstrap over participants"),
                        ("bootstrap_tests", "Direct bootstrap tests"), ("excluded_participants", "Excluded participants")):
         df = analysis.get(key)
+        if isinstance(df, pd.DataFrame) and len(df) and "p_value" in df:
+            n = df["n_boot"] if "n_boot" in df else pd.Series([None] * len(df), index=df.index)
+            df = df.assign(p_value=[p_value(p, k) for p, k in zip(df["p_value"], n)])
         if isinstance(df, pd.DataFrame) and len(df):
             parts.append(f"<h3>{_e(title)}</h3>{table_html(df, max_rows=400)}")
     z = analysis.get("zscored")
@@ -378,7 +587,8 @@ def participant_table(zscored: pd.DataFrame, predictions: pd.DataFrame | None) -
 
 def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                pairs: pd.DataFrame | None = None, analysis: dict | None = None, figures=(),
-               pictures: dict | None = None, replays: dict | None = None) -> Path:
+               pictures: dict | None = None, replays: dict | None = None,
+               figure_sigma: tuple[float, str] | None = None) -> Path:
     """Write ``<out>/index.html`` (atomically) and return its path.
 
     `run`: command, parameters, engine, engine_settings, stages (name -> s),
@@ -404,16 +614,19 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
 <title>{_e(title)}</title><style>{_STYLE}</style></head>
 <body>
 <header><h1>{_e(title)}</h1>
-<nav><a href="#run">run</a> <a href="#pairs">pairs</a> <a href="#figures">figures</a> <a href="#trials">trials</a> <a href="#human">human data</a>
+<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#figures">figures</a>' if figures else ''} <a href="#trials">trials</a> <a href="#human">human data</a>
 &middot; files: <a href="report.md">report.md</a> <a href="effort.csv">effort.csv</a> <a href="effort_samples.csv">effort_samples.csv</a> <a href="risk.csv">risk.csv</a>{' <a href="pairs.csv">pairs.csv</a>' if pairs is not None else ''}</nav>
 </header>
 <main>
+{_quick_banner(run)}
 {_run_section(run)}
-{_pairs_section(pairs, analysis)}
-{_figures_section([Path(f) for f in figures], out)}
+{_pairs_section(pairs, analysis, figure_sigma)}
+{_figures_section([Path(f) for f in figures], out, *(figure_sigma or (None, None)))}
 <section id="trials"><h2>Trials</h2><p class="trialnav">{nav}</p>
 <p>A is the layout of sample 0 (the one the replay plays); effort is over all {effort_samples.groupby("trial").size().max()} layouts.
-Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over the run's sigma grid.</p>
+Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over the run's sigma grid
+(each mini-plot's axis is scaled to its curve, its top written on it).</p>
+<p class="explain">{risk_explanation(risk, sigma, trials, out)}</p>
 <div class="cards">{"".join(cards)}</div></section>
 {_human_section(analysis, out)}
 </main>
@@ -466,8 +679,16 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         command = "python -m lgp.reproduce " + shlex.join(str(a) for a in argv)
     else:  # as recorded by the caller (lgp.reproduce sets args.command), or said so
         command = getattr(args, "command", None) or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below"
+    counts = Counter()
+    for (kind, outcome), n in getattr(cache, "counts", {}).items():
+        counts[kind, "hit" if outcome == "hit" else "miss"] += n
+    counts.update(page_files(cache))
+    compute = cache.compute_time()[0] if hasattr(cache, "compute_time") else None
     run = {
         "command": command,
+        "key": key_settings(args, trials),
+        "quick": bool(getattr(args, "quick", False)),
+        "compute_s": compute,
         "parameters": {k: (", ".join(f"{x:g}" for x in v) if isinstance(v, tuple) else ("(default)" if v is None else str(v)))
                        for k, v in vars(args).items() if k != "command"},
         "engine": engine,
@@ -475,14 +696,17 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         "stages": dict(clock.laps),
         "cache": {"hits": cache.hits + sum(n for (_, o), n in page_files(cache).items() if o == "hit"),
                   "misses": cache.misses + sum(n for (_, o), n in page_files(cache).items() if o == "miss"),
-                  "root": str(cache.root),
-                  "summary": "; ".join([cache.summary()] + [f"{k} {page_files(cache)[k, 'hit']} hit, {page_files(cache)[k, 'miss']} miss"
-                                                            for k in sorted({k for k, _ in page_files(cache)})])},
+                  "root": str(cache.root), "words": cache_words(counts)},
         "finished": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": f"{platform.node()}, {os.cpu_count()} cores",
         "load": "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),
     }
+    figure_sigma = None
+    settings_table = analysis.get("settings") if isinstance(analysis, dict) else None
+    if isinstance(settings_table, pd.DataFrame) and len(settings_table) and "sigma" in settings_table:
+        figure_sigma = (float(settings_table["sigma"].iloc[0]), str(settings_table.get("sigma_rule", pd.Series([""])).iloc[0]))
     return write_page(out, run=run, trials=trials, effort_samples=effort_samples, risk=risk, sigma=sigma, pairs=pairs,
+                      figure_sigma=figure_sigma,
                       analysis=analysis if getattr(args, "human_data", None) else None, figures=figures,
                       pictures=pictures, replays=replays)
 
@@ -510,6 +734,11 @@ svg text{font-size:9px;fill:#555}svg.hist rect{fill:#6b8fb5}svg.risk polyline{fi
 svg.risk circle{fill:#c0392b}svg.risk .frame{fill:#fafafa;stroke:#ccc}svg.risk .mark{stroke:#888;stroke-dasharray:2 2}
 a.replay{font-weight:600}.none{color:#999}details{font-size:12.5px;margin-top:4px}.warn{background:#fff3cd;padding:6px;font-weight:700}
 footer{padding:12px 24px;color:#777;font-size:12px}
+.banner{background:#fff3cd;border:1px solid #e0c36a;padding:8px 12px;font-weight:600;margin:10px 0}
+.explain{background:#eef4fb;border-left:4px solid #6b8fb5;padding:6px 10px;max-width:1100px}
+table.key caption{text-align:left;font-weight:600;padding:2px 0}table.key th{width:16em}
+@media (max-width:600px){main{padding:6px 10px}.cards{grid-template-columns:1fr}figure{max-width:100%;display:block}
+header{padding:10px}.grid4{grid-template-columns:1fr}table{display:block;overflow-x:auto}}
 """
 
 # Sortable tables: click a header to sort by that column (numbers as numbers), again to reverse.
