@@ -398,7 +398,10 @@ def percent(x) -> str:
         return "n/a"
     if abs(x) < EFFORT_TIE / 100:
         return "0 %"
-    return f"{'+' if x > 0 else ''}{num(100 * x, 3)} %"
+    sign = "+" if x > 0 else ""
+    if abs(x) < EFFORT_TIE:  # the tie rule's plan noise: one digit says all there is
+        return f"{sign}{num(100 * x, 1)} % (tie)"
+    return f"{sign}{num(100 * x, 3)} %"
 
 
 def sigma_edge_warnings(analysis: dict | None) -> list[str]:
