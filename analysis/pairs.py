@@ -26,11 +26,22 @@ TIE_REL = 1e-4
 PAPER_NO_DIFFERENCE = frozenset({11})
 
 
+#: The codes of `pair_order_codes`: 1 the easy trial is lower (E<H), 0 a tie, -1 reversed.
+ORDER_NAMES = {1: "E<H", 0: "tie", -1: "H<E"}
+
+
+def pair_order_codes(cost_E, cost_H, tie_rel: float = TIE_REL) -> np.ndarray:
+    """The tie rule (TIE_REL) on arrays of any shape: 1 where E < H beyond a tie, 0 a
+    tie, -1 where H < E. `pair_order` is this on one pair; held-out predictions of
+    many resamples and folds (analysis.crossval) are ordered by it too."""
+    e, h = np.asarray(cost_E, dtype=float), np.asarray(cost_H, dtype=float)
+    tie = np.abs(h - e) <= tie_rel * np.maximum(np.abs(e), np.abs(h))
+    return np.where(tie, 0, np.where(e < h, 1, -1)).astype(np.int8)
+
+
 def pair_order(cost_E: float, cost_H: float, tie_rel: float = TIE_REL) -> str:
     """'E<H', 'tie' or 'H<E' under the tie rule (see TIE_REL)."""
-    if abs(cost_H - cost_E) <= tie_rel * max(abs(cost_E), abs(cost_H)):
-        return "tie"
-    return "E<H" if cost_E < cost_H else "H<E"
+    return ORDER_NAMES[int(pair_order_codes(cost_E, cost_H, tie_rel))]
 
 
 def pair_table(cost: pd.Series | Mapping[str, float], tie_rel: float = TIE_REL) -> pd.DataFrame:

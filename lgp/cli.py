@@ -87,6 +87,17 @@ def approach_height(text: str) -> float:
     return value
 
 
+def positive_number(text: str) -> float:
+    """A finite number > 0 (a budget of seconds)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
+
+
 def trial_id(text: str) -> str:
     """A trial id, case-insensitive, returned in its canonical spelling: the paper's
     1E ... 12H, or another <pair><E|H> (a trial file the loader then looks for)."""

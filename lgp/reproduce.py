@@ -38,6 +38,7 @@ from lgp.app.manifest import TimedCache, clear_previous, expand, file_sha256, in
 from lgp.app.page import Stopwatch, write_index
 from lgp.app.replays import write_replays
 from lgp.app import sensitivity
+from lgp.app.sensitivity import planner_choice
 
 PROG = "python -m lgp.reproduce"
 
@@ -72,21 +73,26 @@ def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_thre
 
 
 def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
-               slices_per_phase: int | None = None) -> str:
+               slices_per_phase: int | None = None, planner: str = "paper", budget=None) -> str:
     """The cache key of one trial's effort table: the trial file, M, the seed, the
-    planner's design (approach height, slices per phase) and effort_key_inputs()."""
+    planner's design (approach height, slices per phase), for planner="search"
+    the planner and its budget (lgp.search.Budget), and effort_key_inputs()."""
     from lgp.planner import APPROACH, SLICES_PER_PHASE, check_design
+    from lgp.search import Budget, check_planner
 
     h, S = check_design(APPROACH if approach_height is None else approach_height,
                         SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase)
+    searched = {"planner": planner, "budget": repr(budget or Budget())} if check_planner(planner) == "search" else {}
     return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=h,
-                     slices_per_phase=S, **effort_key_inputs())
+                     slices_per_phase=S, **searched, **effort_key_inputs())
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
-                  slices_per_phase: int | None = None, log: bool = True, verbose: bool = True) -> pd.DataFrame:
+                  slices_per_phase: int | None = None, log: bool = True, planner: str = "paper",
+                  budget=None, verbose: bool = True) -> pd.DataFrame:
     """Per (trial, sample) effort, one cached file per trial (and design: the
-    planner's `approach_height` and `slices_per_phase`, defaults when None).
+    planner's `approach_height` and `slices_per_phase`, defaults when None; the
+    `planner`, "paper" or "search" with its `budget`).
 
     The layouts of every uncached trial are one stream of work units on the run's
     one executor (warm workers plan across trial boundaries); a trial's file is
@@ -99,6 +105,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
 
     design = {"approach_height": APPROACH if approach_height is None else approach_height,
               "slices_per_phase": SLICES_PER_PHASE if slices_per_phase is None else slices_per_phase}
+    if planner != "paper":
+        design |= {"planner": planner, "budget": budget}
     keys = {t.id: effort_key(t, samples, seed, **design) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
@@ -336,6 +344,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), "
         f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}, "
         f"effort planned with {_design_text(getattr(args, 'approach_height', None), getattr(args, 'slices', None))}"
+        + (f", planner search ({args.budget})" if getattr(args, "planner", "paper") == "search" else "")
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
         f"Risk engine: {engine or args.engine or 'default'}.",
         compute_text,
@@ -424,6 +433,13 @@ def parse_args(argv=None) -> argparse.Namespace:
                         "instead (default 0.05; docs/effort.md)")
     p.add_argument("--slices", type=cli.positive_int, default=None,
                    help="effort: KOMO slices per 1 s phase (default 20; docs/effort.md, time discretisation)")
+    p.add_argument("--planner", type=cli.one_of(("paper", "search"), "planner"), default="paper",
+                   help="effort: paper (the paper's pipeline, default) or search (best-first over skeletons, lgp.search; "
+                        "docs/effort.md)")
+    p.add_argument("--budget-solves", type=cli.positive_int, default=None,
+                   help="--planner search: at most this many KOMO solves per layout (default 3)")
+    p.add_argument("--budget-seconds", type=cli.positive_number, default=None,
+                   help="--planner search: at most this many seconds per layout (default 120)")
     p.add_argument("--jobs", type=cli.positive_int, default=default_jobs(),
                    help="processes, or LocalCluster workers with --scheduler local-dask, >= 1 (default: all cores, %(default)s here)")
     p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
@@ -456,6 +472,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         sensitivity.check_arguments(args)
     except ValueError as e:
         p.exit(2, f"{p.prog}: error: {e}\n")
+    if args.planner != "search" and (args.budget_solves or args.budget_seconds):
+        p.error("--budget-solves and --budget-seconds apply to --planner search only")
+    args.budget = None
+    if args.planner == "search":
+        from lgp.search import Budget
+
+        args.budget = Budget(solves=args.budget_solves or Budget().solves, seconds=args.budget_seconds or Budget().seconds)
     if args.risk_measure and not (args.build_risk and args.human_data):
         p.error("--risk-measure needs --build-risk and --human-data")
     if args.per_participant_sigma and not args.human_data:
@@ -544,7 +567,8 @@ def run(args, argv=None) -> int:
         from models.effort import summarise_effort
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache, verbose=args.verbose,
-                                       approach_height=args.approach_height, slices_per_phase=args.slices)
+                                       approach_height=args.approach_height, slices_per_phase=args.slices,
+                                       **planner_choice(args))
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk, verbose=args.verbose,
@@ -565,7 +589,7 @@ def run(args, argv=None) -> int:
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,
-            planner_options={"approach_height": args.approach_height, "slices_per_phase": args.slices})
+            planner_options={"approach_height": args.approach_height, "slices_per_phase": args.slices, **planner_choice(args)})
         clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
@@ -634,7 +658,7 @@ def run(args, argv=None) -> int:
                   "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
                   "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
                   "sensitivity": getattr(args, "sensitivity", None), "approach_height": args.approach_height,
-                  "slices_per_phase": args.slices}
+                  "slices_per_phase": args.slices, **{k: repr(v) if k == "budget" else v for k, v in planner_choice(args).items()}}
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
     files = list(dict.fromkeys(expand(written)))

@@ -60,6 +60,14 @@ DEFAULT_RISK_ENGINES = ("mujoco", "physx", "physx:game-defaults")
 COLUMNS = ["engine", "faithful", "fall_rule", "fall_threshold", "trial", "sigma", "risk", "falls", "n", "stands_unperturbed"]
 
 
+def planner_choice(args) -> dict:
+    """The planner of a run's effort (lgp.reproduce --planner): {} for the paper's
+    pipeline (its cache keys and manifests as before the search existed), else
+    {"planner": "search", "budget": lgp.search.Budget}."""
+    planner = getattr(args, "planner", "paper")
+    return {} if planner == "paper" else {"planner": planner, "budget": getattr(args, "budget", None)}
+
+
 @dataclass
 class Context:
     """What a section may use: parsed arguments of lgp.reproduce, its trials, the
@@ -337,13 +345,13 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
         t0 = time.perf_counter()
         try:
             table = ctx.effort_tables(ctx.trials, samples, args.seed, ctx.executor, ctx.cache,
-                                      approach_height=h, slices_per_phase=S)
+                                      approach_height=h, slices_per_phase=S, **planner_choice(args))
         except Exception:  # a trial the planner cannot do with this design: the others, one by one (cached ones at once)
             parts = []
             for t in ctx.trials:
                 try:
                     parts.append(ctx.effort_tables([t], samples, args.seed, ctx.executor, ctx.cache,
-                                                   approach_height=h, slices_per_phase=S))
+                                                   approach_height=h, slices_per_phase=S, **planner_choice(args)))
                 except Exception as e:  # said in the report and the table (effort NaN), not hidden
                     notes.append(f"{label}, {t.id}: {type(e).__name__}: {e}")
                     ctx.log(f"[sensitivity] effort, {label}, {t.id}: failed ({type(e).__name__})")

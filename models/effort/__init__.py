@@ -37,9 +37,14 @@ import pandas as pd
 
 from lgp.paper import SAMPLES
 from lgp.executor import borrowed
-from lgp.planner import APPROACH, PHASE_DURATION, SLICES_PER_PHASE, PlanningError, check_design, plan
+from lgp.planner import APPROACH, PHASE_DURATION, SLICES_PER_PHASE, PlanningError, check_design
+from lgp.search import Budget, check_planner, describe_search, plan
 
 COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "status"]
+#: planner="search" adds what the search found: the lower bound of the best
+#: unexplored branch (J s), the gap to the plan's effort, set-asides, KOMO solves,
+#: and the paper skeleton's effort on the same layout (empty when it has none).
+SEARCH_COLUMNS = COLUMNS + ["bound", "gap", "set_asides", "solves", "paper_effort"]
 #: Mass of a unit block [paper: "a unit mass to a unit block"], kg.
 BLOCK_MASS = 1.0
 
@@ -88,10 +93,13 @@ def cumulative_effort(plan) -> np.ndarray:
 
 
 def describe(plan) -> str:
-    """The plan's action list with times and per-action energies, one line each, and its effort."""
+    """The plan's action list (its skeleton) with times and per-action energies, one
+    line each, and its effort; a searched plan also its bound and gap."""
     energies = kinetic_energy_by_action(plan) if plan.actions else []
     lines = [f"{k + 1:3d}  t = {k + 1:5.1f} s  {a}   E = {e:.4f} J s" for k, (a, e) in enumerate(zip(plan.actions, energies))]
     lines.append(f"physical effort: {kinetic_energy(plan):.4f} J s over {len(plan.actions)} actions")
+    if describe_search(plan):
+        lines.append(describe_search(plan))
     return "\n".join(lines)
 
 
@@ -117,18 +125,24 @@ def plan_of_sample(trial, seed: int, sample: int, **planner_options):
 
 
 def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float = APPROACH,
-                     slices_per_phase: int = SLICES_PER_PHASE) -> dict:
+                     slices_per_phase: int = SLICES_PER_PHASE, planner: str = "paper", budget: Budget | None = None) -> dict:
     """One row of the effort table: plan the sample's layout, integrate kinetic energy.
 
-    `approach_height` (m) and `slices_per_phase` are the planner's (lgp.planner.plan).
+    `approach_height` (m) and `slices_per_phase` are the planner's (lgp.planner.plan);
+    `planner` "paper" (default) or "search" (lgp.search, with `budget`).
     Raises PlanningError naming the trial, the sample and the failing action.
     """
-    result = plan_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    options = {"planner": planner, "budget": budget} if check_planner(planner) == "search" else {}
+    result = plan_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase, **options)
     effort = kinetic_energy(result)
     if not np.isfinite(effort):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): effort is {effort}")
     komo = result.komo
-    return {
+    searched = getattr(result, "search", None)
+    extra = {} if searched is None else {
+        "bound": searched.bound, "gap": searched.gap, "set_asides": searched.set_asides, "solves": searched.solves,
+        "paper_effort": searched.paper_effort}
+    return extra | {
         "trial": trial.id,
         "sample": sample,
         "effort": effort,
@@ -152,12 +166,15 @@ class EffortResult(NamedTuple):
 
 
 def effort_units(trial, samples: int, seed: int, *, approach_height: float = APPROACH,
-                 slices_per_phase: int = SLICES_PER_PHASE) -> list[tuple]:
+                 slices_per_phase: int = SLICES_PER_PHASE, planner: str = "paper", budget: Budget | None = None) -> list[tuple]:
     """The work units of a trial's effort, (trial, seed, sample, design), one per
     layout that needs planning: every sample, or only sample 0 when A is not
-    random. `design` = (approach_height, slices_per_phase), carried in the unit so
-    an executor's workers plan with the same choices."""
+    random. `design` = (approach_height, slices_per_phase), and for
+    planner="search" also ("search", budget), carried in the unit so an
+    executor's workers plan with the same choices."""
     design = check_design(approach_height, slices_per_phase)
+    if check_planner(planner) == "search":
+        design = (*design, planner, budget or Budget())
     return [(trial, seed, i, design) for i in (range(samples) if trial.initial.is_random else [0])]
 
 
@@ -165,21 +182,26 @@ def effort_of_unit(unit) -> dict:
     """effort_of_sample for one unit of `effort_units` (what executors map); a
     3-tuple (trial, seed, sample) plans with the default design."""
     trial, seed, sample, *rest = unit
-    approach_height, slices_per_phase = rest[0] if rest else (APPROACH, SLICES_PER_PHASE)
-    return effort_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    approach_height, slices_per_phase, *search = rest[0] if rest else (APPROACH, SLICES_PER_PHASE)
+    planner, budget = search if search else ("paper", None)
+    return effort_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase,
+                            planner=planner, budget=budget)
 
 
 def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
     """The tidy (trial, sample) table from the rows of a trial's units (any order);
-    a trial whose A is not random has its one row repeated for every sample."""
+    a trial whose A is not random has its one row repeated for every sample.
+    Columns COLUMNS, or SEARCH_COLUMNS for rows of planner="search"."""
     if not trial.initial.is_random:
         rows = [{**rows[0], "sample": i} for i in range(samples)]
-    return pd.DataFrame(rows, columns=COLUMNS).sort_values("sample").reset_index(drop=True)
+    columns = SEARCH_COLUMNS if rows and "bound" in rows[0] else COLUMNS
+    return pd.DataFrame(rows, columns=columns).sort_values("sample").reset_index(drop=True)
 
 
 def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
                     progress: Callable[[int, int], None] | None = None, executor=None, *,
-                    approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE) -> EffortResult:
+                    approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE,
+                    planner: str = "paper", budget: Budget | None = None) -> EffortResult:
     """Physical effort of `trial` over `samples` random layouts: an `EffortResult`
     with ``.mean`` (J s) and ``.table`` (one row per layout: trial, sample, effort,
     n_actions, solve_time, solver, status).
@@ -192,7 +214,9 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
     once and its row repeated: every sample would draw the same layout.
     `approach_height` (m; 0.05 default, 0 = clearance constraint instead of the
     legs) and `slices_per_phase` (20 default) are passed to the planner
-    (lgp.planner.plan; docs/effort.md, "Modelling choices").
+    (lgp.planner.plan; docs/effort.md, "Modelling choices"). `planner` is "paper"
+    (the paper's pipeline, default) or "search" (lgp.search within `budget`; the
+    table then has SEARCH_COLUMNS: bound, gap, set-asides, solves, paper_effort).
     """
     if isinstance(trial, str):
         import stimuli
@@ -200,7 +224,8 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
         trial = stimuli.load_trial(trial)
     if samples < 1:
         raise ValueError(f"physical_effort needs samples >= 1, got {samples}")
-    units = effort_units(trial, samples, seed, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    units = effort_units(trial, samples, seed, approach_height=approach_height, slices_per_phase=slices_per_phase,
+                         planner=planner, budget=budget)
     done = 0
 
     def record(_, row):
