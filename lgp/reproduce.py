@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
-import json
-import os
 import signal
 import sys
 import time
@@ -35,8 +33,11 @@ from lgp.app.progress import Progress
 from lgp.app.progress import log as progress_log
 from lgp.app.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.app.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
-from lgp.app.page import Stopwatch, write_index
+from lgp.app.page import write_index
+from lgp.app.progress import Stopwatch
 from lgp.app.replays import write_replays
+from lgp.app.report import append_report, engine_description, pairs_csv_table, write_report
+from lgp.app.stages import check_targets, risk_key_inputs, risk_tables
 from lgp.app import sensitivity
 from lgp.app.sensitivity import planner_choice
 
@@ -56,20 +57,6 @@ def effort_key_inputs() -> dict:
     return {"code": modules_digest("models.effort", "stimuli"),
             "data": files_digest("models/*.sdf", "models/*.urdf", "models/*.yaml"),
             "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
-
-
-def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> dict:
-    """What a risk table depends on besides the trial and the parameters: the source
-    of every project module risk_table can run (the engine module is loaded by name,
-    so it is named here), the engine's settings, the fall rule, and the libraries."""
-    from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
-
-    name = DEFAULT_ENGINE if engine is None else engine
-    spec = ENGINES[name]
-    extra = (spec.requires,) if spec.requires else ()  # e.g. sapien for PhysX
-    return {"code": modules_digest("models.risk.core", spec.target.split(":")[0], "stimuli"),
-            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra),
-            "fall_rule": fall_rule, "fall_threshold": float(fall_threshold)}
 
 
 def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
@@ -148,259 +135,6 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
     return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
-def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6,
-                fall_rule: str = "horizontal", fall_threshold: float = 0.25, verbose: bool = True) -> pd.DataFrame:
-    """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
-
-    Uncached trials are simulated a few at a time on the run's one executor, so
-    the grid keeps every worker busy and an interruption loses at most one chunk.
-    """
-    from models.risk import risk_table
-
-    depends = risk_key_inputs(engine, fall_rule, fall_threshold)
-    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
-    tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
-    todo = [t for t in trials if tables[t.id] is None]
-    if todo:
-        _log(f"risk: {len(todo) * len(sigmas) * n_sims} simulations of B ({len(todo)} trial(s) x {len(sigmas)} sigma(s) "
-             f"x {n_sims} noisy runs)" + (f"; {len(trials) - len(todo)} trial(s) reused from the cache" if len(todo) < len(trials) else ""))
-    bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs", what="noisy runs of B")
-    for k in range(0, len(todo), chunk):
-        group = todo[k:k + chunk]
-        t0 = time.perf_counter()
-        base = bar.done
-        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
-                           fall_rule=fall_rule, fall_threshold=fall_threshold,
-                           progress=lambda done, total: bar.advance(base + done - bar.done))
-        for t in group:
-            tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
-        if verbose:
-            _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
-    if todo:
-        bar.close()
-    out = []
-    for k, trial in enumerate(trials, 1):
-        df = tables[trial.id]
-        curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
-        if verbose:
-            _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
-        out.append(df)
-    return pd.concat(out, ignore_index=True)
-
-
-def check_targets(trials, engine: str | None, cache: Cache, fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> None:
-    """Before the long work: B of every trial must stand unperturbed (the risk
-    model's sigma = 0 run), one simulation per trial, cached like the results.
-    Raises UnstableSceneError naming every trial whose B falls and its blocks."""
-    from models.risk import UnstableSceneError, check_stable
-
-    depends = risk_key_inputs(engine, fall_rule, fall_threshold)
-    problems = []
-    for t in trials:
-        key = input_key(trial=t.id, digest=t.digest, check="B stands unperturbed", **depends)
-        df = cache.get("stable", key)
-        if df is None:
-            try:
-                check_stable(t.target, engine, fall_rule=fall_rule, fall_threshold=fall_threshold)
-                df = pd.DataFrame([{"trial": t.id, "stable": True, "problem": ""}])
-            except UnstableSceneError as e:
-                df = pd.DataFrame([{"trial": t.id, "stable": False, "problem": str(e)}])
-            cache.put("stable", key, df)
-        if not bool(df["stable"].iloc[0]):
-            problems.append(str(df["problem"].iloc[0]))
-    if problems:
-        raise UnstableSceneError("; ".join(problems))
-
-
-def kappa_range(E_e: float, R_e: float, E_h: float, R_h: float) -> str:
-    """Ratios k = b2/b1 (b1 > 0, k >= 0) for which Eq. 1 costs E less than H.
-
-    Eq. 1 cost over b1 is E(1 - R) + k E R (+ const), so cost_H - cost_E is
-    a + k b with a = E_h(1 - R_h) - E_e(1 - R_e) and b = E_h R_h - E_e R_e:
-    linear in k, and the set where it is positive is a half-line.
-    """
-    a = E_h * (1 - R_h) - E_e * (1 - R_e)
-    b = E_h * R_h - E_e * R_e
-    if b == 0:
-        return "any" if a > 0 else "none"
-    k = -a / b
-    if b > 0:
-        return "any" if k < 0 else f"> {k:.3g}"
-    return "none" if k <= 0 else f"< {k:.3g}"
-
-
-def pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trials) -> pd.DataFrame:
-    """Per pair: effort and risk (at `sigma`) of E and H, whether E < H in each, and
-    the ratios b2/b1 for which the full model (Eq. 1) would order the pair E < H."""
-    from analysis import pair_table, risk_at_sigma
-
-    dims = {t.pair: t.dimension for t in trials}
-    e = pair_table(effort.set_index("trial")["effort"]).rename(
-        columns={"cost_E": "effort_E", "cost_H": "effort_H", "order": "effort_order", "E_lt_H": "effort_E_lt_H"})
-    r = pair_table(risk_at_sigma(risk, sigma)).rename(
-        columns={"cost_E": "risk_E", "cost_H": "risk_H", "order": "risk_order", "E_lt_H": "risk_E_lt_H"})
-    table = e.merge(r, on="pair")
-    table.insert(1, "dimension", table["pair"].map(dims))
-    table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
-    table.insert(table.columns.get_loc("risk_E"), "sigma", sigma)
-    return _with_full_model_range(table)
-
-
-def _with_full_model_range(table: pd.DataFrame) -> pd.DataFrame:
-    """Add the ratios b2/b1 for which Eq. 1 orders each pair E < H; a pair tied in
-    effort and in risk (analysis.pairs.TIE_REL) is tied by Eq. 1 for every b."""
-    table["full_E_lt_H_for_b2_over_b1"] = [
-        "none (tie)" if (eo == "tie" and ro == "tie") else kappa_range(*row)
-        for row, eo, ro in zip(table[["effort_E", "risk_E", "effort_H", "risk_H"]].to_numpy(),
-                               table["effort_order"], table["risk_order"])]
-    return table
-
-
-def declared_pair_orderings(effort: pd.DataFrame, risk: pd.DataFrame, sigma: float, trials) -> pd.DataFrame | None:
-    """pair_orderings (same columns, same tie rule) for a stimulus set other than
-    the paper's: the pairs whose E and H trials (ids <pair>E, <pair>H) are both in
-    the run; None when there are none."""
-    from analysis.pairs import pair_order
-
-    ids = {t.id for t in trials}
-    declared = sorted({t.pair for t in trials if t.pair is not None and {f"{t.pair}E", f"{t.pair}H"} <= ids})
-    if not declared:
-        return None
-    at = risk[np.isclose(risk["sigma"].astype(float), sigma, rtol=0, atol=1e-9)]
-    costs = {"effort": effort.set_index("trial")["effort"].astype(float), "risk": at.set_index("trial")["risk"].astype(float)}
-    table = pd.DataFrame({"pair": declared})
-    for name, cost in costs.items():
-        table[f"{name}_E"] = [cost[f"{p}E"] for p in declared]
-        table[f"{name}_H"] = [cost[f"{p}H"] for p in declared]
-        table[f"{name}_order"] = [pair_order(e, h) for e, h in zip(table[f"{name}_E"], table[f"{name}_H"])]
-        table[f"{name}_E_lt_H"] = table[f"{name}_order"] == "E<H"
-    table.insert(1, "dimension", table["pair"].map({t.pair: t.dimension for t in trials}))
-    table.insert(4, "effort_rel_diff", (table["effort_H"] - table["effort_E"]) / table["effort_E"])
-    table.insert(table.columns.get_loc("risk_E"), "sigma", sigma)
-    return _with_full_model_range(table)
-
-
-def _orders(pairs: pd.DataFrame, source: str) -> str:
-    """'E < H in 10 of 12 pairs (tied: 6; reversed: 11)' from a pair table."""
-    n = int(pairs[f"{source}_E_lt_H"].sum())
-    notes = []
-    for order, word in (("tie", "tied"), ("H<E", "reversed")):
-        found = pairs.loc[pairs[f"{source}_order"] == order, "pair"].tolist()
-        if found:
-            notes.append(f"{word}: {', '.join(map(str, found))}")
-    return f"E < H in {n} of {len(pairs)} pairs" + (f" ({'; '.join(notes)})" if notes else "")
-
-
-def engine_description(engine: str | None, settings: dict | None = None) -> str:
-    """The risk engine by name with its settings, e.g. 'mujoco 3.3.0 (timestep 0.002, ...)'."""
-    from models.risk.core import DEFAULT_ENGINE
-    from models.risk.engine import get_engine
-
-    name = engine or DEFAULT_ENGINE
-    settings = dict(get_engine(name).settings() if settings is None else settings)
-    settings.pop("engine", None)
-    version = settings.pop("version", None)
-    text = ", ".join(f"{k} {v}" for k, v in settings.items())
-    return f"{name}" + (f" {version}" if version else "") + (f" ({text})" if text else "") + \
-        ("" if engine else " [the default engine]") + \
-        (" [UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md]" if settings.get("faithful") is False else "")
-
-
-def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
-    cols = list(df.columns)
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for _, row in df.iterrows():
-        cells = [format(v, floatfmt) if isinstance(v, (float, np.floating)) else str(v) for v in row]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
-
-
-def _design_text(approach_height: float | None, slices: int | None) -> str:
-    """'5 cm approach legs, 20 slices per phase' (or the clearance design at height 0)."""
-    from lgp.planner import APPROACH, SLICES_PER_PHASE
-
-    h = APPROACH if approach_height is None else approach_height
-    legs = f"{h * 100:g} cm approach legs" if h > 0 else "no approach legs (clearance constraint)"
-    return f"{legs}, {SLICES_PER_PHASE if slices is None else slices} slices per phase"
-
-
-def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None,
-                 elapsed: float, software: dict | None = None, compute: tuple[float, int] = (float("nan"), 0)) -> Path:
-    """report.md: settings, the engine with its settings, both times, the tables, and
-    the pair orderings under the one tie rule (analysis.pairs.TIE_REL)."""
-    from analysis.pairs import TIE_REL
-
-    engine = engine_description(args.engine, (software or {}).get("engine"))
-    wide = risk.pivot_table(index="trial", columns="sigma", values="risk").reindex(effort["trial"])
-    wide.columns = [f"{s:g}" for s in wide.columns]
-    compute_s, unknown = compute
-    compute_text = (f"Compute time of these results {compute_s:.0f} s (wall time spent computing each cached effort and risk "
-                    "result when it was computed" + (f"; {unknown} result(s) cached by an older version have no recorded time"
-                                                     if unknown else "") + f"); this run took {elapsed:.0f} s.")
-    lines = [
-        "# Reproduction report",
-        "",
-        f"Settings: trials {len(effort)}, M = {args.samples} layouts, N = {args.n_sims} runs per sigma, "
-        f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), "
-        f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}, "
-        f"effort planned with {_design_text(getattr(args, 'approach_height', None), getattr(args, 'slices', None))}"
-        + (f", planner search ({args.budget})" if getattr(args, "planner", "paper") == "search" else "")
-        + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
-        f"Risk engine: {engine or args.engine or 'default'}.",
-        compute_text,
-        "",
-        "## Physical effort (J*s: integral of the carried blocks' kinetic energy over time, 1 kg blocks)",
-        "",
-        _markdown(effort),
-        "",
-        "## Physical risk (fraction of noisy runs that fall)",
-        "",
-        _markdown(wide.reset_index(), ".2f"),
-        "",
-    ]
-    if pairs is not None:
-        lines += [
-            f"## Easy/hard pairs (risk at sigma = {pairs['sigma'].iloc[0]:g} d)",
-            "",
-            _markdown(pairs.drop(columns=["sigma"])),
-            "",
-            f"Tie rule (one rule for this table, pairs.csv, the figures and docs/results.md): E and H are tied when "
-            f"|H - E| <= {TIE_REL:g} x max(E, H), the plan-to-plan noise of effort (analysis.pairs.TIE_REL); "
-            "a tie counts as not ordered. effort_rel_diff = (H - E) / E.",
-            "",
-            f"Effort: {_orders(pairs, 'effort')}. Risk: {_orders(pairs, 'risk')}. "
-            "The paper's fitted full model ordered 11 of 12 (pair 11 the exception).",
-            "",
-        ]
-        if analysis is None:
-            lines += ["Without human data there are no fitted betas, so the last column says for which ratios b2/b1 "
-                      "(b1 > 0) Eq. 1 would order each pair E < H.", ""]
-        else:
-            lines += ["The last column says for which ratios b2/b1 (b1 > 0) Eq. 1 would order each pair E < H; the "
-                      "fitted betas and the orderings they give are below.", ""]
-    if analysis is None:
-        lines += ["No human data given (`--human-data FILE`, format in docs/human-data.md): the fits of Eq. 1, "
-                  "the sigma profile and the bootstrap need the responses, which are not public.", ""]
-    else:
-        from lgp.app.page import sigma_edge_warnings
-
-        lines += [f"**Warning**: {w}." for w in sigma_edge_warnings(analysis)] + ([""] if sigma_edge_warnings(analysis) else [])
-        for key in ("sigma_choice", "fits", "bootstrap_summary", "bootstrap_tests"):
-            if key in analysis and isinstance(analysis[key], pd.DataFrame) and len(analysis[key]):
-                lines += [f"## {key.replace('_', ' ')}", "", _markdown(analysis[key]), ""]
-        if "orderings" in analysis:
-            lines += ["## Pair orderings by source (orderings.csv)", "", _markdown(analysis["orderings"]), ""]
-    if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers
-        lines += ["## Software", "", "Libraries: " + ", ".join(f"{k} {v}" for k, v in software["libraries"].items()) + ".",
-                  "", f"Risk engine settings: `{json.dumps(software['engine'], sort_keys=True, default=str)}`.", ""]
-    path = out / "report.md"
-    tmp = path.with_suffix(".md.tmp")
-    tmp.write_text("\n".join(lines))
-    os.replace(tmp, path)
-    return path
-
-
-
 def _took(command: str) -> str:
     """'; took 16 s cold, ... [machine]' from bench/commands.py's last run (lgp.cli.measured_time), or ''."""
     text = cli.measured_time(command)
@@ -410,6 +144,9 @@ def _took(command: str) -> str:
 def parse_args(argv=None) -> argparse.Namespace:
     """The command line, checked: every count, sigma, trial id and path is refused
     here, in one line, before any work (lgp.cli)."""
+    from lgp.app.build_risk import BUILD_SIGMAS
+    from models.risk.engine import DEFAULT_FALL_RULE, FALL_RULES, FALL_THRESHOLD
+
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="results", type=cli.output_dir,
                    help="output directory (default: results/); an earlier run's outputs in it are removed, its cache kept")
@@ -423,11 +160,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
     p.add_argument("--engine", help="physics engine for risk: mujoco, drake, physx (optional extra) (default: mujoco)")
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
-    from models.risk.engine import FALL_RULES
-
-    p.add_argument("--fall-rule", default="horizontal", type=cli.one_of(FALL_RULES, "fall rule"),
+    p.add_argument("--fall-rule", default=DEFAULT_FALL_RULE, type=cli.one_of(FALL_RULES, "fall rule"),
                    help="a run falls by horizontal (default) or 3d displacement (case-insensitive)")
-    p.add_argument("--fall-threshold", type=float, default=0.25, help="fall threshold in units of d (default %(default)s)")
+    p.add_argument("--fall-threshold", type=float, default=FALL_THRESHOLD, help="fall threshold in units of d (default %(default)s)")
     p.add_argument("--approach-height", type=cli.approach_height, default=None,
                    help="effort: vertical approach/retreat leg (m) at every grasp and place; 0 = a clearance constraint "
                         "instead (default 0.05; docs/effort.md)")
@@ -453,7 +188,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=cli.positive_int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
     p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/app/build_risk.py)")
-    p.add_argument("--build-sigmas", type=cli.sigma, nargs="+", help="noise levels of --build-risk in (0, 1] (default 0.065 0.1)")
+    p.add_argument("--build-sigmas", type=cli.sigma, nargs="+",
+                   help=f"noise levels of --build-risk in (0, 1] (default {' '.join(f'{s:g}' for s in BUILD_SIGMAS)})")
     p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
@@ -464,10 +200,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     sensitivity.add_arguments(p)
     args = p.parse_args(argv)
     try:  # bad engine, profile, rule or threshold: one line, before any work
-        from models.risk import check_fall_rule, engine_name
+        from models.risk import DEFAULT_ENGINE, check_fall_rule, engine_name
 
         if args.engine is not None or args.profile is not None:
-            args.engine = engine_name(args.engine or "mujoco", args.profile)
+            args.engine = engine_name(args.engine or DEFAULT_ENGINE, args.profile)
         check_fall_rule(args.fall_rule, args.fall_threshold)
         sensitivity.check_arguments(args)
     except ValueError as e:
@@ -515,30 +251,15 @@ def main(argv=None) -> int:
             return 128 + int(sig)
 
 
-def select_trials(ids: list[str] | None, directory=None) -> list:
-    """The trials of a run: the paper's 24 by default (other trial files in the
-    directory are named, not run), ``all`` for every trial file, or the ids given."""
-    if not ids and directory is not None:  # a user's stimulus set (--stimuli DIR): every trial file in it
-        if not stimuli.trial_ids(directory):
-            raise stimuli.StimulusError(f"--stimuli {directory}: no trial files (*.yaml) there")
-        return stimuli.load_all(directory)
-    if not ids:
-        extra = stimuli.extra_ids(directory)
-        if extra:
-            _log(f"the trial folder also holds {', '.join(extra)} (not among the paper's 24): "
-                 f"run them with --trials {' '.join(extra)} or --trials all")
-        return stimuli.load_paper(directory)
-    if [t.lower() for t in ids] == ["all"]:
-        return stimuli.load_all(directory)
-    return [stimuli.load_trial(t, directory) for t in ids]
-
-
 def run(args, argv=None) -> int:
     """The pipeline for parsed command-line `args` (see `main`)."""
     t0 = time.perf_counter()
     clock = Stopwatch()  # wall time per stage, for the results page
     # Validate every input before anything is written or computed.
-    trials = select_trials(args.trials, args.stimuli)
+    trials, extra = stimuli.select_trials(args.trials, args.stimuli)
+    if extra:
+        _log(f"the trial folder also holds {', '.join(extra)} (not among the paper's 24): "
+             f"run them with --trials {' '.join(extra)} or --trials all")
     human = None
     if args.human_data:
         from analysis import load_human_data
@@ -571,8 +292,8 @@ def run(args, argv=None) -> int:
                                        **planner_choice(args))
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
-        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk, verbose=args.verbose,
-                           fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
+        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
+                           fall_rule=args.fall_rule, fall_threshold=args.fall_threshold, verbose=args.verbose)
         clock.lap("risk")
         sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log,
                                                                      effort_tables=effort_tables)) \
@@ -609,30 +330,33 @@ def run(args, argv=None) -> int:
         # Pair orderings, figures and fits are the paper's: on its 24 trials only;
         # other trials of the run are in the effort and risk tables.
         from analysis import run_analysis
+        from analysis.pairs import pair_orderings
 
         paper = [t for t in trials if t.id in TRIAL_IDS]
         extra = [t.id for t in trials if t.id not in TRIAL_IDS]
         if extra:
             _log(f"pair table, figures and fits use the paper's 24 trials; {', '.join(extra)} are in the effort and risk tables only")
         e_samples, e_mean, r = (df[df["trial"].isin(TRIAL_IDS)] for df in (effort_samples, effort, risk))
-        pairs = pair_orderings(e_mean, r, sigma, paper)
-        written.append(write_csv_atomic(pairs, out / "pairs.csv"))
+        pairs = pair_orderings(e_mean, r, sigma, {t.pair: t.dimension for t in paper})
+        written.append(write_csv_atomic(pairs_csv_table(pairs), out / "pairs.csv"))
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
                                 build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
                                 risk_measure=args.risk_measure, pair_names={t.pair: t.dimension for t in paper})
         written += [Path(path) for path in analysis["files"]["path"]]
         if args.per_participant_sigma:
-            from lgp.app import build_risk
+            from lgp.app.participant_sigma import participant_sigma_outputs
 
-            paths, section = build_risk.participant_sigma_outputs(human, e_samples, r, out,
-                                                                   args.participant_betas, args.command)
+            paths, section = participant_sigma_outputs(human, e_samples, r, out, args.participant_betas, args.command)
             written += paths
             sections.append(section)
     else:
-        pairs = declared_pair_orderings(effort, risk, sigma, trials)
+        from analysis.pairs import declared_pair_orderings
+
+        declared = stimuli.declared_pairs(trials)
+        pairs = declared_pair_orderings(effort, risk, sigma, {t.pair: t.dimension for t in trials}, declared) if declared else None
         if pairs is not None:
-            written.append(write_csv_atomic(pairs, out / "pairs.csv"))
+            written.append(write_csv_atomic(pairs_csv_table(pairs), out / "pairs.csv"))
         _log("not all of the paper's 24 trials: no figures or fits (they need all 24); "
              + (f"pair table for the {len(pairs)} pair(s) whose E and H trials are both in the run" if pairs is not None
                 else "no pair table (no trial files declare both trials of a pair)"))
@@ -642,8 +366,6 @@ def run(args, argv=None) -> int:
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None,
                           time.perf_counter() - t0, software, compute)
     if sections:
-        from lgp.app.build_risk import append_report
-
         append_report(report, sections)
     written.append(report)
     written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
@@ -657,7 +379,7 @@ def run(args, argv=None) -> int:
                   "no_cache": args.no_cache, "build_risk": args.build_risk, "build_sigmas": args.build_sigmas,
                   "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
                   "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
-                  "sensitivity": getattr(args, "sensitivity", None), "approach_height": args.approach_height,
+                  "sensitivity": args.sensitivity, "approach_height": args.approach_height,
                   "slices_per_phase": args.slices, **{k: repr(v) if k == "budget" else v for k, v in planner_choice(args).items()}}
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
@@ -679,9 +401,7 @@ def end_of_run(seconds: float, cache, out: Path, n_files: int) -> str:
     """The two lines a run ends with: how long, what was computed or reused, and
     where to look ("done in 16 s (120 results computed, 0 reused from the cache);
     open results/index.html")."""
-    from lgp.app.replays import page_files
-
-    extra = page_files(cache)
+    extra = getattr(cache, "files", {})  # the page's pictures and replays, beside the result tables
     computed = cache.misses + sum(n for (_, o), n in extra.items() if o == "miss")
     reused = cache.hits + sum(n for (_, o), n in extra.items() if o == "hit")
     took = f"{seconds:.0f} s" if seconds >= 10 else f"{seconds:.1f} s"

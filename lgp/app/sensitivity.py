@@ -37,15 +37,17 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from lgp.app.cache import Cache, input_key, write_csv_atomic
+from lgp.app.cache import Cache, input_key
+from lgp.app.files import atomic_path, write_csv_atomic
 from lgp.paper import BLOCK_SIZE, PAPER_SIGMA, RISK_PAIRS
+from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
 
 #: The noise levels of the risk section: the paper's sigma and the top of its grid.
 RISK_SIGMAS = (PAPER_SIGMA, 0.10)
 #: Fall rules of the risk section: (rule, threshold in units of d). The runs are
 #: simulated once per engine and judged by each rule (exact: every threshold
 #: here has the same early-stop distance, models.risk.engine.fall_certain).
-RISK_RULES = (("horizontal", 0.25), ("3d", 0.25), ("3d", 0.1))
+RISK_RULES = ((DEFAULT_FALL_RULE, FALL_THRESHOLD), ("3d", FALL_THRESHOLD), ("3d", 0.1))
 #: Approach heights (m) of the effort section: the default legs, shorter legs, and
 #: none (the clearance design of lgp.planner).
 EFFORT_HEIGHTS = (0.05, 0.02, 0.0)
@@ -95,7 +97,9 @@ class Section:
 def add_arguments(parser) -> None:
     """The command-line options of the sensitivity sections."""
     parser.add_argument("--sensitivity", action="store_true",
-                        help="also run the sensitivity sections (risk by engine and fall rule; docs/risk.md), cached")
+                        help="also run the sensitivity sections, cached: risk by engine and fall rule (docs/risk.md) and "
+                             "effort by motion design (approach legs 5 and 2 cm, none, twice the slices; docs/effort.md), "
+                             "which plans every trial three more times and is slow (the clearance design most)")
     parser.add_argument("--sensitivity-engines", nargs="+", metavar="ENGINE",
                         help="engines of the risk sensitivity (default: mujoco, physx, physx:game-defaults when "
                              "installed; add drake to include it)")
@@ -139,7 +143,7 @@ def _engine_runs(ctx: Context, engine: str, n_sims: int, seed: int) -> pd.DataFr
     left out (they are flagged by `_stands`)."""
     from models.risk import UnstableSceneError, check_stable, risk_table
 
-    depends = ctx.risk_key(engine, "horizontal", 0.25)
+    depends = ctx.risk_key(engine)  # the runs are judged by every rule of RISK_RULES afterwards
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(RISK_SIGMAS), n_sims=n_sims, seed=seed,
                             table="runs", **depends) for t in ctx.trials}
     tables = {t.id: ctx.cache.get("sensitivity", keys[t.id]) for t in ctx.trials}
@@ -218,15 +222,15 @@ def risk_sensitivity_summary(table: pd.DataFrame) -> pd.DataFrame:
 def risk_sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
     """Risk of every trial over sigma, one panel per engine and rule (hard trials
     solid, easy dashed; the risk-contrast pairs in colour)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     panels = list(table.groupby(["engine", "fall_rule", "fall_threshold"], sort=False))
     ncol = len(RISK_RULES)
     nrow = -(-len(panels) // ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.6 * ncol, 2.9 * nrow), sharex=True, sharey=True, squeeze=False)
+    fig = Figure(figsize=(3.6 * ncol, 2.9 * nrow))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrow, ncol, sharex=True, sharey=True, squeeze=False)
     colours = dict(zip(RISK_PAIRS, ("tab:red", "tab:blue", "tab:green", "tab:purple")))
     for ax, ((engine, rule, thr), g) in zip(axes.flat, panels):
         for trial, c in g.groupby("trial", sort=False):
@@ -248,8 +252,8 @@ def risk_sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
     fig.suptitle("Risk by engine and fall rule (grey: pairs without a risk contrast)", fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     return path
 
 
