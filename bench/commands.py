@@ -1,7 +1,8 @@
 """How long each command of the README takes: one benchmark run, quoted everywhere.
 
-    python bench/commands.py            # every command below, side by side in one run (~10 min on 2 cores)
-    python bench/commands.py --only quick show sheet tests   # a subset (the other rows are kept)
+    python bench/commands.py            # the pipeline, lgp.show and stimuli.sheet, side by side in one run
+    python bench/commands.py --only tests     # the fast test subset too (run it after the README quotes these rows)
+    python bench/commands.py --only quick show sheet   # a subset (the other rows are kept)
 
 Each command runs in a fresh subprocess and a fresh scratch folder, once cold (an
 empty cache) and, for the pipeline, once more warm (the same command again: all
@@ -41,6 +42,9 @@ COMMANDS = {
     "sheet": ("python -m stimuli.sheet --out stimuli.png", [(1, "cold")]),
     "tests": ('python -m pytest -q -m "not slow"', [(2, "cold")]),
 }
+#: What a plain `python bench/commands.py` runs: not the tests (tests/test_readme.py checks
+#: that the README quotes this file, so they pass only once it does).
+DEFAULT = ("quick", "full", "show", "sheet")
 FIELDS = ["command", "jobs", "cache", "wall_s", "cpu_s", "cores", "cpu_model", "load_before", "load_after", "date"]
 
 
@@ -70,6 +74,17 @@ def run(command: str, jobs: int, folder: Path) -> dict:
             "date": datetime.date.today().isoformat()}
 
 
+def _write_csv(path: Path, old: list[dict], rows: list[dict]) -> list[dict]:
+    order = {COMMANDS[n][0]: k for k, n in enumerate(COMMANDS)}
+    table = sorted(old + rows, key=lambda r: (order.get(r["command"], 99), -int(r["jobs"]), r["cache"]))
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=FIELDS)
+        w.writeheader()
+        for r in table:
+            w.writerow({k: r[k] for k in FIELDS})
+    return table
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--only", nargs="+", choices=list(COMMANDS), help="run only these (other rows of the CSV are kept)")
@@ -77,7 +92,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks.md")
     args = p.parse_args(argv)
 
-    names = args.only or list(COMMANDS)
+    names = args.only or list(DEFAULT)
     old = []
     if args.csv.exists():
         with args.csv.open() as f:
@@ -91,16 +106,11 @@ def main(argv=None) -> int:
                 folder.mkdir(exist_ok=True)
                 row = {**run(command, jobs, folder), "cache": cache}
                 rows.append(row)
+                _write_csv(args.csv, old, rows)  # after every row: a later failure keeps what was measured
                 print(f"{command}  --jobs {jobs} {cache}: {row['wall_s']} s wall, {row['cpu_s']} CPU-s "
                       f"(load {row['load_before']} -> {row['load_after']})", flush=True)
     end = machine()
-    order = {COMMANDS[n][0]: k for k, n in enumerate(COMMANDS)}
-    table = sorted(old + rows, key=lambda r: (order.get(r["command"], 99), -int(r["jobs"]), r["cache"]))
-    with args.csv.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=FIELDS)
-        w.writeheader()
-        for r in table:
-            w.writerow({k: r[k] for k in FIELDS})
+    table = _write_csv(args.csv, old, rows)
     lines = ["## commands", "",
              "How long the README's commands take; written by `python bench/commands.py` (rows: "
              f"`{args.csv.relative_to(ROOT)}`). Each row is a fresh subprocess in a fresh folder, one after the other "

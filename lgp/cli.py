@@ -366,8 +366,8 @@ def _seconds(s: float) -> str:
 def measured_time(command: str, path: Path | str | None = None) -> str | None:
     """How long `command` (as the README writes it) took in the last ``bench/commands.py``
     run, with the machine, as the one phrase README, ``--help`` and docs/results.md quote,
-    e.g. ``16 s cold, 2.1 s cached (--jobs 2); 25 s cold with --jobs 1 [2 cores, AMD EPYC,
-    load average 3.1-4.0; bench/commands.py]``. None when it was not measured (an
+    e.g. ``16 s cold (20 CPU-s), 2.1 s cached (--jobs 2); 25 s cold with --jobs 1 [2 cores,
+    AMD EPYC, load average 3.1-4.0; bench/commands.py]``. None when it was not measured (an
     installed copy without docs/)."""
     import csv
 
@@ -380,10 +380,13 @@ def measured_time(command: str, path: Path | str | None = None) -> str | None:
     if not rows:
         return None
     at = {(int(r["jobs"]), r["cache"]): float(r["wall_s"]) for r in rows}
+    cpu = {(int(r["jobs"]), r["cache"]): float(r["cpu_s"]) for r in rows}
     most = max(j for j, _ in at)
     parts = []
     if (most, "cold") in at:
-        parts.append(_seconds(at[most, "cold"]) + (" cold" if (most, "warm") in at else ""))
+        # CPU seconds beside the wall time: they hardly change with the machine's load
+        parts.append(_seconds(at[most, "cold"]) + (" cold" if (most, "warm") in at else "")
+                     + (f" ({cpu[most, 'cold']:.0f} CPU-s)" if cpu[most, "cold"] >= 10 else ""))
     if (most, "warm") in at:
         parts.append(_seconds(at[most, "warm"]) + " cached")
     text = ", ".join(parts) + (f" (--jobs {most})" if any(j != most for j, _ in at) else "")
