@@ -315,7 +315,7 @@ def cross_validate(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray]
     batched = {s: np.asarray(r, float).ndim == 3 for s, r in risks.items()}
     for s, r in risks.items():
         if batched[s] and np.asarray(r).shape[0] not in (B,):
-            raise ValueError(f"risk source {s}: {np.asarray(r).shape[0]} risk draws for {B} resamples")
+            raise ModelInputError(f"risk source {s}: {np.asarray(r).shape[0]} risk draws for {B} resamples")
     preds: dict[str, list] = {m: [] for m in models}
     chosen: dict[str, list] = {}
     for lo in range(0, B, chunk):
@@ -508,6 +508,24 @@ def summarize_comparison(point: pd.DataFrame, boot: pd.DataFrame, boot_fixed_ris
             table["r_widening"] = ((table["r_high"] - table["r_low"])
                                    / (table["r_high_fixed_risk"] - table["r_low_fixed_risk"]))
     return table
+
+
+def gain_over_effort(point: pd.DataFrame, boot: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
+    """How much lower each model's RMSE is than effort-only's (effort RMSE - model
+    RMSE; positive: the model predicts better), per dataset and scheme, with the
+    percentile interval of the per-resample difference. In sample Eq. 1's gain is
+    >= 0 by construction; out of sample it can be negative."""
+    tail = (1 - level) / 2
+    keys = ["dataset", "scheme"]
+    pt = point.pivot_table(index=keys, columns="model", values="rmse", sort=False)
+    bt = boot.pivot_table(index=keys + ["resample"], columns="model", values="rmse", sort=False)
+    rows = []
+    for model in [m for m in pt.columns if m != "effort"]:
+        g = (bt["effort"] - bt[model]).groupby(level=keys, sort=False)
+        lo, hi = g.quantile(tail), g.quantile(1 - tail)
+        for key in pt.index:
+            rows.append((*key, model, float(pt.loc[key, "effort"] - pt.loc[key, model]), float(lo[key]), float(hi[key])))
+    return pd.DataFrame(rows, columns=keys + ["model", "gain", "gain_low", "gain_high"])
 
 
 def direct_p(better: np.ndarray, worse: np.ndarray, higher_is_better: bool) -> float:

@@ -30,6 +30,7 @@ import pandas as pd
 from analysis.crossval import RiskGrid, cross_validate, pairs_of, scores
 from analysis.data import TRIAL_IDS, ordered_datasets
 from analysis.models import effort_per_trial
+from lgp.errors import InputError
 
 KINDS: tuple[str, ...] = ("shuffle", "within-pair")
 #: Default permutations per test.
@@ -41,10 +42,10 @@ SCHEME = "leave-one-pair-out"
 
 
 def check_count(value, what: str) -> int:
-    """`value` as an int if it is a whole number >= 1, else ValueError naming `what`."""
+    """`value` as an int if it is a whole number >= 1, else InputError naming `what`."""
     if isinstance(value, bool) or not isinstance(value, (numbers.Integral, numbers.Real)) \
             or not np.isfinite(value) or value != int(value) or value < 1:
-        raise ValueError(f"{what} must be a whole number >= 1, got {value!r}")
+        raise InputError(f"{what} must be a whole number >= 1, got {value!r}")
     return int(value)
 
 
@@ -64,7 +65,21 @@ def draw_permutations(kind: str, n_perm: int, rng: np.random.Generator, trials=T
         out[:, pairs[:, 0]] = np.where(swap, pairs[:, 1], pairs[:, 0])
         out[:, pairs[:, 1]] = np.where(swap, pairs[:, 0], pairs[:, 1])
         return out
-    raise ValueError(f"unknown permutation kind {kind!r}; expected one of {', '.join(KINDS)}")
+    raise InputError(f"unknown permutation kind {kind!r}; expected one of {', '.join(KINDS)}")
+
+
+def distinct_assignments(kind: str, risk: np.ndarray, trials=TRIAL_IDS) -> float:
+    """Number of distinct risk tables (S, T) a permutation of `kind` can produce:
+    shuffle T! / prod(m!) over groups of trials with identical risk curves (a
+    float; may be huge); within-pair 2^k, k the pairs whose E and H curves differ."""
+    from math import lgamma
+
+    if kind == "within-pair":
+        pairs = pairs_of(list(trials))
+        return float(2 ** sum(not np.array_equal(risk[:, e], risk[:, h]) for e, h in pairs))
+    _, counts = np.unique(np.round(risk.T, 12), axis=0, return_counts=True)
+    n = float(np.exp(lgamma(risk.shape[1] + 1) - sum(lgamma(c + 1) for c in counts)))
+    return float(round(n)) if n < 1e15 else n
 
 
 def cv_gain(Y: np.ndarray, E: np.ndarray, risk: np.ndarray, scheme: str = SCHEME, pool: bool = True) -> np.ndarray:
@@ -84,6 +99,10 @@ def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_
     Returns (summary, null): summary one row per (kind, dataset): kind, dataset,
     scheme, observed_gain, null_mean, null_q95, n_at_least, n_perm, p_value;
     null one row per (kind, dataset, permutation) with its gain.
+    distinct_assignments is how many different risk tables the permutations can
+    make (trials with identical risk curves swap to the same table): the
+    observed table is one of them, so p cannot fall far below its inverse. With
+    our table's few risky pairs the within-pair test has only 2^k of them.
     """
     n_perm = check_count(n_perm, "the number of permutations")
     rng = np.random.default_rng(0) if rng is None else rng
@@ -96,13 +115,14 @@ def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_
         perms = draw_permutations(kind, n_perm, rng)
         risks = grid.risk[:, perms].transpose(1, 0, 2)                     # (P, S, T)
         null = cv_gain(np.broadcast_to(Y, (n_perm,) + Y.shape[1:]), E, risks, scheme)   # (P, D)
+        distinct = distinct_assignments(kind, grid.risk)
         for k, dataset in enumerate(datasets):
             g = null[:, k]
             at_least = int(np.sum(g >= observed[k] - 1e-12 * abs(observed[k])))
             rows.append((kind, dataset, scheme, observed[k], float(np.mean(g)), float(np.quantile(g, 0.95)),
-                         at_least, n_perm, (1 + at_least) / (1 + n_perm)))
+                         at_least, n_perm, (1 + at_least) / (1 + n_perm), distinct))
             nulls.append(pd.DataFrame({"kind": kind, "dataset": dataset, "permutation": np.arange(n_perm),
                                        "gain": g}))
     summary = pd.DataFrame(rows, columns=["kind", "dataset", "scheme", "observed_gain", "null_mean", "null_q95",
-                                          "n_at_least", "n_perm", "p_value"])
+                                          "n_at_least", "n_perm", "p_value", "distinct_assignments"])
     return summary, pd.concat(nulls, ignore_index=True)

@@ -2,12 +2,14 @@
 tables to fits, sigma profile, bootstrap, tests, pair table and figures."""
 from __future__ import annotations
 
+from lgp.atomic import write_csv_atomic
+
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from analysis.crossval import (RISK_DRAW_STREAM, RISK_DRAWS, SCHEMES, bootstrap_comparison, comparison_tests,
+from analysis.crossval import (RISK_DRAW_STREAM, RISK_DRAWS, SCHEMES, bootstrap_comparison, comparison_tests, gain_over_effort,
                                measure_grid, model_comparison, redraw_risk, risk_grid, summarize_comparison)
 from analysis.permutation import N_PERM, PERMUTATION_STREAM, check_count, permutation_test
 from analysis.bootstrap import COMPARISONS, bootstrap_model_correlations, bootstrap_tests, summarize_bootstrap
@@ -20,6 +22,7 @@ from analysis.models import (MEASURE_BASES, MODELS, RISK_MEASURES, effort_per_tr
                              measure_at_sigma, measure_model, risk_at_sigma, risk_inputs, risk_sigmas)
 from analysis.pairs import pair_table
 from analysis.sigma import PAPER_SIGMA, choose_sigma, sigma_profile
+from lgp.errors import InputError
 
 
 def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
@@ -82,7 +85,8 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     fits, predictions, bootstrap_correlations, bootstrap_summary,
     bootstrap_tests (these in-sample, column scheme "in-sample"); with
     `compare`, model_comparison (in-sample and out-of-sample scores of every
-    model side by side, with bootstrap intervals), model_comparison_tests,
+    model side by side, with bootstrap intervals), model_comparison_gain (RMSE
+    below effort-only's, with intervals), model_comparison_tests,
     cv_predictions, cv_bootstrap, permutation_test and permutation_null; plus
     files (kind, path) listing everything written.
     """
@@ -90,7 +94,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     check_count(n_boot, "the number of bootstrap resamples")
     check_count(n_perm, "the number of permutations")
     if risk_draw not in RISK_DRAWS:
-        raise ValueError(f"unknown risk draw {risk_draw!r}; expected one of {', '.join(RISK_DRAWS)}")
+        raise InputError(f"unknown risk draw {risk_draw!r}; expected one of {', '.join(RISK_DRAWS)}")
     E = effort_per_trial(effort_by_trial)
     available = risk_sigmas(risk_table)
     results: dict[str, pd.DataFrame] = {}
@@ -136,7 +140,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     R = risk_at_sigma(risk_table, sigma)
     models, comparisons, build_sigma = list(MODELS), list(COMPARISONS), None
     if risk_measure is not None and risk_measure not in RISK_MEASURES:
-        raise ValueError(f"unknown risk measure {risk_measure!r}; expected one of {', '.join(RISK_MEASURES)}")
+        raise InputError(f"unknown risk measure {risk_measure!r}; expected one of {', '.join(RISK_MEASURES)}")
     if build_risk is not None:
         have = np.unique(np.round(build_risk["sigma"].astype(float), 9))
         build_sigma = float(have[np.argmin(np.abs(have - sigma))])
@@ -146,7 +150,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         models += [measure_model(b, m) for m in RISK_MEASURES for b in MEASURE_BASES]
         comparisons += [(measure_model("full", m), "full") for m in RISK_MEASURES]
     elif risk_measure is not None:
-        raise ValueError(f"risk measure {risk_measure!r} needs the build-risk table (build_risk=...)")
+        raise InputError(f"risk measure {risk_measure!r} needs the build-risk table (build_risk=...)")
     else:
         inputs = R
     fits, predictions = fit_models(means, E, inputs, sigma, models=models)
@@ -202,7 +206,8 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         figure_paths += plot_sigma_profile(profile, out_dir, choice, stem=f"{prefix}sigma_profile")
         if compare:
             figure_paths += plot_model_comparison(results["model_comparison"], out_dir,
-                                                  stem=f"{prefix}fig4_model_comparison")
+                                                  stem=f"{prefix}fig4_model_comparison",
+                                                  gain=results["model_comparison_gain"])
         figure_paths += plot_effort_risk(
             E, risk_table, sigma, out_dir,
             betas={d: tuple(full.loc[d]) for d in ordered_datasets(full.index)},  # the paper's order, as every figure
@@ -232,7 +237,9 @@ def _comparison(means: pd.DataFrame, boot_means, E: pd.Series, grids, models, co
         tests = comparison_tests(point, fixed, comparisons)
         cv_boot = fixed.assign(risk_draw="none")
     perm, null = permutation_test(y, E, grids["R"], n_perm, np.random.default_rng([seed, PERMUTATION_STREAM]))
-    return {"model_comparison": summary, "model_comparison_tests": tests, "cv_predictions": cv_pred,
+    gain = gain_over_effort(point, boot if risk_draw == "binomial" else fixed)
+    return {"model_comparison": summary, "model_comparison_gain": gain, "model_comparison_tests": tests,
+            "cv_predictions": cv_pred,
             "cv_bootstrap": cv_boot, "permutation_test": perm, "permutation_null": null}
 
 
@@ -252,11 +259,11 @@ def _write(results: dict[str, pd.DataFrame], out_dir: Path, prefix: str,
     written = []
     for key, table in results.items():
         path = out_dir / f"{prefix}{key}.csv"
-        table.to_csv(path, index=False)
+        write_csv_atomic(table, path)
         written.append(("table", str(path)))
     written += [("figure", str(p)) for p in figure_paths]
     files_path = out_dir / f"{prefix}files.csv"
     written.append(("table", str(files_path)))
     results["files"] = pd.DataFrame(written, columns=["kind", "path"])
-    results["files"].to_csv(files_path, index=False)
+    write_csv_atomic(results["files"], files_path)
     return results

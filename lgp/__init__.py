@@ -1,9 +1,10 @@
 """Logic-geometric planning of block-building tasks: scene, support graph,
 assignment, symbolic plan (logic layer) and KOMO motion optimisation (geometry).
 
-``lgp.plan`` (lgp/search.py: planner="paper", the paper's pipeline of lgp/planner.py,
-or planner="search") and ``lgp.Plan`` (lgp/planner.py) load Drake on first use, so
-that ``import stimuli`` and the logic layer stay light.
+``lgp.plan`` (lgp/search.py: planner="paper", the paper's pipeline of lgp/planner/,
+or planner="search") and ``lgp.Plan`` (lgp/planner/) are imported on first use,
+and the planner loads Drake only when it plans, so that ``import stimuli`` and the
+logic layer stay light.
 """
 from lgp.scene import Block, FixedBox, Scene, StimulusError, support_graph  # noqa: F401
 

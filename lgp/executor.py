@@ -35,6 +35,8 @@ import sys
 import threading
 from typing import Any, Callable, Protocol, Sequence
 
+from lgp.errors import InputError
+
 
 class Executor(Protocol):
     jobs: int
@@ -240,7 +242,7 @@ class ProcessExecutor:
     def __init__(self, jobs: int | None = None, start_method: str | None = None):
         self.jobs = default_jobs() if jobs is None else int(jobs)
         if self.jobs < 1:
-            raise ValueError(f"jobs must be >= 1, got {jobs}")
+            raise InputError(f"jobs must be >= 1, got {jobs}")
         self.start_method = start_method
         self._pool = None
         self._procs: list = []
@@ -446,7 +448,7 @@ class DaskExecutor:
         elif address == "local-dask":
             n = default_jobs() if jobs is None else int(jobs)
             if n < 1:
-                raise ValueError(f"jobs must be >= 1, got {jobs}")
+                raise InputError(f"jobs must be >= 1, got {jobs}")
             self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                          dashboard_address=None, silence_logs=50)
             self.client = Client(self._cluster, set_as_default=False)
@@ -557,7 +559,7 @@ def executor_for(jobs: int | None) -> SerialExecutor | ProcessExecutor:
     """SerialExecutor for one job, a ProcessExecutor otherwise (None: all cores)."""
     jobs = default_jobs() if jobs is None else int(jobs)
     if jobs < 1:
-        raise ValueError(f"jobs must be >= 1, got {jobs}")
+        raise InputError(f"jobs must be >= 1, got {jobs}")
     return SerialExecutor() if jobs == 1 else ProcessExecutor(jobs)
 
 

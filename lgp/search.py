@@ -53,12 +53,13 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from lgp.assignment import assign_blocks
+from lgp.errors import InputError
 from lgp.planner import (APPROACH, APPROACH_TIME, PHASE_DURATION, SEED_MARGIN, SLICES_PER_PHASE, SWIVELS, Plan,
-                         PlanningError, check_design, default_arm, plan_symbolic)
+                         PlanningError, Design, default_arm, plan_symbolic)
 from lgp.scene import (CONTACT_TOLERANCE, MIN_SUPPORT_AREA, TABLE, Scene, footprint_overlap_area, support_graph,
                        supported_by)
-from lgp.symbolic import (Grasp, Place, SymbolicPlan, SymbolicPlanningError, _enters_any, _near, same_pose,
-                          symbolic_plan)
+from lgp.symbolic import (Grasp, Place, PlanState, SymbolicPlan, SymbolicPlanningError, _enters_any, _near,
+                          _support_memo, apply, same_pose, symbolic_plan)
 
 #: Mass of a unit block (kg) [paper: "a unit mass to a unit block"]; models.effort.BLOCK_MASS.
 BLOCK_MASS = 1.0
@@ -96,9 +97,9 @@ class Budget:
         for name in ("solves", "seconds", "expansions"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-                raise ValueError(f"Budget.{name} must be a positive number, got {value!r}")
+                raise InputError(f"Budget.{name} must be a positive number, got {value!r}")
         if not float(self.solves).is_integer() or not float(self.expansions).is_integer():
-            raise ValueError(f"Budget.solves and .expansions must be whole numbers, got {self.solves!r}, {self.expansions!r}")
+            raise InputError(f"Budget.solves and .expansions must be whole numbers, got {self.solves!r}, {self.expansions!r}")
 
 
 @dataclass
@@ -124,6 +125,7 @@ class SearchResult:
     paper_effort: float | None = None
     paper_symbolic: SymbolicPlan | None = None
     tried: list = field(default_factory=list)  # (skeleton bound, effort or failure) per KOMO solve
+    komo_seconds: float = 0.0  # of `seconds`, the time in lgp.planner.plan_symbolic (IK seeding + KOMO)
 
     @property
     def gap(self) -> float:
@@ -190,7 +192,8 @@ def carry_bound(p_from, p_to, *, approach_height: float = APPROACH, slices_per_p
     adds for certain. (KOMO's motions are rest to rest and curved; the rest-to-rest
     cubic would be 0.6 m L^2 / T, 1.2 times this.)
     """
-    h, S = check_design(approach_height, slices_per_phase)
+    design = Design.of(None, approach_height, slices_per_phase)
+    h, S = design.approach_height, design.slices_per_phase
     D2 = np.sum((np.asarray(p_to, float) - np.asarray(p_from, float)) ** 2, axis=-1)
     tau = PHASE_DURATION / S
     if h > 0:
@@ -223,24 +226,49 @@ def first_sweep(plan: Plan) -> str | None:
     SWEEP_TOLERANCE along the plan (lgp.scene.penetration at every slice it
     moves), None when none does. The legs design has no collision constraint
     between its waypoints: an order or assignment the paper never tried can carry
-    a block through a neighbour (7H), and the search then rejects the plan."""
+    a block through a neighbour (7H), and the search then rejects the plan.
+    Every (moving block, slice, solid) pair is screened at once by the
+    vectorised separating-axis depth (lgp.geometry.rectangle_overlap); pairs
+    not well below the tolerance are decided by the scalar test."""
+    from lgp.geometry import rectangle_overlap, yaw_direction
     from lgp.scene import penetration
 
     initial = plan.initial
     names = initial.names
-    P = np.array([plan.p_WB[n] for n in names])  # (blocks, slices, 3)
-    yaw = np.array([np.arctan2(plan.R_WB[n][:, 1, 0], plan.R_WB[n][:, 0, 0]) for n in names])
-    reach = np.array([np.linalg.norm(b.size) / 2 for b in initial.blocks])
-    moving = np.any(np.diff(P, axis=1) != 0, axis=2)  # (blocks, slices - 1): moved into slice i + 1
-    for k, i in zip(*np.nonzero(moving)):
-        i = i + 1
-        me = initial.blocks[k].moved_to(P[k, i], yaw[k, i])
-        near = np.flatnonzero(np.linalg.norm(P[:, i] - P[k, i], axis=1) <= reach + reach[k])
-        others = [initial.blocks[j].moved_to(P[j, i], yaw[j, i]) for j in near if j != k] + list(initial.fixed)
-        for o in others:
-            depth = penetration(me, o)
+    P = np.array([plan.p_WB[n] for n in names]).reshape(len(names), len(plan.t), 3)  # (blocks, slices, 3)
+    yaw = np.array([np.arctan2(plan.R_WB[n][:, 1, 0], plan.R_WB[n][:, 0, 0]) for n in names]).reshape(len(names), -1)
+    half = np.array([np.asarray(b.size, float) / 2 for b in initial.blocks]).reshape(-1, 3)
+    k, i = np.nonzero(np.any(np.diff(P, axis=1) != 0, axis=2))  # block k moved into slice i + 1
+    i = i + 1
+    order = np.lexsort((k, i))  # first in time
+    k, i = k[order], i[order]
+    if not len(k):
+        return None
+    nb, nf = len(names), len(initial.fixed)
+    # solids per moving entry: every block at that slice (itself masked out), then the fixed boxes
+    c_b = np.concatenate([P[:, i, :].transpose(1, 0, 2),
+                          np.broadcast_to(np.array([f.p_WO for f in initial.fixed]).reshape(nf, 3), (len(k), nf, 3))], axis=1)
+    h_b = np.concatenate([np.broadcast_to(half, (len(k), nb, 3)),
+                          np.broadcast_to(np.array([f.size / 2 for f in initial.fixed]).reshape(nf, 3), (len(k), nf, 3))], axis=1)
+    y_b = np.concatenate([yaw[:, i].T, np.zeros((len(k), nf))], axis=1)
+    n = nb + nf
+    c_a = np.repeat(P[k, i][:, None], n, axis=1)
+    h_a = np.repeat(half[k][:, None], n, axis=1)
+    y_a = np.repeat(yaw[k, i][:, None], n, axis=1)
+    flat = lambda x: x.reshape(len(k) * n, *x.shape[2:])  # noqa: E731
+    horizontal, _ = rectangle_overlap(flat(c_a)[:, :2], flat(h_a)[:, :2], yaw_direction(flat(y_a)),
+                                      flat(c_b)[:, :2], flat(h_b)[:, :2], yaw_direction(flat(y_b)))
+    vertical = (np.minimum(flat(c_a)[:, 2] + flat(h_a)[:, 2], flat(c_b)[:, 2] + flat(h_b)[:, 2])
+                - np.maximum(flat(c_a)[:, 2] - flat(h_a)[:, 2], flat(c_b)[:, 2] - flat(h_b)[:, 2]))
+    maybe = (np.minimum(vertical, horizontal) > SWEEP_TOLERANCE - 1e-7).reshape(len(k), n)
+    maybe[np.arange(len(k)), k] = False  # not itself
+    for m in np.flatnonzero(maybe.any(axis=1)):
+        me = initial.blocks[k[m]].moved_to(P[k[m], i[m]], yaw[k[m], i[m]])
+        for j in np.flatnonzero(maybe[m]):
+            other = (initial.blocks[j].moved_to(P[j, i[m]], yaw[j, i[m]]) if j < nb else initial.fixed[j - nb])
+            depth = penetration(me, other)
             if depth > SWEEP_TOLERANCE:
-                return f"carried block {names[k]} enters {o.name} by {depth * 1000:.1f} mm at t = {plan.t[i]:g} s"
+                return f"carried block {names[k[m]]} enters {other.name} by {depth * 1000:.1f} mm at t = {plan.t[i[m]]:g} s"
     return None
 
 
@@ -500,12 +528,10 @@ def _symbolic(problem: _Problem, carries) -> SymbolicPlan:
         where[i] = w
     assignment = {names[i]: problem.slots[j].name for i, j in slot_of.items()}
     plan = SymbolicPlan(problem.initial, problem.target, assignment, tuple(actions))
-    plan.states()  # every action legal (lgp.symbolic.apply), or IllegalActionError
+    state, support = PlanState(problem.initial), _support_memo()
+    for action in plan.actions:  # every action legal (lgp.symbolic.apply), or IllegalActionError
+        state = apply(action, state, support=support)
     return plan
-
-
-def _signature(symbolic: SymbolicPlan) -> tuple:
-    return tuple((a.block, tuple(np.round(a.p_WB, 6))) for a in symbolic.actions if isinstance(a, Place))
 
 
 def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | None = None,
@@ -527,7 +553,8 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     """
     start = time.perf_counter()
     budget = budget or Budget()
-    approach_height, slices_per_phase = check_design(approach_height, slices_per_phase)
+    design = Design.of(None, approach_height, slices_per_phase)
+    approach_height, slices_per_phase = design.approach_height, design.slices_per_phase
     arm = arm or default_arm()
     rng = rng_or_seed if isinstance(rng_or_seed, np.random.Generator) else np.random.default_rng(rng_or_seed)
     label = f"{initial.label} -> {target.label}"
@@ -535,20 +562,23 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     options = dict(formulation=formulation, solver=solver, slices_per_phase=slices_per_phase,
                    approach_height=approach_height, arm=arm)
     best: tuple[float, Plan, float] | None = None  # (effort, plan, skeleton bound)
-    solved: set = set()
     tried: list = []
     solves = 0
     paper_effort, paper_symbolic = None, None
 
+    komo_seconds = 0.0
+
     def solve(symbolic: SymbolicPlan, bound: float) -> None:
-        nonlocal best, solves
+        nonlocal best, solves, komo_seconds
         solves += 1
-        solved.add(_signature(symbolic))
+        t0 = time.perf_counter()
         try:
             result = plan_symbolic(symbolic, rng, **options)
         except PlanningError as e:
             tried.append((bound, f"failed: {e}"))
             return
+        finally:
+            komo_seconds += time.perf_counter() - t0
         sweep = first_sweep(result)
         if sweep is not None:
             tried.append((bound, f"rejected: {sweep}"))
@@ -658,7 +688,7 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     effort, result, bound = best
     result.planning_time = seconds
     return SearchResult(result, effort, min(float(lowest_open), effort), bound, solves, expansions, seconds, stopped,
-                        paper_effort, paper_symbolic, tried)
+                        paper_effort, paper_symbolic, tried, komo_seconds)
 
 
 # ----------------------------------------------------------------------------- planner="paper" | "search"
@@ -669,9 +699,9 @@ PLANNERS = ("paper", "search")
 
 
 def check_planner(planner: str) -> str:
-    """`planner` if it is one of PLANNERS, else ValueError naming them."""
+    """`planner` if it is one of PLANNERS, else InputError naming them."""
     if planner not in PLANNERS:
-        raise ValueError(f"planner must be one of {', '.join(PLANNERS)}, got {planner!r}")
+        raise InputError(f"planner must be one of {', '.join(PLANNERS)}, got {planner!r}")
     return planner
 
 
@@ -683,9 +713,13 @@ def plan(initial: Scene, target: Scene, rng_or_seed=0, *, planner: str = "paper"
     (formulation, solver, slices_per_phase, approach_height, arm)."""
     from lgp import planner as paper
 
+    for name, scene in (("initial (state A)", initial), ("target (state B)", target)):
+        if not isinstance(scene, Scene):
+            raise InputError(f"lgp.plan: {name} must be an lgp.scene.Scene (e.g. a trial's sample_initial(rng) "
+                             f"and .target), got {type(scene).__name__}")
     if check_planner(planner) == "paper":
         if budget is not None:
-            raise ValueError("a budget applies to planner='search' only")
+            raise InputError("a budget applies to planner='search' only")
         return paper.plan(initial, target, rng_or_seed, **options)
     result = search(initial, target, rng_or_seed, budget=budget, **options)
     result.plan.search = result

@@ -13,6 +13,7 @@ from __future__ import annotations
 import sys
 
 from lgp import cli
+from lgp.planner.design import check_approach_height
 
 PROG = "python -m lgp.show"
 
@@ -27,7 +28,7 @@ def main(argv=None) -> int:
     parser.add_argument("--png", type=cli.output_file, help="write a figure of block paths and speeds here (a missing folder is created)")
     parser.add_argument("--formulation", default="reduced", choices=("reduced", "full"))
     parser.add_argument("--solver", default="snopt", choices=("snopt", "ipopt"))
-    parser.add_argument("--approach-height", type=cli.approach_height, default=None,
+    parser.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=None,
                         help="approach leg (m) of the run, as `lgp.reproduce --approach-height` (default 0.05; 0 = none)")
     parser.add_argument("--slices", type=cli.positive_int, default=None,
                         help="slices per phase of the run, as `lgp.reproduce --slices` (default 20)")

@@ -37,6 +37,8 @@ imports nothing above the ground floor.
 """
 from __future__ import annotations
 
+from lgp.atomic import write_text_atomic
+
 import argparse
 import sys
 from pathlib import Path
@@ -44,6 +46,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from lgp.errors import InputError
 from lgp.paper import BLOCK_SIZE as d
 from lgp.paper import BUILD_SITE
 
@@ -102,7 +105,7 @@ def structure(kind: str, rng: np.random.Generator) -> tuple[list[tuple[float, fl
                 dy += rng.uniform(-d / 6, d / 6)
         text = f"random stack of {len(cells)} blocks in {cols} column{'s' if cols > 1 else ''}"
     else:
-        raise ValueError(f"unknown structure kind {kind!r} (known: {', '.join(KINDS)})")
+        raise InputError(f"unknown structure kind {kind!r} (known: {', '.join(KINDS)})")
     return [(x, y, d / 2 + level * d) for x, y, level in cells], text
 
 
@@ -160,7 +163,7 @@ def rearrange_data(index: int, seed: int, kind: str | None = None) -> dict:
         A, B = _tower("a", sx, sy - s, colours), _tower("b", sx, sy + s, order)
         text = f"{n}-block tower rebuilt {2 * s:.2f} m away in another colour order"
     else:
-        raise ValueError(f"unknown rearrangement kind {kind!r} (known: {', '.join(REARRANGE_KINDS)})")
+        raise InputError(f"unknown rearrangement kind {kind!r} (known: {', '.join(REARRANGE_KINDS)})")
     return {
         "id": f"R{index + 1:04d}",
         "dimension": f"generated rearrangement: {kind}",
@@ -175,10 +178,8 @@ def rearrange_data(index: int, seed: int, kind: str | None = None) -> dict:
 
 def write_trial(data: dict, directory: Path) -> Path:
     path = directory / f"{data['id']}.yaml"
-    tmp = path.with_suffix(".yaml.tmp")
-    tmp.write_text(f"# Generated trial {data['id']}: {data['description']}\n"
-                   + yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
-    tmp.replace(path)
+    write_text_atomic(f"# Generated trial {data['id']}: {data['description']}\n"
+                      + yaml.safe_dump(data, sort_keys=False, default_flow_style=None), path)
     return path
 
 
@@ -192,9 +193,9 @@ def generate(directory: str | Path, count: int, seed: int = 0, engine: str | Non
     from models.risk.core import UnstableSceneError
 
     if count < 1:
-        raise ValueError(f"count must be >= 1, got {count}")
+        raise InputError(f"count must be >= 1, got {count}")
     if kind not in ("scatter", "rearrange"):
-        raise ValueError(f"kind must be scatter or rearrange, got {kind!r}")
+        raise InputError(f"kind must be scatter or rearrange, got {kind!r}")
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     paths = []

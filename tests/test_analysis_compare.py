@@ -264,6 +264,17 @@ def test_permutation_p_values_are_uniform_under_a_null_and_small_for_a_planted_e
     assert len(null) == 2 * 199
 
 
+def test_distinct_risk_tables_bound_the_smallest_p():
+    import math
+
+    from analysis.permutation import distinct_assignments
+
+    risk = np.zeros((2, 24))
+    risk[:, 7], risk[:, 9], risk[1, 3] = 0.1, 0.2, 0.05     # 4H, 5H and (at one sigma) 2H fall
+    assert distinct_assignments("within-pair", risk) == 8    # three pairs whose E and H differ
+    assert distinct_assignments("shuffle", risk) == math.factorial(24) // math.factorial(21)
+
+
 def test_counts_must_be_whole_numbers_at_least_one():
     assert check_count(3, "n") == 3 and check_count(4.0, "n") == 4
     for bad in (0, -1, 2.5, float("nan"), True, "3"):
@@ -319,7 +330,7 @@ def test_run_analysis_writes_in_and_out_of_sample_tables_the_same_whatever_jobs(
         out = run_analysis(sim, E, risk, tmp_path / f"j{jobs}", seed=3, n_boot=60, n_perm=40, jobs=jobs, figures=False)
         files[jobs] = {p: open(p, "rb").read() for p in out["files"]["path"] if "comparison" in p or "cv_" in p
                        or "permutation" in p}
-    assert len(files[1]) == 6
+    assert len(files[1]) == 7
     assert [v for _, v in sorted(files[1].items())] == [v for _, v in sorted(files[2].items())]
     mc = out["model_comparison"]
     assert set(mc["scheme"]) == set(SCHEMES) and len(mc) == 3 * 3 * 3
@@ -378,3 +389,30 @@ def test_recovery_cli_writes_only_simulated_files_and_refuses_bad_counts(tmp_pat
     refused = subprocess.run(cmd + ["--out", str(human)], capture_output=True, text=True)
     assert refused.returncode == 1 and "human-data analysis" in refused.stderr
     assert sorted(p.name for p in human.iterdir()) == ["settings.csv"]
+
+
+@pytest.mark.slow
+def test_reproduce_writes_the_comparison_the_permutations_and_the_recovery(tmp_path):
+    # Random responses in the human-data format stand in for a file (no claim is tested on them).
+    from lgp import reproduce
+
+    rng = np.random.default_rng(0)
+    rows = [(d, f"p{k}", t, float(rng.normal())) for d in ("difficulty", "time") for k in range(8) for t in TRIAL_IDS]
+    path = tmp_path / "h.csv"
+    pd.DataFrame(rows, columns=["dataset", "participant", "trial", "response"]).to_csv(path, index=False)
+    out = tmp_path / "r"
+    args = ["--samples", "1", "--n-sims", "4", "--sigmas", "0.065", "0.1", "--jobs", "1", "--n-boot", "20",
+            "--no-replays", "--out", str(out), "--human-data", str(path), "--n-perm", "9", "--recovery",
+            "--recovery-studies", "4"]
+    assert reproduce.main(args) == 0
+    for name in ("model_comparison", "model_comparison_tests", "cv_predictions", "permutation_test"):
+        assert (out / "analysis" / f"{name}.csv").exists()
+    assert sorted(p.name for p in (out / "recovery").iterdir()) == [
+        "simulated_recovery.csv", "simulated_recovery.pdf", "simulated_recovery.png", "simulated_recovery_summary.csv"]
+    report = (out / "report.md").read_text()
+    assert "## Model comparison: in-sample and out of sample" in report and "cannot fail" in report
+    assert "## fits (in-sample)" in report and "## Model recovery on SIMULATED studies" in report
+    page = (out / "index.html").read_text()
+    assert 'id="comparison"' in page and "SIMULATED participants, not human data" in page
+    perm = pd.read_csv(out / "analysis" / "permutation_test.csv")
+    assert (perm["n_perm"] == 9).all() and len(perm) == 2 * 2

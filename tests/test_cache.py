@@ -167,7 +167,6 @@ def test_the_risk_key_covers_what_a_risk_run_loads_and_not_the_planner():
     modules of the risk key's closure, and neither holds the planner or KOMO, so
     editing the motion planner keeps cached risks (build risk, which plans, is
     re-exported by models.risk lazily)."""
-    from lgp import reproduce
 
     loaded = _project_modules_loaded_by("import stimuli\n"
                                         "from models.risk import risk_table\n"
@@ -183,7 +182,7 @@ def test_editing_the_planner_keeps_the_risk_key(tmp_path):
     root = _copy_project(tmp_path)
     risk = modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli", root=root)
     effort = modules_digest("models.effort", "stimuli", root=root)
-    for module in ("lgp/planner.py", "lgp/komo/solve.py", "models/risk/build.py"):
+    for module in ("lgp/planner/__init__.py", "lgp/planner/clearance.py", "lgp/komo/solve.py", "models/risk/build.py"):
         (root / module).write_text((root / module).read_text() + "\n# edited\n")
     assert modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli", root=root) == risk
     assert modules_digest("models.effort", "stimuli", root=root) != effort
@@ -240,12 +239,11 @@ def test_the_effort_key_does_not_hash_the_command_line(tmp_path):
     """The effort CLI is models/effort/__main__.py: its help strings and the shared
     argument checks of lgp.cli are no input of an effort, so editing them keeps
     every cached effort (before the split, models.effort imported lgp.cli)."""
-    from lgp import reproduce
 
     closure = set(import_closure("models.effort", "stimuli"))
     assert "models.effort" in closure and "lgp.planner" in closure
     assert not {"models.effort.__main__", "lgp.cli"} & closure
-    assert reproduce.effort_key_inputs()["code"] == modules_digest("models.effort", "stimuli")
+    assert stages.effort_key_inputs()["code"] == modules_digest("models.effort", "stimuli")
     root = _copy_project(tmp_path)
     before = modules_digest("models.effort", "stimuli", root=root)
     for module in ("models/effort/__main__.py", "lgp/cli.py"):
@@ -284,7 +282,6 @@ def test_a_file_that_appears_is_followed_though_the_importer_is_unchanged(tmp_pa
 
 
 def test_reproduce_keys_cover_libraries_and_engine_settings(monkeypatch):
-    from lgp import reproduce
     from models.risk import get_engine
 
     risk = stages.risk_key_inputs(None)
@@ -292,7 +289,7 @@ def test_reproduce_keys_cover_libraries_and_engine_settings(monkeypatch):
     assert risk["libraries"] == library_versions()
     drake = stages.risk_key_inputs("drake")
     assert drake["engine_settings"]["engine"] == "drake" and drake["code"] != risk["code"]
-    effort = reproduce.effort_key_inputs()
+    effort = stages.effort_key_inputs()
     assert {"drake", "numpy", "scipy", "pandas"} <= set(effort["libraries"])
 
     # a library upgrade changes both keys
@@ -300,7 +297,7 @@ def test_reproduce_keys_cover_libraries_and_engine_settings(monkeypatch):
     monkeypatch.setattr(cache_module.metadata, "version", lambda name: "99.0" if name == "mujoco" else real(name))
     assert stages.risk_key_inputs(None)["libraries"] != risk["libraries"]
     monkeypatch.setattr(cache_module.metadata, "version", lambda name: "99.0" if name == "drake" else real(name))
-    assert reproduce.effort_key_inputs() != effort
+    assert stages.effort_key_inputs() != effort
 
 
 def test_the_manifest_is_written_without_setting_the_umask(tmp_path, monkeypatch):

@@ -5,6 +5,8 @@ stage and a report section.
 """
 from __future__ import annotations
 
+from lgp.app.files import atomic_path
+
 import time
 from pathlib import Path
 
@@ -125,7 +127,8 @@ def plot_stage_curves(stages: pd.DataFrame, out_dir: str | Path, stem: str = "bu
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [out_dir / f"{stem}.png", out_dir / f"{stem}.pdf"]
     for p in paths:
-        fig.savefig(p, dpi=130)
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, dpi=130)
     return paths
 
 

@@ -18,7 +18,6 @@ import html
 from collections import Counter
 import os
 import platform
-import shlex
 import sys
 from pathlib import Path
 
@@ -28,7 +27,8 @@ import pandas as pd
 from lgp.app.cache import Cache, library_versions
 from lgp.app.files import write_text_atomic
 from lgp.app.report import ratio_text, sigma_edge_warnings
-from lgp.app.pictures import trial_pictures
+from lgp.app.pictures import rendered_trial_pictures
+from lgp.errors import InputError
 
 #: A spread of effort over layouts below this fraction of the mean is round-off of
 #: one and the same plan (a fixed layout of A: 10E's 4.2e-17 on 0.1159 J s), not variation.
@@ -48,6 +48,13 @@ CAPTIONS = {
                                "with each dataset, 95% intervals from the bootstrap over participants.",
     "sigma_profile": "RMSE of the fitted full model (Eq. 1) over the noise level sigma, per dataset; "
                      "the chosen sigma marked.",
+    "fig4_model_comparison": "Figure 4 in sample and out of sample: correlation of each model with each dataset when "
+                             "fit and scored on all 24 trials (pale; Eq. 1 cannot lose to effort-only there) and of its "
+                             "held-out predictions (leave-one-pair-out, full colour; leave-one-trial-out, hatched), "
+                             "sigma chosen inside each fold; 95% bootstrap intervals.",
+    "recovery": "Model recovery on SIMULATED studies from our effort and risk tables: how often the comparison names "
+                "the true model, against participants per study (left) and how often Eq. 1 beats effort-only out of "
+                "sample against the true sigma (right).",
 }
 
 
@@ -474,15 +481,16 @@ def _human_section(analysis: dict | None, out: Path) -> str:
     parts += [f'<p class="warn">Warning: {_e(w)}.</p>' for w in sigma_edge_warnings(analysis)]
     if settings is not None:
         parts.append(table_html(settings.T.reset_index().set_axis(["setting", "value"], axis=1), "plain"))
-    for key, title in (("fits", "Fits of Eq. 1 and its lesions"), ("sigma_choice", "Sigma chosen by RMSE"),
-                       ("sigma_profile", "RMSE profile over sigma"), ("bootstrap_summary", "Bootstrap over participants"),
-                       ("bootstrap_tests", "Direct bootstrap tests"), ("excluded_participants", "Excluded participants")):
+    for key, title in (("fits", "Fits of Eq. 1 and its lesions (in-sample)"), ("sigma_choice", "Sigma chosen by RMSE"),
+                       ("sigma_profile", "RMSE profile over sigma"),
+                       ("bootstrap_summary", "Bootstrap over participants (in-sample)"),
+                       ("bootstrap_tests", "Direct bootstrap tests (in-sample; full vs effort cannot fail there)"),
+                       ("excluded_participants", "Excluded participants")):
         df = analysis.get(key)
         if isinstance(df, pd.DataFrame) and len(df) and "p_value" in df:
             n = df["n_boot"] if "n_boot" in df else pd.Series([None] * len(df), index=df.index)
             df = df.assign(p_value=[p_value(p, k) for p, k in zip(df["p_value"], n)])
         if isinstance(df, pd.DataFrame) and len(df):
-
             parts.append(f"<h3>{_e(title)}</h3>{table_html(df, max_rows=400)}")
     z = analysis.get("zscored")
     pred = analysis.get("predictions")
@@ -490,6 +498,35 @@ def _human_section(analysis: dict | None, out: Path) -> str:
         parts.append(f"<h3>Participants</h3>{table_html(participant_table(z, pred), max_rows=2000)}")
     parts.append("</section>")
     return "".join(parts)
+
+
+def _comparison_section(analysis: dict | None, out: Path) -> str:
+    """Model comparison: in-sample and out-of-sample side by side, the tests, the
+    permutation tests (with human data), and the recovery table of SIMULATED
+    studies when recovery/ holds one (--recovery)."""
+    from analysis import compare_report as cr
+
+    parts = []
+    if analysis is not None and "model_comparison" in analysis:
+        parts += [f"<p>{_e(cr.CANNOT_FAIL)}</p>",
+                  f"<h3>Scores in sample and out of sample</h3>{table_html(cr.side_by_side(analysis['model_comparison']), 'plain')}",
+                  f"<h3>Eq. 1 against effort-only: direct bootstrap tests</h3>"
+                  f"{table_html(cr.tests_table(analysis['model_comparison_tests']), 'plain')}",
+                  f"<p>{_e(cr.widening_text(analysis['model_comparison']))}</p>"]
+        if "permutation_test" in analysis:
+            parts.append(f"<h3>Permutation tests of the risk term</h3>"
+                         f"{table_html(cr.permutation_table(analysis['permutation_test']), 'plain')}")
+    summary_path = out / "recovery" / "simulated_recovery_summary.csv"
+    if summary_path.is_file():
+        summary = pd.read_csv(summary_path)
+        parts.append('<h3>Model recovery on SIMULATED studies (not human data)</h3>'
+                     '<p class="warn">SIMULATED participants, not human data: could a study of this design tell the '
+                     'models apart on these effort and risk tables?</p>')
+        for source in summary["source"].unique():
+            parts.append(f"<p>Parameters {_e(source)}:</p>{table_html(cr.recovery_table(summary, source=source), 'plain')}")
+    if not parts:
+        return ""
+    return '<section id="comparison"><h2>Model comparison: in-sample and out of sample</h2>' + "".join(parts) + "</section>"
 
 
 def participant_table(zscored: pd.DataFrame, predictions: pd.DataFrame | None) -> pd.DataFrame:
@@ -534,7 +571,7 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
         s = effort_samples[effort_samples["trial"] == trial.id]
         r = risk[risk["trial"] == trial.id]
         if not len(s) or not len(r):
-            raise ValueError(f"results page: trial {trial.id} has no effort or no risk rows")
+            raise InputError(f"results page: trial {trial.id} has no effort or no risk rows")
         cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out))
     nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
     title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"
@@ -543,7 +580,7 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
 <title>{_e(title)}</title><style>{_asset('page.css')}</style></head>
 <body>
 <header><h1>{_e(title)}</h1>
-<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#figures">figures</a>' if figures else ''} <a href="#trials">trials</a> <a href="#human">human data</a>
+<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#figures">figures</a>' if figures else ''} <a href="#trials">trials</a> <a href="#human">human data</a> <a href="#comparison">model comparison</a>
 &middot; files: <a href="report.md">report.md</a> <a href="effort.csv">effort.csv</a> <a href="effort_samples.csv">effort_samples.csv</a> <a href="risk.csv">risk.csv</a>{' <a href="pairs.csv">pairs.csv</a>' if pairs is not None else ''}</nav>
 </header>
 <main>
@@ -558,6 +595,7 @@ Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over 
 <p class="explain">{risk_explanation(risk, sigma, trials, out)}</p>
 <div class="cards">{"".join(cards)}</div></section>
 {_human_section(analysis, out)}
+{_comparison_section(analysis, out)}
 </main>
 <footer>Written by <code>python -m lgp.reproduce</code>; every file it links is beside this page.</footer>
 <script>{_asset('page.js')}</script>
@@ -567,14 +605,22 @@ Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over 
 
 
 
+def _parameter(v) -> str:
+    """A setting of the run as the page's chips show it."""
+    if isinstance(v, tuple):
+        return ", ".join(f"{x:g}" if isinstance(x, float) else str(x) for x in v)
+    return "(default)" if v is None else str(v)
+
+
 def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                 pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock,
-                replays: dict | None = None, argv=None) -> Path:
-    """The page of a `lgp.reproduce` run (its parsed `args`): pictures, run record, index.html."""
+                replays: dict | None = None) -> Path:
+    """The page of a `lgp.reproduce` run (its lgp.app.config.RunConfig `args`):
+    pictures, run record, index.html."""
     from models.risk import DEFAULT_ENGINE, get_engine
 
     out = Path(args.out) if out is None else Path(out)
-    pictures = trial_pictures(trials, args.seed, out / "page", cache)
+    pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=getattr(args, "jobs", 2) or 2)
     clock.lap("trial pictures")
     figures = []
     if analysis is not None and "files" in analysis:
@@ -584,24 +630,17 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         settings = get_engine(engine).settings()
     except Exception as e:  # an engine that cannot load here still ran elsewhere: say so
         settings = {"error": str(e)}
-    if argv is None and Path(sys.argv[0]).name == "reproduce.py":
-        argv = sys.argv[1:]
-    if argv is not None:
-        command = "python -m lgp.reproduce " + shlex.join(str(a) for a in argv)
-    else:  # as recorded by the caller (lgp.reproduce sets args.command), or said so
-        command = getattr(args, "command", None) or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below"
     counts = Counter()
     for (kind, outcome), n in getattr(cache, "counts", {}).items():
         counts[kind, "hit" if outcome == "hit" else "miss"] += n
     counts.update(cache.files)
     compute = cache.compute_time()[0] if hasattr(cache, "compute_time") else None
     run = {
-        "command": command,
+        "command": args.command or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below",
         "key": key_settings(args, trials),
         "quick": bool(getattr(args, "quick", False)),
         "compute_s": compute,
-        "parameters": {k: (", ".join(f"{x:g}" for x in v) if isinstance(v, tuple) else ("(default)" if v is None else str(v)))
-                       for k, v in vars(args).items() if k != "command"},
+        "parameters": {k: _parameter(v) for k, v in args.parameters().items()},
         "engine": engine,
         "engine_settings": settings,
         "stages": dict(clock.laps),
@@ -618,5 +657,5 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         figure_sigma = (float(settings_table["sigma"].iloc[0]), str(settings_table.get("sigma_rule", pd.Series([""])).iloc[0]))
     return write_page(out, run=run, trials=trials, effort_samples=effort_samples, risk=risk, sigma=sigma, pairs=pairs,
                       figure_sigma=figure_sigma,
-                      analysis=analysis if getattr(args, "human_data", None) else None, figures=figures,
+                      analysis=analysis if args.human_data else None, figures=figures,
                       pictures=pictures, replays=replays)

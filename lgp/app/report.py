@@ -124,7 +124,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), "
         f"fall rule {args.fall_rule} > {args.fall_threshold:g} d, seed {args.seed}, "
         f"effort planned with {_design_text(args.approach_height, args.slices)}"
-        + (f", planner search ({args.budget})" if getattr(args, "planner", "paper") == "search" else "")
+        + (f", planner search ({args.budget})" if args.planner == "search" else "")
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
         f"Risk engine: {engine or args.engine or 'default'}.",
         compute_text,
@@ -163,9 +163,13 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
                   "the sigma profile and the bootstrap need the responses, which are not public.", ""]
     else:
         lines += [f"**Warning**: {w}." for w in sigma_edge_warnings(analysis)] + ([""] if sigma_edge_warnings(analysis) else [])
+        from analysis.compare_report import comparison_lines
+
         for key in ("sigma_choice", "fits", "bootstrap_summary", "bootstrap_tests"):
             if key in analysis and isinstance(analysis[key], pd.DataFrame) and len(analysis[key]):
-                lines += [f"## {key.replace('_', ' ')}", "", _markdown(analysis[key]), ""]
+                label = " (in-sample)" if key != "sigma_choice" else ""
+                lines += [f"## {key.replace('_', ' ')}{label}", "", _markdown(analysis[key]), ""]
+        lines += comparison_lines(analysis, _markdown)
         if "orderings" in analysis:
             lines += ["## Pair orderings by source (orderings.csv)", "", _markdown(analysis["orderings"]), ""]
     if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers

@@ -1,18 +1,102 @@
 """The stages of a reproduce run that compute, each cached per trial by a hash of
-its inputs (lgp.app.cache): the check that B stands (`check_targets`), risk
-(`risk_tables`) and, for effort, its cache key. The keys are written here once:
+its inputs (lgp.app.cache): the check that B stands (`check_targets`), effort
+(`effort_tables`) and risk (`risk_tables`), with their cache keys, written here once:
 `engine_key_inputs` is what every risk-like result (risk, the stand check, the
 build-risk stage, the sensitivity runs) depends on through its physics engine.
 """
 from __future__ import annotations
 
 import time
+from collections import Counter
 
 import pandas as pd
 
-from lgp.app.cache import LIBRARIES, Cache, input_key, library_versions, modules_digest
+from lgp.app.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest
 from lgp.app.progress import Progress
 from lgp.app.progress import log as _log
+
+
+def effort_key_inputs() -> dict:
+    """What an effort table depends on besides the trial and the parameters: the
+    source of every project module physical_effort can run (stimuli draws the
+    layouts of A), the arm's model files, and the numerical libraries (SNOPT is Drake's)."""
+    return {"code": modules_digest("models.effort", "stimuli"),
+            "data": files_digest("models/*.sdf", "models/*.urdf", "models/*.yaml"),
+            "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
+
+
+def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
+               slices_per_phase: int | None = None, planner: str = "paper", budget=None, design=None) -> str:
+    """The cache key of one trial's effort table: the trial file, M, the seed, the
+    planner's design (approach height, slices per phase: `design` or its two
+    values), for planner="search" the planner and its budget (lgp.search.Budget),
+    and effort_key_inputs()."""
+    from lgp.planner import Design
+    from lgp.search import Budget, check_planner
+
+    design = Design.of(design, approach_height, slices_per_phase)
+    searched = {"planner": planner, "budget": repr(budget or Budget())} if check_planner(planner) == "search" else {}
+    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=design.approach_height,
+                     slices_per_phase=design.slices_per_phase, **searched, **effort_key_inputs())
+
+
+def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
+                  slices_per_phase: int | None = None, log: bool = True, planner: str = "paper",
+                  budget=None, verbose: bool = True) -> pd.DataFrame:
+    """Per (trial, sample) effort, one cached file per trial (and design: the
+    planner's `approach_height` and `slices_per_phase`, defaults when None; the
+    `planner`, "paper" or "search" with its `budget`).
+
+    The layouts of every uncached trial are one stream of work units on the run's
+    one executor (warm workers plan across trial boundaries); a trial's file is
+    written as soon as its last layout arrives, so an interruption loses at most
+    the trials still in flight.
+    """
+    from models.effort import effort_of_unit, effort_table, effort_units
+
+    from lgp.planner import Design
+
+    design = Design.of(None, approach_height, slices_per_phase)  # checked once for the stage
+    searched = {"planner": planner, "budget": budget} if planner != "paper" else {}
+    keys = {t.id: effort_key(t, samples, seed, design=design, **searched) for t in trials}
+    tables: dict[str, pd.DataFrame] = {}
+    for t in trials:
+        cached = cache.get("effort", keys[t.id])
+        if cached is not None:
+            tables[t.id] = cached
+    todo = [t for t in trials if t.id not in tables]
+    units = [u for t in todo for u in effort_units(t, samples, seed, design=design, **searched)]
+    owner = [u[0] for u in units]
+    pending = Counter(t.id for t in owner)
+    rows: dict[str, list[dict]] = {t.id: [] for t in todo}
+    t0 = time.perf_counter()
+    if units:
+        fixed = sum(1 for t in todo if not t.initial.is_random)
+        _log(f"effort: {len(units)} plans to make for {len(todo)} trial(s)"
+             + (f" ({len(todo) - fixed} x {samples} random layouts of A, and {fixed} trial(s) whose A has no random "
+                "blocks, planned once)" if fixed and samples > 1 else f" x {samples} layouts of A")
+             + (f"; {len(trials) - len(todo)} trial(s) reused from the cache" if len(todo) < len(trials) else ""))
+    bar = Progress("effort", len(units), "plans", what="motion plans")
+
+    def arrived(k, row):
+        bar.advance()
+        trial = owner[k]
+        rows[trial.id].append(row)
+        pending[trial.id] -= 1
+        if pending[trial.id] == 0:
+            tables[trial.id] = cache.put("effort", keys[trial.id], effort_table(trial, samples, rows[trial.id]))
+            df = tables[trial.id]
+            if log and verbose:
+                _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
+                     f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
+
+    for t in trials:
+        if log and verbose and t.id in tables and t.id not in rows:
+            _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
+                 f" over {len(tables[t.id])} layouts  (cached)")
+    with bar:
+        executor.map(effort_of_unit, units, arrived)
+    return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
 def engine_key_inputs(engine: str | None, model: str) -> dict:

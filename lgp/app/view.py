@@ -16,6 +16,8 @@ shaded and its effort written above it.
 """
 from __future__ import annotations
 
+from lgp.atomic import atomic_path, write_text_atomic
+
 import html
 import json
 from pathlib import Path
@@ -229,7 +231,7 @@ def replay_html(plan, title: str = "", back: str | None = None) -> str:
 def write_html(plan, path, title: str = "") -> str:
     """Write a self-contained replay of `plan` (an lgp.planner.Plan) to `path`."""
     path = Path(path)
-    path.write_text(replay_html(plan, title))
+    write_text_atomic(replay_html(plan, title), path)
     return str(path)
 
 
@@ -292,5 +294,6 @@ def write_png(plan, path, title: str = "") -> str:
         bar.set_label(f"placement order ({ORDER_CMAP}; grey: not moved)")
     fig.suptitle(title or f"{plan.initial.label} -> {plan.target.label}", y=1.06, fontweight="bold")
     path = Path(path)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, bbox_inches="tight")
     return str(path)

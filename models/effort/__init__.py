@@ -15,11 +15,12 @@ Each action takes one phase of 1 s (lgp.planner.PHASE_DURATION). The measure is
 `kinetic_energy_by_action`), computed here from the Plan's block trajectories
 p_WB; the planner only produces trajectories.
 
-Two modelling choices the paper leaves open are parameters of every function
-here (and of the planner): `approach_height` (m; default lgp.planner.APPROACH =
-0.05, the vertical leg at every grasp and place; 0 plans each carry with a
-clearance constraint instead) and `slices_per_phase` (default
-lgp.planner.SLICES_PER_PHASE = 20). docs/effort.md says how much each moves effort.
+Two modelling choices the paper leaves open make the planner's motion design
+(lgp.planner.Design), a parameter of every function here: `approach_height` (m;
+default lgp.planner.APPROACH = 0.05, the vertical leg at every grasp and place; 0
+plans each carry with a clearance constraint instead) and `slices_per_phase`
+(default lgp.planner.SLICES_PER_PHASE = 20), given as ``design=Design(h, S)`` or
+as the two keywords. docs/effort.md says how much each moves effort.
 
 The command line (the table of docs/effort.md) is models/effort/__main__.py,
 kept out of this module so that the effort cache key (lgp.app.cache.modules_digest of
@@ -36,8 +37,9 @@ import numpy as np
 import pandas as pd
 
 from lgp.paper import SAMPLES
+from lgp.errors import InputError
 from lgp.executor import borrowed
-from lgp.planner import APPROACH, PHASE_DURATION, SLICES_PER_PHASE, PlanningError, check_design
+from lgp.planner import PHASE_DURATION, Design, PlanningError
 from lgp.search import Budget, check_planner, describe_search, plan
 
 COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "status"]
@@ -45,6 +47,11 @@ COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "st
 #: unexplored branch (J s), the gap to the plan's effort, set-asides, KOMO solves,
 #: and the paper skeleton's effort on the same layout (empty when it has none).
 SEARCH_COLUMNS = COLUMNS + ["bound", "gap", "set_asides", "solves", "paper_effort"]
+#: Column status of a layout whose plan needs no motion (A is already B).
+NOTHING_TO_MOVE = "nothing to move"
+#: Column status of a solved plan starts with this: Drake's SolutionResult
+#: kSolutionFound by name, as lgp.komo.KomoResult.status writes it.
+SOLUTION_FOUND = "kSolutionFound"
 #: Mass of a unit block [paper: "a unit mass to a unit block"], kg.
 BLOCK_MASS = 1.0
 
@@ -124,16 +131,23 @@ def plan_of_sample(trial, seed: int, sample: int, **planner_options):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): {e}", e.action) from e
 
 
-def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float = APPROACH,
-                     slices_per_phase: int = SLICES_PER_PHASE, planner: str = "paper", budget: Budget | None = None) -> dict:
+def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float | None = None,
+                     slices_per_phase: int | None = None, design: Design | None = None, planner: str = "paper",
+                     budget: Budget | None = None) -> dict:
     """One row of the effort table: plan the sample's layout, integrate kinetic energy.
 
-    `approach_height` (m) and `slices_per_phase` are the planner's (lgp.planner.plan);
-    `planner` "paper" (default) or "search" (lgp.search, with `budget`).
+    The motion design, `design` or its two values (None: the default), is the
+    planner's (lgp.planner.plan); `planner` "paper" (default) or "search"
+    (lgp.search, with `budget`).
     Raises PlanningError naming the trial, the sample and the failing action.
     """
-    options = {"planner": planner, "budget": budget} if check_planner(planner) == "search" else {}
-    result = plan_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase, **options)
+    design = Design.of(design, approach_height, slices_per_phase)
+    if check_planner(planner) == "search":  # lgp.search takes the design's two values
+        options = {"planner": planner, "budget": budget, "approach_height": design.approach_height,
+                   "slices_per_phase": design.slices_per_phase}
+    else:
+        options = {"design": design}
+    result = plan_of_sample(trial, seed, sample, **options)
     effort = kinetic_energy(result)
     if not np.isfinite(effort):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): effort is {effort}")
@@ -149,8 +163,17 @@ def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float = 
         "n_actions": len(result.actions),
         "solve_time": result.planning_time,  # wall-clock s, assignment to KOMO
         "solver": komo.solver if komo else "none",
-        "status": komo.status if komo else "nothing to move",
+        "status": komo.status if komo else NOTHING_TO_MOVE,
     }
+
+
+def converged(status) -> pd.Series:
+    """Per row of an effort table's column status (text, as the table and its CSV
+    hold it): whether the layout's plan was solved (KOMO's SolutionResult is
+    kSolutionFound) or needed no motion. The in-memory verdict is typed
+    (KomoResult.solution_result, .solver_info); this is the one reader of its text."""
+    text = pd.Series(status).astype(str)
+    return text.str.startswith(SOLUTION_FOUND) | (text == NOTHING_TO_MOVE)
 
 
 class EffortResult(NamedTuple):
@@ -165,16 +188,18 @@ class EffortResult(NamedTuple):
         return f"EffortResult(mean={self.mean:.6g} J*s over {len(self.table)} layouts)"
 
 
-def effort_units(trial, samples: int, seed: int, *, approach_height: float = APPROACH,
-                 slices_per_phase: int = SLICES_PER_PHASE, planner: str = "paper", budget: Budget | None = None) -> list[tuple]:
+def effort_units(trial, samples: int, seed: int, *, approach_height: float | None = None,
+                 slices_per_phase: int | None = None, design: Design | None = None, planner: str = "paper",
+                 budget: Budget | None = None) -> list[tuple]:
     """The work units of a trial's effort, (trial, seed, sample, design), one per
     layout that needs planning: every sample, or only sample 0 when A is not
-    random. `design` = (approach_height, slices_per_phase), and for
-    planner="search" also ("search", budget), carried in the unit so an
-    executor's workers plan with the same choices."""
-    design = check_design(approach_height, slices_per_phase)
+    random. `design` (an lgp.planner.Design, checked once here), and for
+    planner="search" also "search" and the budget after it, carried in the unit
+    so an executor's workers plan with the same choices."""
+    design = Design.of(design, approach_height, slices_per_phase)
     if check_planner(planner) == "search":
-        design = (*design, planner, budget or Budget())
+        return [(trial, seed, i, design, planner, budget or Budget())
+                for i in (range(samples) if trial.initial.is_random else [0])]
     return [(trial, seed, i, design) for i in (range(samples) if trial.initial.is_random else [0])]
 
 
@@ -182,10 +207,8 @@ def effort_of_unit(unit) -> dict:
     """effort_of_sample for one unit of `effort_units` (what executors map); a
     3-tuple (trial, seed, sample) plans with the default design."""
     trial, seed, sample, *rest = unit
-    approach_height, slices_per_phase, *search = rest[0] if rest else (APPROACH, SLICES_PER_PHASE)
-    planner, budget = search if search else ("paper", None)
-    return effort_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase,
-                            planner=planner, budget=budget)
+    return effort_of_sample(trial, seed, sample, design=rest[0] if rest else Design(),
+                            **(dict(zip(("planner", "budget"), rest[1:3])) if len(rest) > 1 else {}))
 
 
 def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
@@ -200,8 +223,8 @@ def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
 
 def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
                     progress: Callable[[int, int], None] | None = None, executor=None, *,
-                    approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE,
-                    planner: str = "paper", budget: Budget | None = None) -> EffortResult:
+                    approach_height: float | None = None, slices_per_phase: int | None = None,
+                    design: Design | None = None, planner: str = "paper", budget: Budget | None = None) -> EffortResult:
     """Physical effort of `trial` over `samples` random layouts: an `EffortResult`
     with ``.mean`` (J s) and ``.table`` (one row per layout: trial, sample, effort,
     n_actions, solve_time, solver, status).
@@ -212,9 +235,10 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
     warm workers across trials). `progress(done, total)` is called after each
     sample. A trial whose layout is not random (a fixed structure in A) is planned
     once and its row repeated: every sample would draw the same layout.
-    `approach_height` (m; 0.05 default, 0 = clearance constraint instead of the
-    legs) and `slices_per_phase` (20 default) are passed to the planner
-    (lgp.planner.plan; docs/effort.md, "Modelling choices"). `planner` is "paper"
+    The motion design, `design` or `approach_height` (m; 0.05 default, 0 =
+    clearance constraint instead of the legs) and `slices_per_phase` (20
+    default), is checked once and passed to the planner (lgp.planner.plan;
+    docs/effort.md, "Modelling choices"). `planner` is "paper"
     (the paper's pipeline, default) or "search" (lgp.search within `budget`; the
     table then has SEARCH_COLUMNS: bound, gap, set-asides, solves, paper_effort).
     """
@@ -223,8 +247,8 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
 
         trial = stimuli.load_trial(trial)
     if samples < 1:
-        raise ValueError(f"physical_effort needs samples >= 1, got {samples}")
-    units = effort_units(trial, samples, seed, approach_height=approach_height, slices_per_phase=slices_per_phase,
+        raise InputError(f"physical_effort needs samples >= 1, got {samples}")
+    units = effort_units(trial, samples, seed, design=Design.of(design, approach_height, slices_per_phase),
                          planner=planner, budget=budget)
     done = 0
 

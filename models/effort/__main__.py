@@ -11,13 +11,15 @@ an argument check in lgp.cli) does not change the effort cache key.
 """
 from __future__ import annotations
 
+from lgp.atomic import write_csv_atomic
+
 import sys
 
 import pandas as pd
 
 from lgp import cli
 from lgp.paper import SAMPLES
-from lgp.planner import APPROACH, SLICES_PER_PHASE
+from lgp.planner import APPROACH, SLICES_PER_PHASE, check_approach_height
 from lgp.search import PLANNERS, Budget
 from models.effort import physical_effort
 
@@ -33,7 +35,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=cli.seed, default=0)
     parser.add_argument("--jobs", type=cli.positive_int, default=1)
     parser.add_argument("--out", type=cli.output_file, help="write the per-sample table (CSV) here")
-    parser.add_argument("--approach-height", type=cli.approach_height, default=APPROACH,
+    parser.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=APPROACH,
                         help="vertical approach/retreat leg (m) at every grasp and place; 0 = clearance constraint "
                              "instead (default %(default)s)")
     parser.add_argument("--slices", type=cli.positive_int, default=SLICES_PER_PHASE,
@@ -66,7 +68,7 @@ def main(argv=None) -> int:
               f"actions {table['n_actions'].iloc[0]:3d}  {table['solve_time'].mean():6.3f} s/plan{searched}", flush=True)
     table = pd.concat(tables, ignore_index=True)
     if args.out:
-        table.to_csv(cli.make_parent(args.out), index=False)
+        write_csv_atomic(table, cli.make_parent(args.out))
     return 0
 
 

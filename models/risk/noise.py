@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lgp.errors import InputError
 from lgp.geometry import rectangle_overlap
 from lgp.scene import CONTACT_TOLERANCE, Scene
 
@@ -136,9 +137,9 @@ class NoiseRule:
         scene, n = self.scene, self.n
         z = np.asarray(z, float)
         if z.shape[-2:] != (n, 3) or z.ndim not in (2, 3):
-            raise ValueError(f"{scene.label}: need standard normals of shape ({n}, 3), got {z.shape}")
+            raise InputError(f"{scene.label}: need standard normals of shape ({n}, 3), got {z.shape}")
         if not sigma >= 0:
-            raise ValueError(f"{scene.label}: sigma must be >= 0 (a fraction of the block size), got {sigma}")
+            raise InputError(f"{scene.label}: sigma must be >= 0 (a fraction of the block size), got {sigma}")
         one = z.ndim == 2
         z = z[None] if one else z
         runs = len(z)
