@@ -345,7 +345,7 @@ def _interrupted(prog: str, message: str, debug: bool) -> int:
 # ----------------------------------------------------------------------------- measured times
 
 #: How long the README's commands took: rows written by ``python bench/commands.py``.
-COMMAND_TIMES = _ROOT / "docs" / "command_times.csv"
+COMMAND_TIMES = Path(__file__).resolve().parent.parent / "docs" / "command_times.csv"
 
 
 def _seconds(s: float) -> str:

@@ -574,13 +574,14 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
             raise InputError(f"results page: trial {trial.id} has no effort or no risk rows")
         cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out))
     nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
+    comparison = _comparison_section(analysis, out)  # "" when there is nothing to compare: no link to it
     title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"
     body = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
 <title>{_e(title)}</title><style>{_asset('page.css')}</style></head>
 <body>
 <header><h1>{_e(title)}</h1>
-<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#figures">figures</a>' if figures else ''} <a href="#trials">trials</a> <a href="#human">human data</a> <a href="#comparison">model comparison</a>
+<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#figures">figures</a>' if figures else ''} <a href="#trials">trials</a> <a href="#human">human data</a>{' <a href="#comparison">model comparison</a>' if comparison else ''}
 &middot; files: <a href="report.md">report.md</a> <a href="effort.csv">effort.csv</a> <a href="effort_samples.csv">effort_samples.csv</a> <a href="risk.csv">risk.csv</a>{' <a href="pairs.csv">pairs.csv</a>' if pairs is not None else ''}</nav>
 </header>
 <main>
@@ -595,7 +596,7 @@ Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over 
 <p class="explain">{risk_explanation(risk, sigma, trials, out)}</p>
 <div class="cards">{"".join(cards)}</div></section>
 {_human_section(analysis, out)}
-{_comparison_section(analysis, out)}
+{comparison}
 </main>
 <footer>Written by <code>python -m lgp.reproduce</code>; every file it links is beside this page.</footer>
 <script>{_asset('page.js')}</script>
