@@ -56,7 +56,8 @@ PLACEHOLDERS = {"DIR": "generated", "N": "3", "S": "0", "FILE.csv": "human.csv",
 PARSED_ONLY = ("lgp.reproduce",)
 #: Commands that read the results of an `lgp.reproduce` run: their --help runs here,
 #: their work in the test named (which makes the results first).
-NEEDS_A_RUN = {"analysis.demo": "tests/test_analysis_simulated.py::test_demo_labels_every_output_as_simulated"}
+NEEDS_A_RUN = {"analysis.demo": "tests/test_analysis_simulated.py::test_demo_labels_every_output_as_simulated",
+               "analysis.recovery": "tests/test_analysis_compare.py::test_recovery_confusion_matrix_and_its_seeds"}
 
 
 def readme_commands(text: str | None = None) -> list[str]:
