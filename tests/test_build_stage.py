@@ -110,7 +110,7 @@ def test_human_data_run_with_build_risk_models_and_participant_sigmas(tmp_path, 
     path = tmp_path / "sim.csv"
     simulate_participants(effort, grid, (0, 1, 3), 0.065, 5, 1.0, rng).to_csv(path, index=False)
     real = analysis.load_human_data
-    monkeypatch.setattr(analysis, "load_human_data", lambda p: real(p, allow_simulated=True))
+    monkeypatch.setattr(analysis, "load_human_data", lambda p, **k: real(p, **{**k, "allow_simulated": True}))
     out = tmp_path / "r"
     args = ["--samples", "1", "--n-sims", "2", "--sigmas", "0.065", "0.1", "--jobs", "2", "--n-boot", "20",
             "--no-replays", "--build-risk", "--risk-measure", "max", "--per-participant-sigma",
