@@ -164,15 +164,15 @@ def trial_cases(tmp: Path):
 
 
 def crowded(tmp: Path):
-    old = stimuli.SCATTER_SECONDS
-    stimuli.SCATTER_SECONDS = 1.0
+    old = stimuli.start.SCATTER_SECONDS
+    stimuli.start.SCATTER_SECONDS = 1.0
     try:
         folder = Path(tempfile.mkdtemp(dir=tmp))
         (folder / "X1.yaml").write_text(X1.replace("count: 3", "count: 140").replace("x: [0.2, 0.55]", "x: [-0.2, 0.2]")
                                         .replace("y: [-0.25, 0.25]", "y: [0.1, 0.5]"))
         return stimuli.load_trial("X1", folder)
     finally:
-        stimuli.SCATTER_SECONDS = old
+        stimuli.start.SCATTER_SECONDS = old
 
 
 # ----------------------------------------------------------------------------- human data
@@ -337,7 +337,7 @@ def main(argv=None) -> int:
                 if run == "crowded":
                     run = lambda: crowded(tmp)  # noqa: E731
                 verdict, what = judge(run, accept)
-                rows.append((group, name, verdict, what.replace("|", "/").replace(str(tmp), "TMP")))
+                rows.append((group, name, verdict, what.replace("|", "\\|").replace(str(tmp), "TMP")))
                 print(f"{verdict:>22}  {group}: {name}: {what[:150]}", flush=True)
     bad = [r for r in rows if not r[2].startswith("accepted")]
     refused = [r for r in bad if r[2] in ("refused", "recomputed")]
@@ -349,7 +349,8 @@ def main(argv=None) -> int:
              f"By kind: " + ", ".join(f"{g} {sum(1 for r in refused if r[0] == g)}/{sum(1 for r in bad if r[0] == g)}"
                                       for g in ("trial file", "human data", "API", "cache entry")) + ".", "",
              "| kind | input | verdict | what the project does |", "|---|---|---|---|"]
-    lines += [f"| {g} | {n} | {v} | {w[:220]} |" for g, n, v, w in rows]
+    bar = "\\|"
+    lines += [f"| {g} | {n.replace('|', bar)} | {v} | {w[:220]} |" for g, n, v, w in rows]
     write_section(args.out, "Bad inputs tried", "\n".join(lines) + "\n")
     print(f"{len(refused)}/{len(bad)} bad inputs refused; {len(accepted)} accepted by design")
     return 0 if len(refused) == len(bad) else 1

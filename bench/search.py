@@ -35,7 +35,8 @@ sys.path.insert(0, str(ROOT))
 import stimuli  # noqa: E402
 from bench.common import machine, write_section  # noqa: E402
 from lgp.planner import plan, plan_symbolic  # noqa: E402
-from lgp.search import _Problem, candidate_spots, first_sweep, kinetic_energy, search  # noqa: E402
+from lgp.search import candidate_spots, first_sweep, kinetic_energy, search  # noqa: E402
+from lgp.search.problem import _Problem  # noqa: E402
 from lgp.symbolic import Place, PlanState, SymbolicPlan, apply  # noqa: E402
 from models.effort import sample_rng  # noqa: E402
 

@@ -32,12 +32,18 @@ def cpu_model() -> str:
     return "unknown CPU"
 
 
-def timed(cmd, env) -> float:
+def timed(cmd, env) -> tuple[float, float]:
+    """(wall seconds, CPU seconds user + sys of the command and every process it waited for)."""
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     run = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if run.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed:\n{run.stderr[-2000:]}")
-    return time.perf_counter() - t0
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def first_screens(index: Path, repeats: int) -> list[tuple[float, float]]:
@@ -85,16 +91,18 @@ def main() -> int:
 `python bench/study.py` on {cpu_model()}; before: {load_before}; after: {load_after}
 (the machine is shared with other sessions: the load is theirs and ours).
 
-| step | wall time (s) |
-|---|---|
-| `python -m stimuli.render --out DIR` (48 pictures, 960x640, 2 processes) | {render:.1f} |
-| `python -m stimuli.render --trials 7H --jobs 1` (2 pictures, 1 process: start-up and shader compilation included) | {one:.1f} |
-| `python -m stimuli.experiment --task difficulty` with an empty render cache (52 pictures rendered, folder written) | {cold:.1f} |
-| `python -m stimuli.experiment --task time` with the pictures cached | {warm:.1f} |
+| step | wall time (s) | CPU time (s, user + sys, all processes) |
+|---|---|---|
+| `python -m stimuli.render --out DIR` (48 pictures, 960x640, 2 processes) | {render[0]:.1f} | {render[1]:.1f} |
+| `python -m stimuli.render --trials 7H --jobs 1` (2 pictures, 1 process: start-up and shader compilation included) | {one[0]:.1f} | {one[1]:.1f} |
+| `python -m stimuli.experiment --task difficulty` with an empty render cache (52 pictures rendered, folder written) | {cold[0]:.1f} | {cold[1]:.1f} |
+| `python -m stimuli.experiment --task time` with the pictures cached | {warm[0]:.1f} | {warm[1]:.1f} |
 
 Rendering the 48 pictures and building a study folder (the cold build renders its
-52 pictures itself): {cold:.1f} s; the cold build against the render alone: ratio
-{cold / render:.2f}. A study folder holds {size_mb:.1f} MB (pictures, jsPsych, page).
+52 pictures itself): {cold[0]:.1f} s of wall time, {cold[1]:.1f} s of CPU time on the 2 cores; the
+cold build against the render alone: ratio {cold[0] / render[0]:.2f} (wall). Under the
+load above, wall time is mostly waiting for a core: the CPU time is what the work
+costs. A study folder holds {size_mb:.1f} MB (pictures, jsPsych, page).
 
 Seconds from `page.goto` of the local `index.html` (headless Chromium, 1280x800) to
 the first screen (the instructions, all 52 pictures preloaded) and to the first trial

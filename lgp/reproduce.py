@@ -97,7 +97,7 @@ def parse_args(argv=None) -> RunConfig:
     p.add_argument("--n-boot", type=cli.positive_int, help=f"bootstrap resamples (default {D('n_boot')}; --quick {QUICK['n_boot']})")
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
     p.add_argument("--max-participants", type=cli.positive_int, default=None,
-                   help="with --human-data: most participants the file may hold (default 5000; memory grows with "
+                   help=f"with --human-data: most participants the file may hold (default {D('max_participants')}; memory grows with "
                         "participants x bootstrap resamples, docs/human-data.md)")
     p.add_argument("--quick", action="store_true",
                    help=f"a low-precision preview: M = {QUICK['samples']}, N = {QUICK['n_sims']}, {len(QUICK['sigmas'])} sigmas"

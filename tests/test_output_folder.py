@@ -159,3 +159,13 @@ def test_a_stop_before_any_result_does_not_claim_a_cache(tmp_path):
     (tmp_path / "out" / "cache").mkdir(parents=True)
     (tmp_path / "out" / "cache" / "effort-abc.csv").write_text("x")
     assert _resume_note(args).startswith("finished trials are cached in")
+
+
+def test_a_compute_times_file_linked_to_dev_zero_is_not_read(tmp_path):
+    from lgp.app.manifest import TIMES, TimedCache
+
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "cache" / TIMES).symlink_to("/dev/zero")
+    t0 = time.monotonic()
+    assert TimedCache(tmp_path / "cache").load_times() == {}
+    assert time.monotonic() - t0 < 5

@@ -100,7 +100,7 @@ def test_the_pair_table_ties_by_the_one_rule():
 
 
 def test_histogram_draws_every_layout_once():
-    from lgp.app.page import histogram_svg
+    from lgp.app.charts import histogram_svg
 
     values = np.random.default_rng(0).normal(0.5, 0.05, 30)
     svg = histogram_svg(values)

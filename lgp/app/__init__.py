@@ -18,6 +18,6 @@ analysis/ and stimuli/ (tests/test_layers.py). Its commands are
 - sensitivity: the --sensitivity sections (sensitivity.risk: by engine and fall rule;
   sensitivity.effort: by motion design)
 - report: report.md, and the pair tables in words
-- page: the results page index.html (page.css, page.js); pictures: its trial
-  pictures; replays: its 3-D replays; view: replay and figure of one plan
+- page: the results page index.html (page.css, page.js); charts: its inline SVG;
+  pictures: its trial pictures; replays: its 3-D replays; view: replay and figure of one plan
 """

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any
 
+from analysis.data import MAX_PARTICIPANTS
 from analysis.permutation import N_PERM
 from analysis.recovery import N_STUDIES
 from lgp.executor import default_jobs
@@ -56,7 +57,7 @@ class RunConfig:
     n_boot: int = N_BOOT
     human_data: str | None = None
     #: --max-participants: most participants a human-data file may hold (analysis.data.MAX_PARTICIPANTS)
-    max_participants: int = 5_000
+    max_participants: int = MAX_PARTICIPANTS
     quick: bool = False
     no_cache: bool = False
     no_replays: bool = False

@@ -224,7 +224,10 @@ class TimedCache(Cache):
 
     def load_times(self) -> dict[str, float]:
         try:
-            return {str(k): float(v) for k, v in json.loads(self._times_path.read_text()).items()}
+            from lgp.inputs import read_bounded
+
+            data = read_bounded(self._times_path, MAX_MANIFEST_BYTES, "compute-times file", within=self.root)
+            return {str(k): float(v) for k, v in json.loads(data).items()}
         except (OSError, ValueError, AttributeError):
             return {}
 

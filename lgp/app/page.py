@@ -27,6 +27,7 @@ import pandas as pd
 from lgp.app.cache import Cache, library_versions
 from lgp.app.files import write_text_atomic
 from lgp.app.report import ratio_text, sigma_edge_warnings
+from lgp.app.charts import histogram_svg, num, risk_svg, risk_top
 from lgp.app.pictures import rendered_trial_pictures
 from lgp.errors import InputError
 
@@ -65,26 +66,6 @@ def _asset(name: str) -> str:
 
 def _e(x) -> str:
     return html.escape(str(x))
-
-
-#: No number on the page prints more than this many significant digits.
-DIGITS = 4
-
-
-def num(v, digits: int = DIGITS) -> str:
-    """A number for a reader: at most `digits` significant digits, no exponent below
-    1e-4 or above 1e6 unless needed ("0.1159", "2124", "1.5e-05"); nan/None -> "n/a"."""
-    if v is None:
-        return "n/a"
-    try:
-        x = float(v)
-    except (TypeError, ValueError):
-        return str(v)
-    if not np.isfinite(x):
-        return "n/a" if np.isnan(x) else ("inf" if x > 0 else "-inf")
-    if x == int(x) and abs(x) < 10 ** digits:
-        return str(int(x))
-    return f"{x:.{digits}g}"
 
 
 def _fmt(v) -> str:
@@ -131,68 +112,6 @@ def table_html(df: pd.DataFrame, cls: str = "sortable", row_attrs=None, max_rows
         cells = "".join(f'<td data-v="{_e(v)}">{_e(_fmt(v))}</td>' for v in row)
         rows.append(f"<tr{attrs}>{cells}</tr>")
     return f'<table class="{cls}"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
-
-
-# ----------------------------------------------------------------------------- small inline charts
-
-
-def histogram_svg(values, width: int = 150, height: int = 44, bins: int = 10) -> str:
-    """A tiny histogram of `values` as inline SVG (axis: min and max printed below)."""
-    v = np.asarray(values, dtype=float)
-    lo, hi = float(v.min()), float(v.max())
-    if hi - lo < 1e-12 * max(1.0, abs(hi)):
-        counts, edges = np.array([len(v)]), np.array([lo, hi])
-    else:
-        counts, edges = np.histogram(v, bins=bins, range=(lo, hi))
-    plot_h = height - 12
-    bw = width / len(counts)
-    top = counts.max()
-    bars = "".join(
-        f'<rect x="{k * bw + 0.5:.1f}" y="{plot_h - plot_h * c / top:.1f}" width="{bw - 1:.1f}" height="{plot_h * c / top:.1f}"><title>{c} layouts in [{edges[k]:.4g}, {edges[k + 1]:.4g}] J s</title></rect>'
-        for k, c in enumerate(counts))
-    return (f'<svg class="hist" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img" '
-            f'aria-label="histogram of effort over {len(v)} layouts">{bars}'
-            f'<text x="0" y="{height - 1}">{lo:.3g}</text><text x="{width}" y="{height - 1}" text-anchor="end">{hi:.3g}</text></svg>')
-
-
-#: Tops of the risk mini-plot's y axis: the smallest that holds the curve.
-RISK_TOPS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
-
-
-def risk_top(risks) -> float:
-    """The y-axis top of a risk curve: the smallest of RISK_TOPS at or above its
-    maximum (a curve of 0.02 is not drawn flat on 0..1); 1 for an all-zero curve."""
-    peak = float(np.nanmax(np.asarray(risks, dtype=float))) if len(risks) else 0.0
-    return 1.0 if peak <= 0 else next(t for t in RISK_TOPS if t >= peak - 1e-12)
-
-
-def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height: int = 70) -> str:
-    """Risk over sigma as inline SVG: y from 0 to the curve's `risk_top` (written on
-    the axis), x over the run's sigma grid."""
-    s = np.asarray(sigmas, dtype=float)
-    r = np.asarray(risks, dtype=float)
-    y_top = risk_top(r)
-    left, bottom, top = 22, 14, 4
-    pw, ph = width - left - 4, height - bottom - top
-    s0, s1 = float(s.min()), float(s.max())
-    span = s1 - s0 if s1 > s0 else 1.0
-
-    def X(x):
-        return left + pw * ((x - s0) / span if s1 > s0 else 0.5)
-
-    def Y(y):
-        return top + ph * (1 - y / y_top)
-
-    pts = " ".join(f"{X(a):.1f},{Y(b):.1f}" for a, b in zip(s, r))
-    dots = "".join(f'<circle cx="{X(a):.1f}" cy="{Y(b):.1f}" r="2"><title>sigma {a:g} d: risk {b:.2f}</title></circle>' for a, b in zip(s, r))
-    marker = ""
-    if mark is not None and s0 <= mark <= s1:
-        marker = f'<line class="mark" x1="{X(mark):.1f}" x2="{X(mark):.1f}" y1="{top}" y2="{top + ph}"/>'
-    return (f'<svg class="risk" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img" aria-label="risk over sigma">'
-            f'<rect class="frame" x="{left}" y="{top}" width="{pw}" height="{ph}"/>{marker}'
-            f'<polyline points="{pts}"/>{dots}'
-            f'<text x="{left - 2}" y="{top + 7}" text-anchor="end">{num(y_top)}</text><text x="{left - 2}" y="{top + ph}" text-anchor="end">0</text>'
-            f'<text x="{left}" y="{height - 2}">{s0:g}</text><text x="{left + pw}" y="{height - 2}" text-anchor="end">{s1:g} d</text></svg>')
 
 
 # ----------------------------------------------------------------------------- sections
@@ -621,7 +540,7 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
     from models.risk import DEFAULT_ENGINE, get_engine
 
     out = Path(args.out) if out is None else Path(out)
-    pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=getattr(args, "jobs", 2) or 2)
+    pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=args.jobs)
     clock.lap("trial pictures")
     figures = []
     if analysis is not None and "files" in analysis:

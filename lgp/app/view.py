@@ -16,14 +16,12 @@ shaded and its effort written above it.
 """
 from __future__ import annotations
 
-from lgp.atomic import atomic_path, write_text_atomic
-
 import html
 import json
-from pathlib import Path
 
 import numpy as np
 
+from lgp.app.files import atomic_path, write_text_atomic
 from lgp.paper import BUILD_SITE, DISPLAY_RGB as COLOURS
 
 #: Sequential colormap of placement order (first placed: dark, last: bright).
@@ -230,9 +228,7 @@ def replay_html(plan, title: str = "", back: str | None = None) -> str:
 
 def write_html(plan, path, title: str = "") -> str:
     """Write a self-contained replay of `plan` (an lgp.planner.Plan) to `path`."""
-    path = Path(path)
-    write_text_atomic(replay_html(plan, title), path)
-    return str(path)
+    return str(write_text_atomic(replay_html(plan, title), path))
 
 
 def write_png(plan, path, title: str = "") -> str:
@@ -293,7 +289,6 @@ def write_png(plan, path, title: str = "") -> str:
         bar.ax.set_yticklabels([f"{k + 1}: {name}" for k, name in enumerate(order)], fontsize=7)
         bar.set_label(f"placement order ({ORDER_CMAP}; grey: not moved)")
     fig.suptitle(title or f"{plan.initial.label} -> {plan.target.label}", y=1.06, fontweight="bold")
-    path = Path(path)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, bbox_inches="tight")
     return str(path)
