@@ -21,8 +21,8 @@ def num(v, digits: int = DIGITS) -> str:
         return str(v)
     if not np.isfinite(x):
         return "n/a" if np.isnan(x) else ("inf" if x > 0 else "-inf")
-    if x == int(x) and abs(x) < 10 ** digits:
-        return str(int(x))
+    if x == int(x) and abs(x) < 1e6 and len(str(abs(int(x))).rstrip("0")) <= digits:
+        return str(int(x))  # 2124, 20000, 26400: whole numbers as written
     return f"{x:.{digits}g}"
 
 
