@@ -252,7 +252,7 @@ def test_physical_risk_refuses_bad_arguments_by_name(kwargs, message):
 
 def test_the_bootstrap_in_blocks_gives_the_same_numbers_as_all_at_once(monkeypatch):
     """Bounded memory for big files must not change a single resample."""
-    import analysis.data as data
+    import analysis.data.means as data  # where resample_trial_means reads BOOTSTRAP_BLOCK_BYTES
     from analysis.data import resample_trial_means, validate_human_data, zscore_responses
 
     z = zscore_responses(validate_human_data(_responses(37)))

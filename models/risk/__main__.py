@@ -82,9 +82,9 @@ def main(argv=None) -> int:
     table = summarise(runs)
     order = {t.id: k for k, t in enumerate(trials)}
     table = table.sort_values(["trial", "sigma"], key=lambda c: c.map(order) if c.name == "trial" else c).reset_index(drop=True)
-    write_csv_atomic(table, args.table)
+    write_csv_atomic(table, cli.make_parent(args.table))
     if args.runs:
-        write_csv_atomic(runs, args.runs)
+        write_csv_atomic(runs, cli.make_parent(args.runs))
     wide = table.pivot(index="trial", columns="sigma", values="risk").reindex([t.id for t in trials])
     print(wide.to_string(float_format=lambda x: f"{x:.2f}"))
     label = args.engine if ENGINES[args.engine].faithful else f"{args.engine} (UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md)"
@@ -120,7 +120,7 @@ def _build_risk(args) -> int:
         print(agg.drop(columns=["engine"]).to_string(index=False, float_format=lambda x: f"{x:.3f}"))
         print(f"  ({time.perf_counter() - t1:.1f} s)", file=sys.stderr, flush=True)
     if args.out:
-        write_csv_atomic(pd.concat(tables, ignore_index=True), args.out)
+        write_csv_atomic(pd.concat(tables, ignore_index=True), cli.make_parent(args.out))
     print(f"{len(ids)} trial(s) in {time.perf_counter() - t0:.1f} s" + (f" -> {args.out}" if args.out else ""), file=sys.stderr)
     return 0
 
