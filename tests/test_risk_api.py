@@ -26,7 +26,7 @@ def test_sigma_grid_is_the_papers():
 
 def test_risk_is_the_fraction_of_runs_that_fell():
     risk, runs = physical_risk(staircase(4), 0.1, n_sims=40, seed=1, return_table=True)
-    assert list(runs.columns) == ["sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine", "fall_rule", "fall_threshold"]
+    assert list(runs.columns) == ["sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine", "fall_rule", "fall_threshold", "noise_rule"]
     assert list(runs["run"]) == list(range(40))
     assert risk == runs["fell"].mean()
     assert 0 < risk < 1  # a 4-block staircase at sigma = 0.1 d falls sometimes
@@ -49,7 +49,8 @@ def test_same_seed_gives_same_numbers_and_another_seed_other_numbers():
 
 def test_risk_curve_uses_the_same_random_numbers_for_every_sigma():
     curve, runs = risk_curve(staircase(4), [0.06, 0.08, 0.1], n_sims=30, seed=5, jobs=1, return_table=True)
-    assert list(curve.columns) == ["sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold"]
+    assert list(curve.columns) == ["sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold", "noise_rule",
+                                   "risk_low", "risk_high"]
     assert list(curve["sigma"]) == [0.06, 0.08, 0.1] and (curve["n"] == 30).all()
     for sigma in (0.06, 0.1):
         alone = physical_risk(staircase(4), sigma, n_sims=30, seed=5, return_table=True)[1]
@@ -64,13 +65,15 @@ def test_risk_grows_with_noise_on_a_marginal_stack():
 def test_risk_table_is_tidy_in_input_order_and_matches_physical_risk():
     scenes = {"stair": staircase(4), "tower": tower(4), "line": line(3)}
     table = risk_table(scenes, [0.07, 0.1], n_sims=20, seed=2, jobs=1)
-    assert list(table.columns) == ["trial", "sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold"]
+    assert list(table.columns) == ["trial", "sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold", "noise_rule",
+                                   "risk_low", "risk_high"]
     assert list(table["trial"]) == ["stair", "stair", "tower", "tower", "line", "line"]
     assert table.loc[(table.trial == "stair") & (table.sigma == 0.1), "risk"].item() == physical_risk(
         staircase(4), 0.1, n_sims=20, seed=2
     )
     runs = risk_table([staircase(4)], [0.1], n_sims=20, seed=2, jobs=1, runs=True)
-    assert list(runs.columns) == ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine", "fall_rule", "fall_threshold"]
+    assert list(runs.columns) == ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine", "fall_rule", "fall_threshold",
+                                  "noise_rule"]
     assert set(runs["trial"]) == {"staircase4 0.2d"}
 
 
