@@ -76,6 +76,17 @@ def sigma(text: str) -> float:
     return value
 
 
+def precision_level(text: str) -> float:
+    """A risk level of the required precision sigma*, in (0, 1)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a risk in (0, 1), got {text!r}") from None
+    if not (math.isfinite(value) and 0 < value < 1):
+        raise argparse.ArgumentTypeError(f"a precision level must be a risk in (0, 1), got {text!r}")
+    return value
+
+
 def approach_height(text: str) -> float:
     """A length in metres >= 0 and < 0.5 (the planner's approach leg; 0 = none)."""
     try:

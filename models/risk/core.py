@@ -253,7 +253,9 @@ def wilson_interval(falls, n, z: float = WILSON_Z):
     denom = 1 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
     half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return np.clip(centre - half, 0.0, 1.0), np.clip(centre + half, 0.0, 1.0)
+    low = np.where(k == 0, 0.0, np.clip(centre - half, 0.0, 1.0))  # exact ends: no 1e-18 rounding at 0 falls
+    high = np.where(k == n, 1.0, np.clip(centre + half, 0.0, 1.0))
+    return (low, high) if low.ndim else (float(low), float(high))
 
 
 def summarise(runs: pd.DataFrame) -> pd.DataFrame:

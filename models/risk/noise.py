@@ -103,9 +103,12 @@ class NoiseRule:
     (tests/test_risk_noise_reference.py keeps the per-run rule as the reference)."""
 
     def __init__(self, scene: Scene, noise_rule: str = DEFAULT_NOISE_RULE, movable=None):
-        """`movable` (n,) bools, default all: blocks marked False keep their pose
-        (a sequential build's settled blocks, models/risk/build.py); a side pair
-        with one of them pushes the other the whole way."""
+        """`movable` (n,) bools, default all: blocks marked False get no noise and
+        keep their height (a sequential build's settled blocks,
+        models/risk/build.py); side pairs still push them apart half each, as a
+        hand placing a block nudges its neighbour (pushing the new block alone
+        cannot always work: settled neighbours may leave less than a block's
+        width between them)."""
         self.scene = scene
         self.noise_rule = check_noise_rule(noise_rule)
         blocks = scene.blocks
@@ -141,7 +144,7 @@ class NoiseRule:
             allowed = np.maximum(0.0, depth0)  # overlap already in B
             reach = _reach(outlines, si, sj, normal) - allowed  # least (c_j - c_i) . normal
             # who moves: 0 half each, 1 i only (j fixed), 2 j only (i fixed); neither: no pair
-            mov = np.concatenate([self.movable, np.zeros(m - n, bool)])
+            mov = np.concatenate([np.ones(n, bool), np.zeros(m - n, bool)])  # blocks are pushed, fixed boxes not
             mode = np.where(mov[si] & mov[sj], 0, np.where(mov[si], 1, 2))
             both = mov[si] | mov[sj]
             side = [(i, j, n0, n1, rk, md) for i, j, n0, n1, rk, md, b in
@@ -162,9 +165,11 @@ class NoiseRule:
             below_j += beneath.tolist()
         self.below_i, self.below_j = np.array(below_i, dtype=int), np.array(below_j, dtype=int)
 
-    def positions(self, sigma: float, z: np.ndarray) -> np.ndarray:
+    def positions(self, sigma: float, z: np.ndarray, start: np.ndarray | None = None) -> np.ndarray:
         """Block centres p_WB of the noisy scenes: (n, 3) for normals z (n, 3), or
-        (R, n, 3) for z (R, n, 3)."""
+        (R, n, 3) for z (R, n, 3). `start` (same shape): centres to perturb instead
+        of B's (a sequential build's settled state; the pairs, their sides and the
+        solids beneath each block are still B's)."""
         scene, n = self.scene, self.n
         z = np.asarray(z, float)
         if z.shape[-2:] != (n, 3) or z.ndim not in (2, 3):
@@ -174,7 +179,7 @@ class NoiseRule:
         one = z.ndim == 2
         z = z[None] if one else z
         runs = len(z)
-        p = np.broadcast_to(self.p0, z.shape).copy()
+        p = np.broadcast_to(self.p0 if start is None else np.asarray(start, float).reshape(z.shape), z.shape).copy()
         if n == 0 or sigma == 0 or runs == 0:
             return p[0] if one else p
         # noise along each block's own axes, scaled by its size along that axis
