@@ -113,6 +113,22 @@ def trial_id_or_all(text: str) -> str:
     return "all" if str(text).strip().lower() == "all" else trial_id(text)
 
 
+def one_of(names: Sequence[str], what: str) -> Callable[[str], str]:
+    """A validator for a word from `names`, case-insensitive (``3D`` is ``3d``), returned
+    in its listed spelling; anything else is refused as ``unknown <what> ...``
+    (argparse prefixes ``argument --flag:``). E.g. ``type=one_of(FALL_RULES, "fall rule")``."""
+    names = tuple(names)
+
+    def check(text: str) -> str:
+        for name in names:
+            if str(text).strip().lower() == name.lower():
+                return name
+        raise argparse.ArgumentTypeError(f"unknown {what} {text!r}; known {what}s: {', '.join(names)} (case-insensitive)")
+
+    check.__name__ = what.replace(" ", "_")
+    return check
+
+
 def _nearest_existing(path: Path) -> Path:
     path = path.absolute()
     while not path.exists() and path != path.parent:

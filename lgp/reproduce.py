@@ -1,10 +1,10 @@
 """The paper's pipeline end to end: stimuli -> physical effort -> physical risk ->
-(analysis, when human data are given) -> tidy CSVs, figures, report.md and the results page index.html (lgp/page.py).
+(analysis, when human data are given) -> tidy CSVs, figures, report.md and the results page index.html (lgp/app/page.py).
 
     python -m lgp.reproduce --quick                 # a small version, about a minute
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
-    python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/sensitivity.py)
+    python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/app/sensitivity.py)
     python -m lgp.reproduce --fall-rule 3d --fall-threshold 0.1   # the risk model with another fall rule
     python -m lgp.reproduce --approach-height 0 --slices 40       # effort with another motion design (docs/effort.md)
 
@@ -31,12 +31,13 @@ import stimuli
 from lgp import cli
 from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
 from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
-from lgp.progress import Progress
-from lgp.progress import log as progress_log
-from lgp.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
-from lgp.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
-from lgp.page import Stopwatch, write_index, write_replays
-from lgp import sensitivity
+from lgp.app.progress import Progress
+from lgp.app.progress import log as progress_log
+from lgp.app.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest, write_csv_atomic
+from lgp.app.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
+from lgp.app.page import Stopwatch, write_index
+from lgp.app.replays import write_replays
+from lgp.app import sensitivity
 
 PROG = "python -m lgp.reproduce"
 
@@ -190,15 +191,6 @@ def check_targets(trials, engine: str | None, cache: Cache, fall_rule: str = "ho
             problems.append(str(df["problem"].iloc[0]))
     if problems:
         raise UnstableSceneError("; ".join(problems))
-
-
-def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
-    order = {t.id: i for i, t in enumerate(trials)}
-    g = samples.groupby("trial")["effort"]
-    df = pd.DataFrame({"effort": g.mean(), "effort_sd": g.std(ddof=1), "samples": g.size()}).reset_index()
-    df["pair"] = df["trial"].map({t.id: t.pair for t in trials}).astype("Int64")  # empty for a trial of no pair
-    df["level"] = df["trial"].map({t.id: t.level for t in trials})
-    return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]
 
 
 def kappa_range(E_e: float, R_e: float, E_h: float, R_h: float) -> str:
@@ -420,7 +412,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=cli.positive_int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
-    p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/build_stage.py)")
+    p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/app/build_risk.py)")
     p.add_argument("--build-sigmas", type=cli.sigma, nargs="+", help="noise levels of --build-risk in (0, 1] (default 0.065 0.1)")
     p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
@@ -507,7 +499,7 @@ def run(args, argv=None) -> int:
             raise ValueError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    removed = clear_previous(out)  # this folder describes this run only (lgp/manifest.py)
+    removed = clear_previous(out)  # this folder describes this run only (lgp/app/manifest.py)
     if removed:
         _log(f"removed the outputs of an earlier run from {out}: {', '.join(removed)} (the cache is kept)")
     cache = TimedCache(out / "cache", enabled=not args.no_cache)
@@ -523,6 +515,7 @@ def run(args, argv=None) -> int:
         with cli.deferred_interrupt():  # Drake loads here; a Ctrl-C meanwhile waits until it has
             import models.effort  # noqa: F401
             import models.risk  # noqa: F401
+        from models.effort import summarise_effort
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache,
                                        approach_height=args.approach_height, slices_per_phase=args.slices)
@@ -537,9 +530,9 @@ def run(args, argv=None) -> int:
         if args.sensitivity:
             clock.lap("sensitivity")
         if args.build_risk:
-            from lgp import build_stage
+            from lgp.app import build_risk
 
-            stages = build_stage.build_risk_tables(trials, args.build_sigmas or build_stage.BUILD_SIGMAS, args.n_sims,
+            stages = build_risk.build_risk_tables(trials, args.build_sigmas or build_risk.BUILD_SIGMAS, args.n_sims,
                                                    args.samples, args.seed, args.engine, executor, cache,
                                                    fall_rule=args.fall_rule, fall_threshold=args.fall_threshold,
                                                    approach_height=args.approach_height)
@@ -554,11 +547,11 @@ def run(args, argv=None) -> int:
     if replays:
         written += [Path(p) for p in replays.values()]
     sections, build = [], None
-    for s in sensitive:  # --sensitivity (lgp/sensitivity.py)
+    for s in sensitive:  # --sensitivity (lgp/app/sensitivity.py)
         written += s.files
         sections.append("\n".join(s.lines))
     if args.build_risk:
-        paths, section, build = build_stage.build_risk_outputs(stages, out, args.command)
+        paths, section, build = build_risk.build_risk_outputs(stages, out, args.command)
         written += paths
         sections.append(section)
     pairs, analysis = None, None
@@ -580,9 +573,9 @@ def run(args, argv=None) -> int:
                                 risk_measure=args.risk_measure)
         written += [Path(path) for path in analysis["files"]["path"]]
         if args.per_participant_sigma:
-            from lgp import build_stage
+            from lgp.app import build_risk
 
-            paths, section = build_stage.participant_sigma_outputs(human, e_samples, r, out,
+            paths, section = build_risk.participant_sigma_outputs(human, e_samples, r, out,
                                                                    args.participant_betas, args.command)
             written += paths
             sections.append(section)
@@ -599,7 +592,7 @@ def run(args, argv=None) -> int:
     report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None,
                           time.perf_counter() - t0, software, compute)
     if sections:
-        from lgp.build_stage import append_report
+        from lgp.app.build_risk import append_report
 
         append_report(report, sections)
     written.append(report)

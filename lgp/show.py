@@ -5,8 +5,8 @@ the planner are seeded as `models.effort.physical_effort` seeds them
 (`models.effort.plan_of_sample`), so the effort printed here equals that row's.
 Prints the action list with per-action kinetic energy, and optionally writes the
 3-D replay (HTML, works offline) and a figure of block paths and speeds (PNG).
-From a script, use ``lgp.plan(...)`` (lgp/planner.py) and ``lgp.view.write_html`` /
-``lgp.view.write_png``; this module is the command line only.
+From a script, use ``lgp.plan(...)`` (lgp/planner.py) and ``lgp.app.view.write_html`` /
+``lgp.app.view.write_png``; this module is the command line only.
 """
 from __future__ import annotations
 
@@ -48,7 +48,7 @@ def main(argv=None) -> int:
     print(f"effort {kinetic_energy(result):.12g} J*s")
     title = f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})"
     if args.html or args.png:
-        from lgp.view import write_html, write_png
+        from lgp.app.view import write_html, write_png
 
         if args.html:
             print("replay:", write_html(result, args.html, title))

@@ -391,6 +391,25 @@ def _refuse_anchors(where: str, event) -> None:
                             "are not allowed in trial files")
 
 
+def _at(mark) -> str:
+    return f"line {mark.line + 1}, column {mark.column + 1}"
+
+
+def yaml_error_line(e: yaml.YAMLError) -> str:
+    """A YAML error as one line that keeps its position ("not valid YAML at line 8,
+    column 11: mapping values are not allowed here"); PyYAML's own text spreads the
+    position over further lines, which a one-line CLI error would cut off."""
+    problem = getattr(e, "problem", None)
+    mark = getattr(e, "problem_mark", None)
+    if not problem or mark is None:
+        return "not valid YAML: " + " ".join(str(e).split())
+    text = f"not valid YAML at {_at(mark)}: {problem}"
+    context, context_mark = getattr(e, "context", None), getattr(e, "context_mark", None)
+    if context:
+        text += f" ({context}" + (f" at {_at(context_mark)}" if context_mark is not None else "") + ")"
+    return text
+
+
 def _safe_load(text: str, where: str):
     """yaml.safe_load without anchors and aliases; libyaml's C parser when present
     (a first pass over the parse events refuses anchors before anything is built)."""
@@ -422,7 +441,7 @@ def load_file(path: str | Path) -> Trial:
     try:
         data = _safe_load(text, str(path))
     except yaml.YAMLError as e:
-        raise StimulusError(f"{path}: not valid YAML: {e}") from None
+        raise StimulusError(f"{path}: {yaml_error_line(e)}") from None
     if not isinstance(data, dict):
         raise StimulusError(f"{path}: a trial file is a mapping of fields (id, pair, level, initial, target, ...), got {type(data).__name__}")
     return parse_trial(data, path)

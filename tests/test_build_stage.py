@@ -1,4 +1,4 @@
-"""`python -m lgp.reproduce --build-risk` and `--per-participant-sigma` (lgp/build_stage.py):
+"""`python -m lgp.reproduce --build-risk` and `--per-participant-sigma` (lgp/app/build_risk.py):
 cached per trial, report sections, the pair table of aggregates. Participants here
 are SIMULATED."""
 import numpy as np
@@ -6,7 +6,8 @@ import pandas as pd
 import pytest
 
 import models.risk.build
-from lgp import build_stage, reproduce
+from lgp import reproduce
+from lgp.app import build_risk
 from lgp.paper import TRIAL_IDS
 
 ARGS = ["--trials", "6E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.065", "--jobs", "1", "--build-risk",
@@ -54,7 +55,7 @@ def _fake_stages():
 
 
 def test_pair_table_of_aggregates_and_figure(tmp_path):
-    paths, section, long = build_stage.build_risk_outputs(_fake_stages(), tmp_path, "cmd")
+    paths, section, long = build_risk.build_risk_outputs(_fake_stages(), tmp_path, "cmd")
     pairs = pd.read_csv(tmp_path / "build_risk_pairs.csv")
     row = pairs[(pairs["pair"] == 6) & (pairs["measure"] == "max") & (pairs["sigma"] == 0.065)].iloc[0]
     assert (row["E"], row["H"], bool(row["E_lt_H"])) == (0.2, 0.4, True)
@@ -75,7 +76,7 @@ def test_participant_sigma_outputs_are_labelled_simulated(tmp_path):
     grid = pd.DataFrame([(t, s, min(1.0, s * (i % 5))) for i, t in enumerate(TRIAL_IDS) for s in (0.05, 0.075, 0.1)],
                         columns=["trial", "sigma", "risk"])
     sim = simulate_participants(effort, grid, (0, 1, 3), 0.075, 8, 1.0, rng, datasets=("time",))
-    paths, section = build_stage.participant_sigma_outputs(sim, effort, grid, tmp_path, "shared", "cmd")
+    paths, section = build_risk.participant_sigma_outputs(sim, effort, grid, tmp_path, "shared", "cmd")
     assert (tmp_path / "simulated_participant_sigma.csv").exists()
     assert any(p.name == "simulated_participant_sigma.png" for p in paths)
     assert "SIMULATED" in section and "simulated-time" in section

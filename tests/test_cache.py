@@ -9,8 +9,8 @@ import sys
 import pandas as pd
 import pytest
 
-from lgp import cache as cache_module
-from lgp.cache import (PACKAGES, ROOT, Cache, import_closure, input_key, library_versions, module_imports,
+from lgp.app import cache as cache_module
+from lgp.app.cache import (PACKAGES, ROOT, Cache, import_closure, input_key, library_versions, module_imports,
                        modules_digest, write_csv_atomic)
 
 
@@ -220,7 +220,7 @@ def test_editing_a_module_the_computation_imports_changes_the_key(tmp_path):
 
     # symbolic is reached through lgp.planner, komo.linear through the lgp.komo
     # package, stimuli through an import inside physical_effort.
-    for module in ("lgp/symbolic.py", "lgp/komo/linear.py", "lgp/executor.py", "stimuli/__init__.py", "models/effort.py"):
+    for module in ("lgp/symbolic.py", "lgp/komo/linear.py", "lgp/executor.py", "stimuli/__init__.py", "models/effort/__init__.py"):
         path = root / module
         text = path.read_text()
         path.write_text(text + "\n# edited\n")
@@ -229,9 +229,28 @@ def test_editing_a_module_the_computation_imports_changes_the_key(tmp_path):
     assert modules_digest("models.effort", root=root) == before
 
     # files the effort computation never imports do not invalidate it
-    for module in ("lgp/reproduce.py", "lgp/view.py", "analysis/models.py", "models/risk/core.py"):
+    for module in ("lgp/reproduce.py", "lgp/app/view.py", "analysis/models.py", "models/risk/core.py"):
         (root / module).write_text((root / module).read_text() + "\n# edited\n")
     assert modules_digest("models.effort", root=root) == before
+
+
+def test_the_effort_key_does_not_hash_the_command_line(tmp_path):
+    """The effort CLI is models/effort/__main__.py: its help strings and the shared
+    argument checks of lgp.cli are no input of an effort, so editing them keeps
+    every cached effort (before the split, models.effort imported lgp.cli)."""
+    from lgp import reproduce
+
+    closure = set(import_closure("models.effort", "stimuli"))
+    assert "models.effort" in closure and "lgp.planner" in closure
+    assert not {"models.effort.__main__", "lgp.cli"} & closure
+    assert reproduce.effort_key_inputs()["code"] == modules_digest("models.effort", "stimuli")
+    root = _copy_project(tmp_path)
+    before = modules_digest("models.effort", "stimuli", root=root)
+    for module in ("models/effort/__main__.py", "lgp/cli.py"):
+        (root / module).write_text((root / module).read_text() + "\n# a help string edited\n")
+    assert modules_digest("models.effort", "stimuli", root=root) == before
+    (root / "models" / "effort" / "__init__.py").write_text((root / "models" / "effort" / "__init__.py").read_text() + "\n# edited\n")
+    assert modules_digest("models.effort", "stimuli", root=root) != before
 
 
 def test_a_new_import_is_followed(tmp_path):

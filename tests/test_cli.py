@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def _mains():
     from analysis import demo
     from lgp import reproduce, show
-    from models import effort
+    from models.effort import __main__ as effort
     from models.risk import __main__ as risk_cli
     from stimuli import sheet
 
@@ -146,6 +146,23 @@ def test_trial_ids_are_case_insensitive_on_the_command_line_and_in_the_loaders(t
         cli.trial_id("7X")
     with pytest.raises(stimuli.StimulusError, match="no trial '13E'"):
         stimuli.load_trial("13e")  # a well-formed id without a file: the loader's one-line error
+
+
+def test_effort_help_says_which_trials_it_runs_by_default(capsys, tmp_path, monkeypatch):
+    """With no trial named, python -m models.effort runs every trial file the
+    loader finds (stimuli.load_all), and its help says so, not "all 24"."""
+    from models.effort import __main__ as effort_cli
+
+    with pytest.raises(SystemExit):
+        effort_cli.main(["--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "all 24" not in help_text and "every trial file" in help_text
+    import stimuli
+
+    seen = []
+    monkeypatch.setattr(stimuli, "load_all", lambda: seen.append("load_all") or [])
+    monkeypatch.setattr(effort_cli.pd, "concat", lambda tables, **kw: pd.DataFrame())
+    assert effort_cli.main([]) == 0 and seen == ["load_all"]
 
 
 def test_counts_and_sigmas_are_checked_exactly():

@@ -76,8 +76,8 @@ def test_a_worker_killed_mid_run_loses_and_duplicates_nothing():
 @pytest.mark.slow
 def test_pipeline_tables_survive_a_killed_worker_and_the_client_writes_the_cache(tmp_path, monkeypatch):
     import stimuli
-    import lgp.cache
-    from lgp.cache import Cache
+    import lgp.app.cache
+    from lgp.app.cache import Cache
     from lgp.reproduce import effort_tables, risk_tables
 
     trials = [stimuli.load_trial(t) for t in ("1E", "4H")]
@@ -85,8 +85,8 @@ def test_pipeline_tables_survive_a_killed_worker_and_the_client_writes_the_cache
             risk_tables(trials, (0.05, 0.08), 4, 0, None, SerialExecutor(), Cache(tmp_path / "calm")))
 
     written = []
-    real = lgp.cache.write_bytes_atomic  # every cache entry is written through it
-    monkeypatch.setattr(lgp.cache, "write_bytes_atomic", lambda data, path: written.append(Path(path)) or real(data, path))
+    real = lgp.app.cache.write_bytes_atomic  # every cache entry is written through it
+    monkeypatch.setattr(lgp.app.cache, "write_bytes_atomic", lambda data, path: written.append(Path(path)) or real(data, path))
 
     class Killer(DaskExecutor):
         """Kills one worker process as soon as the first result of each map arrives."""

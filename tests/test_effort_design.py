@@ -196,8 +196,8 @@ def test_effort_sensitivity_section_ratios_and_order_changes(tmp_path):
 
     import pandas as pd
 
-    from lgp import sensitivity
-    from lgp.cache import Cache
+    from lgp.app import sensitivity
+    from lgp.app.cache import Cache
     from lgp.executor import SerialExecutor
     from lgp.paper import TRIAL_IDS
 

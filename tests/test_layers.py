@@ -1,6 +1,11 @@
 """The project is a layered house: every module imports only from its own layer or
 below, and no project modules import each other in a cycle. Imports are read from
-the source with `ast` (lgp.cache.module_imports), those inside functions too.
+the source with `ast` (lgp.app.cache.module_imports), those inside functions too.
+
+lgp/ holds two wings: the planning library (scene, logic, KOMO, planner) and the
+application wing (lgp/app/ with the commands lgp.reproduce and lgp.show). No module
+of the library imports the wing, and only the wing imports models/, analysis/ or
+stimuli/ (`wing_imports`).
 
 The rule is written once, here, as an ordered list of layers (lowest first) of
 module-name patterns. A module may import modules of lower layers freely and of
@@ -14,23 +19,26 @@ from __future__ import annotations
 from fnmatch import fnmatchcase
 from pathlib import Path
 
-from lgp.cache import PACKAGES, ROOT, module_imports
+from lgp.app.cache import PACKAGES, ROOT, module_imports
+
+#: lgp's application wing: the folder lgp/app/ and the two commands beside it.
+APP_WING = ["lgp.app", "lgp.app.*", "lgp.reproduce", "lgp.show"]
 
 #: (layer, module-name patterns, layers it may import besides its own; None = all lower)
 LAYERS = [
     # lgp.cli (argument checks, one-line errors) is used by CLIs on every floor, so it sits here
-    ("ground", ["lgp.paper", "lgp.scene", "lgp.geometry", "lgp.executor", "lgp.cli", "lgp.progress"], None),
+    ("ground", ["lgp.paper", "lgp.scene", "lgp.geometry", "lgp.executor", "lgp.cli"], None),
     ("stimuli and logic", ["stimuli", "lgp.assignment", "lgp.symbolic"], None),
     ("arm", ["lgp.arm"], None),
     ("KOMO", ["lgp.komo", "lgp.komo.*"], None),
     # the package lgp re-exports lgp.plan (lazily), so it sits with the planner
-    ("planner", ["lgp.planner", "lgp"], None),
+    ("planner", ["lgp.planner", "lgp.planner.*", "lgp"], None),
     ("models", ["models", "models.*"], None),
     # analysis imports nothing of the physics: no stimuli, scene, planner or models
     ("analysis", ["analysis", "analysis.*"], ["ground"]),
-    # CLIs, caches and report or page writers
-    ("application", ["lgp.reproduce", "lgp.show", "lgp.cache", "lgp.manifest", "lgp.view", "lgp.komo.view", "lgp.report",
-                     "lgp.build_stage", "lgp.page", "lgp.sensitivity", "stimuli.sheet", "stimuli.generate", "*.__main__"], None),
+    # the application: lgp's application wing (lgp/app/ and its two commands), CLIs,
+    # caches, report and page writers
+    ("application", [*APP_WING, "stimuli.sheet", "stimuli.generate", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]
 RANK = {name: k for k, (name, _, _) in enumerate(LAYERS)}
@@ -82,6 +90,26 @@ def upward_imports(graph: dict[str, list[str]]) -> list[str]:
     return broken
 
 
+def in_app_wing(module: str) -> bool:
+    return any(fnmatchcase(module, pattern) for pattern in APP_WING)
+
+
+def wing_imports(graph: dict[str, list[str]]) -> list[str]:
+    """One line per import inside lgp/ that crosses the wings the wrong way: a
+    module of the planning library importing the application wing, or importing
+    models/, analysis/ or stimuli/ (only the application wing may)."""
+    broken = []
+    for module, imports in sorted(graph.items()):
+        if module.split(".")[0] != "lgp" or in_app_wing(module):
+            continue
+        for imported in imports:
+            if in_app_wing(imported):
+                broken.append(f"{module} (planning library) imports {imported} (application wing)")
+            elif imported.split(".")[0] in ("models", "analysis", "stimuli"):
+                broken.append(f"{module} (planning library) imports {imported} (only the application wing may)")
+    return broken
+
+
 def cycles(graph: dict[str, list[str]]) -> list[list[str]]:
     """Strongly connected components with more than one module (Tarjan), and self-imports."""
     index, low, on_stack, stack, found = {}, {}, set(), [], []
@@ -123,6 +151,11 @@ def test_no_module_imports_from_a_higher_layer():
     assert not broken, "upward imports:\n" + "\n".join(broken)
 
 
+def test_the_planning_library_does_not_import_the_application_wing_or_the_models():
+    broken = wing_imports(import_graph())
+    assert not broken, "imports across lgp's two wings:\n" + "\n".join(broken)
+
+
 def test_no_import_cycle_between_project_modules():
     found = cycles(import_graph())
     assert not found, "import cycles: " + "; ".join(" <-> ".join(c) for c in found)
@@ -130,7 +163,8 @@ def test_no_import_cycle_between_project_modules():
 
 def test_the_checks_catch_an_upward_import_a_cycle_and_an_unplaced_module(tmp_path):
     """The checker on a small made-up tree: a scene that plans (in a function), a
-    cycle within a layer, analysis that reads stimuli, and a module with no layer."""
+    cycle within a layer, analysis that reads stimuli, a module with no layer, and
+    planning-library modules that import the application wing or stimuli."""
     files = {
         "lgp/__init__.py": "",
         "lgp/scene.py": "def f():\n    from lgp.planner import plan\n",
@@ -138,6 +172,14 @@ def test_the_checks_catch_an_upward_import_a_cycle_and_an_unplaced_module(tmp_pa
         "lgp/assignment.py": "import lgp.symbolic\n",
         "lgp/symbolic.py": "def f():\n    from lgp import assignment\n",
         "lgp/mystery.py": "",
+        "lgp/executor.py": "def f():\n    from lgp.app import cache\n",
+        "lgp/arm.py": "import stimuli\n",
+        "lgp/app/__init__.py": "",
+        "lgp/app/cache.py": "",
+        "lgp/app/page.py": "import stimuli\nfrom models import risk\n",
+        "lgp/reproduce.py": "from lgp.app import page\nimport analysis\n",
+        "models/__init__.py": "",
+        "models/risk.py": "",
         "analysis/__init__.py": "",
         "analysis/data.py": "from lgp.scene import X\nimport stimuli\n",
         "stimuli/__init__.py": "from lgp import scene\n",
@@ -147,8 +189,15 @@ def test_the_checks_catch_an_upward_import_a_cycle_and_an_unplaced_module(tmp_pa
         (tmp_path / name).write_text(text)
     graph = import_graph(tmp_path)
     assert upward_imports(graph) == ["analysis.data (analysis) imports stimuli (stimuli and logic)",
+                                     "lgp.executor (ground) imports lgp.app.cache (application)",
                                      "lgp.scene (ground) imports lgp.planner (planner)"]
     assert cycles(graph) == [["lgp.assignment", "lgp.symbolic"]]  # one layer, but a cycle
     assert [m for m in project_modules(tmp_path) if layer_of(m) is None] == ["lgp.mystery"]
     assert layer_of("models.risk.__main__") == APPLICATION and layer_of("models.risk.core") == "models"
-    assert layer_of("lgp.komo.view") == APPLICATION and layer_of("lgp.komo.solve") == "KOMO"
+    assert layer_of("lgp.app.page") == APPLICATION and layer_of("lgp.reproduce") == APPLICATION
+    assert layer_of("lgp.planner.design") == "planner" and layer_of("lgp.komo.solve") == "KOMO"
+    # inside lgp/: the planning library imports neither the application wing (a function
+    # of lgp.executor) nor stimuli (lgp.arm: a lower layer, so only the wing rule sees it);
+    # the wing imports what it likes
+    assert wing_imports(graph) == ["lgp.arm (planning library) imports stimuli (only the application wing may)",
+                                   "lgp.executor (planning library) imports lgp.app.cache (application wing)"]

@@ -135,7 +135,7 @@ def test_replay_renders_the_blocks_in_their_placement_colours(browser, results):
     from PIL import Image
 
     import stimuli
-    from lgp.view import order_colours, placement_order
+    from lgp.app.view import order_colours, placement_order
     from models.effort import plan_of_sample
 
     page, errors, refused = _open(browser, results / "replays" / "7H.html")

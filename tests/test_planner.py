@@ -107,7 +107,7 @@ def test_ipopt_reaches_the_snopt_optimum():
 
 
 def test_replay_html_is_self_contained_and_figure_is_written(tmp_path):
-    from lgp.view import write_html, write_png
+    from lgp.app.view import write_html, write_png
 
     trial = stimuli.load_trial("1E")
     p = plan(trial.sample_initial(np.random.default_rng(0)), trial.target)

@@ -1,7 +1,7 @@
 """The progress line: counts, rate and ETA on a terminal; one line per stage otherwise."""
 import io
 
-from lgp.progress import Progress
+from lgp.app.progress import Progress
 
 
 def test_not_a_terminal_prints_one_line_when_the_stage_ends():
@@ -34,7 +34,7 @@ def test_an_empty_stage_says_nothing():
 def test_log_lines_go_above_the_bar_on_a_terminal(monkeypatch):
     import sys
 
-    from lgp.progress import log
+    from lgp.app.progress import log
 
     out = io.StringIO()
     monkeypatch.setattr(sys, "stderr", out)

@@ -29,3 +29,95 @@ def test_plan_repr_is_one_short_line():
     text = repr(p)
     assert "\n" not in text and len(text) < 300, text
     assert f"{len(p.actions)} actions" in text and trial.target.label.split("-")[0] in text
+
+
+# ----------------------------------------------------------------------------- the README's commands
+#
+# Every `python -m ...` command the README shows (in a ```bash block or inline) is
+# checked here: the cheap ones run as written (in a scratch folder, with the
+# README's placeholders filled in), the long ones (the paper's pipeline) have their
+# arguments parsed and checked by the command's own parser (their run is tested
+# end to end in test_reproduce.py / test_page_browser.py), and the two pytest
+# commands are the ones .ci/run runs.
+
+import os
+import shlex
+import subprocess
+import sys
+
+import pytest
+
+ROOT = README.parent
+#: The README's placeholders (DIR, N, S ...) and the values a test run gives them.
+PLACEHOLDERS = {"DIR": "generated", "N": "3", "S": "0", "FILE.csv": "human.csv", "H": "0.02"}
+#: Commands whose run is the paper's pipeline (minutes): parsed, not run.
+PARSED_ONLY = ("lgp.reproduce",)
+
+
+def readme_commands(text: str | None = None) -> list[str]:
+    """Every `python -m MODULE ...` command line of the README, as written."""
+    text = README.read_text() if text is None else text
+    found = []
+    for block in re.findall(r"```bash\n(.*?)```", text, flags=re.S):
+        for line in block.splitlines():
+            line = line.split("#", 1)[0].strip()
+            if line.startswith("python -m "):
+                found.append(line)
+    for span in re.findall(r"`([^`]+)`", re.sub(r"```.*?```", "", text, flags=re.S)):
+        span = " ".join(span.split())
+        if re.fullmatch(r"python -m [\w.]+( [^:]*)?", span):
+            found.append(span)
+    return list(dict.fromkeys(found))
+
+
+def _argv(command: str) -> tuple[str, list[str]]:
+    words = shlex.split(command)
+    assert words[:2] == ["python", "-m"], command
+    return words[2], [PLACEHOLDERS.get(w, w) for w in words[3:]]
+
+
+def test_the_readme_names_its_commands():
+    modules = {_argv(c)[0] for c in readme_commands()}
+    assert {"pytest", "lgp.reproduce", "lgp.show", "stimuli.sheet", "stimuli.generate", "models.risk"} <= modules, modules
+
+
+def test_the_readmes_test_commands_are_what_ci_runs():
+    ci = (ROOT / ".ci" / "run").read_text()
+    for command in readme_commands():
+        module, argv = _argv(command)
+        if module == "pytest" and argv == ["-q"]:
+            assert command in ci, f"README's {command!r} is not what .ci/run runs"
+    install = re.search(r"```bash\n(pip install [^#\n]*?)\s*#", README.read_text()).group(1).strip()
+    assert install in ci, f"README's install line {install!r} is not .ci/run's"
+    assert "slow:" in (ROOT / "pyproject.toml").read_text(), "the README's -m 'not slow' needs the marker registered"
+
+
+@pytest.mark.parametrize("command", [c for c in readme_commands() if _argv(c)[0] in PARSED_ONLY])
+def test_the_readmes_pipeline_commands_parse(command, tmp_path, monkeypatch):
+    import importlib
+
+    module, argv = _argv(command)
+    monkeypatch.chdir(tmp_path)
+    args = importlib.import_module(module).parse_args(argv)
+    assert args.out == "results"
+
+
+def _runnable(commands: list[str]) -> list[str]:
+    """The commands to run: not the pipeline's or pytest's, and not a bare module name
+    (the layout table's `python -m lgp.show`) when the README shows that module's use."""
+    used = {_argv(c)[0] for c in commands if _argv(c)[1]}
+    return [c for c in commands if _argv(c)[0] not in PARSED_ONLY + ("pytest",) and (_argv(c)[1] or _argv(c)[0] not in used)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command", _runnable(readme_commands()))
+def test_the_readmes_commands_run_as_written(command, tmp_path):
+    module, argv = _argv(command)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    run = subprocess.run([sys.executable, "-m", module, *argv], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, f"{command}\n{run.stderr[-2000:]}"
+    for flag in ("--out", "--html", "--png"):  # what it says it writes is there
+        if flag in argv:
+            target = tmp_path / argv[argv.index(flag) + 1]
+            assert target.exists() and (target.is_dir() or target.stat().st_size > 0), (command, target)

@@ -7,7 +7,7 @@ import shutil
 import pandas as pd
 import pytest
 
-from lgp.cache import read_entry
+from lgp.app.cache import read_entry
 
 import models.effort
 import models.risk

@@ -122,8 +122,10 @@ def test_rules_are_the_documented_ones():
 
 
 @pytest.mark.parametrize("args,message", [
-    (["--fall-rule", "vertical"], "unknown fall rule"),
+    (["--fall-rule", "vertical"], "argument --fall-rule: unknown fall rule 'vertical'"),
     (["--fall-threshold", "0"], "fall threshold must be > 0"),
+    # 3D is 3d (like trial ids, case-insensitive): the rule passes and the threshold is what is refused
+    (["--fall-rule", "3D", "--fall-threshold", "0"], "fall threshold must be > 0"),
     (["--engine", "bullet"], "unknown physics engine"),
     (["--engine", "physx", "--profile", "fast"], "unknown physx profile"),
 ])
@@ -149,3 +151,14 @@ def test_physx_without_the_extra_says_how_to_install(tmp_path):
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and 'pip install -e ".[physx]"' in lines[0], res.stderr
+
+
+def test_a_fall_rule_is_read_case_insensitively_and_given_back_in_its_listed_spelling():
+    import argparse
+
+    from lgp import cli
+
+    check = cli.one_of(FALL_RULES, "fall rule")
+    assert [check(t) for t in ("3D", " Horizontal", "3d")] == ["3d", "horizontal", "3d"]
+    with pytest.raises(argparse.ArgumentTypeError, match="unknown fall rule 'vertical'; known fall rules: horizontal, 3d"):
+        check("vertical")

@@ -9,8 +9,9 @@ import pandas as pd
 import pytest
 
 import stimuli
-from lgp import reproduce, sensitivity
-from lgp.cache import Cache
+from lgp import reproduce
+from lgp.app import sensitivity
+from lgp.app.cache import Cache
 from lgp.executor import SerialExecutor
 from models.risk import available_engines, risk_table
 

@@ -139,3 +139,25 @@ def _pairwise_scatter(start, rng):
         if len(placed) == len(start.scattered):
             return placed
     raise AssertionError("reference sampler failed")
+
+
+@pytest.mark.parametrize("old, new, problem", [
+    # the case: a colon inside a value ("mapping values are not allowed")
+    ("dimension: ", "dimension: a: ", "mapping values are not allowed"),
+    ("p_WB: [0.35, 0.0, 0.0127]", "p_WB: [0.35, 0.0, 0.0127", "expected ',' or ']'"),
+])
+def test_a_yaml_error_keeps_its_line_and_column_in_the_one_line_a_cli_prints(tmp_path, old, new, problem):
+    from lgp.cli import one_line
+
+    assert old in BASE
+    text = BASE.replace(old, new, 1)
+    with pytest.raises(StimulusError) as info:
+        _load(tmp_path, text)
+    line = one_line(info.value)
+    assert "\n" not in str(info.value) and "more line(s)" not in line
+    m = re.search(r"not valid YAML at line (\d+), column (\d+): (.*)", line)
+    assert m and problem in m.group(3), line
+    # the position names the line that was broken (the first line that differs from BASE, or after it)
+    first_changed = next(k for k, (a, b) in enumerate(zip(BASE.splitlines(), text.splitlines())) if a != b) + 1
+    assert first_changed <= int(m.group(1)) <= first_changed + 1, (line, first_changed)
+    assert int(m.group(2)) >= 1

@@ -1,4 +1,4 @@
-"""Plan views (lgp.view) and the results page's pure parts (lgp.page)."""
+"""Plan views (lgp.app.view) and the results page's pure parts (lgp.app.page)."""
 from __future__ import annotations
 
 import re
@@ -9,8 +9,8 @@ import pytest
 
 import stimuli
 from lgp.paper import BUILD_SITE
-from lgp.view import CAMERA_FOV, camera_frame, cumulative_effort, order_colours, placement_order
-from models.effort import kinetic_energy, kinetic_energy_by_action, plan_of_sample
+from lgp.app.view import CAMERA_FOV, camera_frame, order_colours, placement_order
+from models.effort import cumulative_effort, kinetic_energy, kinetic_energy_by_action, plan_of_sample
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +61,7 @@ def test_the_camera_sees_the_build_site_the_blocks_and_the_hand(trial_id):
 
 
 def test_pair_verdicts_mark_where_the_paper_and_we_differ():
-    from lgp.page import pair_verdicts
+    from lgp.app.page import pair_verdicts
 
     pairs = pd.DataFrame({
         "pair": [4, 6, 11, 7],
@@ -77,7 +77,7 @@ def test_pair_verdicts_mark_where_the_paper_and_we_differ():
 
 
 def test_histogram_draws_every_layout_once():
-    from lgp.page import histogram_svg
+    from lgp.app.page import histogram_svg
 
     values = np.random.default_rng(0).normal(0.5, 0.05, 30)
     svg = histogram_svg(values)
@@ -87,7 +87,7 @@ def test_histogram_draws_every_layout_once():
 
 
 def test_a_page_without_a_trials_rows_names_the_trial(tmp_path):
-    from lgp.page import write_page
+    from lgp.app.page import write_page
 
     trial = stimuli.load_trial("1E")
     samples = pd.DataFrame({"trial": ["1E"], "sample": [0], "effort": [0.1], "n_actions": [4]})
@@ -100,7 +100,7 @@ def test_the_page_shows_fits_profile_bootstrap_and_every_participant(tmp_path):
     """With (here SIMULATED) responses the page carries the Results section, labelled."""
     from analysis.run import run_analysis
     from analysis.simulate import simulate_participants
-    from lgp.page import write_page
+    from lgp.app.page import write_page
     from lgp.paper import TRIAL_IDS
 
     trials = stimuli.load_all()

@@ -38,7 +38,7 @@ from models.risk.noise import draw_normals, perturb, perturb_from_normals  # noq
 from models.risk.static import static_stable  # noqa: F401
 #: Risk through the build (beyond the paper; models.risk.build), re-exported lazily:
 #: build risk plans stages with the logic layer, and importing it here would make
-#: every risk result depend on the planner's source (lgp.cache keys by imports).
+#: every risk result depend on the planner's source (lgp.app.cache keys by imports).
 _BUILD = ("MEASURES", "build_risk", "build_risk_aggregates", "build_risk_table", "measure_table", "plan_stages",
           "stage_curve")
 

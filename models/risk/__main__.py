@@ -43,7 +43,7 @@ def main(argv=None) -> int:
     p.add_argument("--engine", default=DEFAULT_ENGINE, help=f"physics engine: {', '.join(ENGINES)} (default %(default)s)")
     p.add_argument("--profile", help="engine profile: " + "; ".join(f"{e}: {', '.join(v)}" for e, v in PROFILES.items())
                    + " (default: faithful; game-defaults is unfaithful, docs/risk.md)")
-    p.add_argument("--fall-rule", default=DEFAULT_FALL_RULE, help=f"{' or '.join(FALL_RULES)} displacement (default %(default)s)")
+    p.add_argument("--fall-rule", type=cli.one_of(FALL_RULES, "fall rule"), default=DEFAULT_FALL_RULE, help=f"{' or '.join(FALL_RULES)} displacement (default %(default)s)")
     p.add_argument("--fall-threshold", type=float, default=FALL_THRESHOLD, help="fall threshold in units of d (default %(default)s)")
     p.add_argument("--jobs", type=cli.positive_int, default=None, help="worker processes (default: all cores)")
     p.add_argument("--noise-rule", choices=NOISE_RULES, default=DEFAULT_NOISE_RULE,

@@ -16,12 +16,10 @@ from __future__ import annotations
 import datetime
 import html
 import importlib.metadata
-import logging
 import os
 import platform
 import shlex
 import shutil
-from collections import Counter
 import sys
 import time
 from pathlib import Path
@@ -29,7 +27,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lgp.cache import Cache, files_digest, input_key, library_versions as _library_versions, modules_digest
+from lgp.app.cache import Cache, input_key, modules_digest
+from lgp.app.replays import page_files
 
 #: |(H - E) / E| below this is a solver-level tie of effort (docs/results.md, pair 6).
 EFFORT_TIE = 1e-4
@@ -156,13 +155,6 @@ def trial_picture(trial, seed: int, path: Path) -> Path:
     return path
 
 
-def _files(cache: Cache) -> Counter:
-    """(kind, "hit" | "miss") counts of the page's files (pictures, replays) kept beside
-    `cache`'s own table counts, which are about computed results only."""
-    if not hasattr(cache, "page_files"):
-        cache.page_files = Counter()
-    return cache.page_files
-
 
 def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None) -> dict[str, Path]:
     """Picture of every trial under `out_dir`, copied from `cache` when drawn before."""
@@ -176,110 +168,15 @@ def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None)
             if cached.exists():
                 path.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(cached, path)
-                _files(cache)["picture", "hit"] += 1
+                page_files(cache)["picture", "hit"] += 1
                 paths[trial.id] = path
                 continue
         trial_picture(trial, seed, path)
         if cached is not None:
             cached.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(path, cached)
-            _files(cache)["picture", "miss"] += 1
+            page_files(cache)["picture", "miss"] += 1
         paths[trial.id] = path
-    return paths
-
-
-# ----------------------------------------------------------------------------- 3-D replays
-
-#: The viewer's JavaScript library, shared by the replays of a run (3 MB; each replay
-#: is then a few hundred kB of recording instead of 3 MB).
-REPLAY_LIBRARY = "meshcat.min.js"
-_LIB_TAG = '<script type="text/javascript">'
-
-
-def split_library(page: str) -> tuple[str, str | None]:
-    """(page with the inlined Meshcat library replaced by a relative <script src>, library)."""
-    start = page.find(_LIB_TAG)
-    end = page.find("</script>", start)
-    if start < 0 or end < 0 or "MeshCat" not in page[start:start + 2000]:
-        return page, None  # not the layout this expects: keep the page whole
-    return page[:start] + f'<script src="{REPLAY_LIBRARY}"></script>' + page[end + len("</script>"):], page[start + len(_LIB_TAG):end]
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
-def _replay_job(item) -> float:
-    """Plan sample 0 of a trial and write its replay; returns the wall time (s)."""
-    import time
-
-    from lgp.view import replay_html
-    from models.effort import plan_of_sample
-
-    trial, seed, path, *options = item
-    logging.getLogger("drake").setLevel(logging.WARNING)  # not a line per replay about Meshcat's port
-    t0 = time.perf_counter()
-    plan = plan_of_sample(trial, seed, 0, **(options[0] if options else {}))
-    title = f"{trial.id}: {trial.description} (sample 0 of seed {seed})"
-    page, library = split_library(replay_html(plan, title))
-    path = Path(path)
-    if library is not None and not (path.parent / REPLAY_LIBRARY).exists():
-        _write_atomic(path.parent / REPLAY_LIBRARY, library)
-    _write_atomic(path, page)
-    return time.perf_counter() - t0
-
-
-def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, executor=None, log=None,
-                  planner_options: dict | None = None) -> dict[str, Path]:
-    """``<out_dir>/<trial>.html`` for every trial: the replay of layout sample 0 of `seed`
-    (planned with `planner_options`, e.g. approach_height and slices_per_phase).
-
-    One plan per trial (the one behind row (trial, 0) of effort_samples.csv); a replay
-    made before with the same trial, seed and code is copied from `cache`.
-    """
-    from lgp.executor import SerialExecutor
-
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    drake = library_versions()["drake"]
-    version = input_key(code=modules_digest("lgp.page", "lgp.view", "models.effort", "stimuli"),
-                        data=files_digest("models/*.sdf", "models/*.urdf", "models/*.yaml"),
-                        libraries=_library_versions(("drake", "numpy", "scipy", "matplotlib")))
-    paths, todo, cached = {}, [], {}
-    for trial in trials:
-        paths[trial.id] = out_dir / f"{trial.id}.html"
-        if cache is not None and cache.enabled:
-            key = input_key(trial=trial.id, digest=trial.digest, seed=seed, code=version, **(planner_options or {}))
-            cached[trial.id] = cache.root / f"replay-{key}.html"
-    lib = out_dir / REPLAY_LIBRARY
-    lib_cache = cache.root / f"meshcat-{drake}.min.js" if cache is not None and cache.enabled else None
-    if lib_cache is not None and lib_cache.exists():
-        shutil.copyfile(lib_cache, lib)
-    else:
-        lib.unlink(missing_ok=True)  # the first job writes it, from this Drake
-    for trial in trials:
-        c = cached.get(trial.id)
-        if c is not None and c.exists() and lib.exists():
-            shutil.copyfile(c, paths[trial.id])
-            _files(cache)["replay", "hit"] += 1
-        else:
-            todo.append(trial)
-    if todo:
-        times = (executor or SerialExecutor()).map(_replay_job, [(t, seed, str(paths[t.id]), dict(planner_options or {})) for t in todo])
-        if log:
-            log(f"[replays] {len(todo)} trials planned (sample 0) and recorded: {sum(times):.1f} s of work, "
-                f"{max(times):.1f} s the longest")
-        for trial in todo:
-            if trial.id in cached:
-                cached[trial.id].parent.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(paths[trial.id], cached[trial.id])
-                _files(cache)["replay", "miss"] += 1
-        if lib_cache is not None and lib.exists():
-            lib_cache.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(lib, lib_cache)
     return paths
 
 
@@ -576,11 +473,11 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         "engine": engine,
         "engine_settings": settings,
         "stages": dict(clock.laps),
-        "cache": {"hits": cache.hits + sum(n for (_, o), n in _files(cache).items() if o == "hit"),
-                  "misses": cache.misses + sum(n for (_, o), n in _files(cache).items() if o == "miss"),
+        "cache": {"hits": cache.hits + sum(n for (_, o), n in page_files(cache).items() if o == "hit"),
+                  "misses": cache.misses + sum(n for (_, o), n in page_files(cache).items() if o == "miss"),
                   "root": str(cache.root),
-                  "summary": "; ".join([cache.summary()] + [f"{k} {_files(cache)[k, 'hit']} hit, {_files(cache)[k, 'miss']} miss"
-                                                            for k in sorted({k for k, _ in _files(cache)})])},
+                  "summary": "; ".join([cache.summary()] + [f"{k} {page_files(cache)[k, 'hit']} hit, {page_files(cache)[k, 'miss']} miss"
+                                                            for k in sorted({k for k, _ in page_files(cache)})])},
         "finished": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": f"{platform.node()}, {os.cpu_count()} cores",
         "load": "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),

@@ -35,7 +35,7 @@ from typing import Callable, Iterable
 
 import pandas as pd
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # lgp/app/cache.py -> the repository
 #: The project's top-level packages: imports of anything else are libraries.
 PACKAGES = ("lgp", "models", "stimuli", "analysis")
 #: Libraries whose version can change a number the pipeline computes.

@@ -37,7 +37,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from lgp.cache import Cache, input_key, write_csv_atomic
+from lgp.app.cache import Cache, input_key, write_csv_atomic
 from lgp.paper import BLOCK_SIZE, PAPER_SIGMA, RISK_PAIRS
 
 #: The noise levels of the risk section: the paper's sigma and the top of its grid.

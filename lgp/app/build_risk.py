@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lgp.cache import Cache, input_key, library_versions, modules_digest, write_csv_atomic
+from lgp.app.cache import Cache, input_key, library_versions, modules_digest, write_csv_atomic
 from lgp.paper import PAIRS
 
 #: The noise levels the build-risk report uses (issue 11: 0.065 d and 0.10 d).

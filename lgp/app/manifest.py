@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from lgp.cache import Cache
+from lgp.app.cache import Cache
 
 MANIFEST = "manifest.json"
 #: What the pipeline writes at the top of an output folder (besides the manifest and the cache).

@@ -21,20 +21,20 @@ here (and of the planner): `approach_height` (m; default lgp.planner.APPROACH =
 clearance constraint instead) and `slices_per_phase` (default
 lgp.planner.SLICES_PER_PHASE = 20). docs/effort.md says how much each moves effort.
 
-Command line, the table of docs/effort.md::
+The command line (the table of docs/effort.md) is models/effort/__main__.py,
+kept out of this module so that the effort cache key (lgp.app.cache.modules_digest of
+``models.effort``) does not hash the CLI or its argument helpers::
 
     python -m models.effort --samples 30 --jobs 2 --out effort_samples.csv
     python -m models.effort 2E 2H --approach-height 0 --slices 40
 """
 from __future__ import annotations
 
-import sys
 from typing import Callable, NamedTuple
 
 import numpy as np
 import pandas as pd
 
-from lgp import cli
 from lgp.paper import SAMPLES
 from lgp.executor import borrowed
 from lgp.planner import APPROACH, PHASE_DURATION, SLICES_PER_PHASE, PlanningError, check_design, plan
@@ -76,6 +76,15 @@ def kinetic_energy_by_action(plan, mass: float = BLOCK_MASS) -> list[float]:
         lo, hi = (k - 1) * S, k * S
         out.append(sum(path_kinetic_energy(p[lo:hi + 1], plan.tau, mass) for p in plan.p_WB.values()))
     return out
+
+
+def cumulative_effort(plan) -> np.ndarray:
+    """Effort (J s) integrated from time 0 to each slice; the last entry is the plan's effort."""
+    v = np.stack([np.diff(p, axis=0) for p in plan.p_WB.values()]) / plan.tau  # (blocks, n-1, 3)
+    # The same rule as kinetic_energy, one slice interval at a time, so the last
+    # value equals kinetic_energy(plan) (checked in tests/test_view.py).
+    per_step = 0.5 * BLOCK_MASS * (v ** 2).sum(axis=(0, 2)) * plan.tau
+    return np.concatenate([[0.0], np.cumsum(per_step)])
 
 
 def describe(plan) -> str:
@@ -206,38 +215,13 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
     return EffortResult(float(table["effort"].mean()), table)
 
 
-PROG = "python -m models.effort"
-
-
-def main(argv=None) -> int:
-    parser = cli.parser(PROG, description="Physical effort of every trial.")
-    parser.add_argument("trials", nargs="*", type=cli.trial_id, help="trial ids (default: all 24; case-insensitive)")
-    parser.add_argument("--samples", type=cli.positive_int, default=SAMPLES, help="layouts per trial (default %(default)s)")
-    parser.add_argument("--seed", type=cli.seed, default=0)
-    parser.add_argument("--jobs", type=cli.positive_int, default=1)
-    parser.add_argument("--out", type=cli.output_file, help="write the per-sample table (CSV) here")
-    parser.add_argument("--approach-height", type=cli.approach_height, default=APPROACH,
-                        help="vertical approach/retreat leg (m) at every grasp and place; 0 = clearance constraint "
-                             "instead (default %(default)s)")
-    parser.add_argument("--slices", type=cli.positive_int, default=SLICES_PER_PHASE,
-                        help="KOMO slices per 1 s phase (default %(default)s)")
-    args = parser.parse_args(argv)
-
-    import stimuli
-
-    trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
-    tables = []
-    for trial in trials:
-        mean, table = physical_effort(trial, samples=args.samples, seed=args.seed, jobs=args.jobs,
-                                      approach_height=args.approach_height, slices_per_phase=args.slices)
-        tables.append(table)
-        print(f"{trial.id:>4}  effort {mean:8.4f} J s  sd {table['effort'].std(ddof=1) if len(table) > 1 else 0.0:7.4f}  "
-              f"actions {table['n_actions'].iloc[0]:3d}  {table['solve_time'].mean():6.3f} s/plan", flush=True)
-    table = pd.concat(tables, ignore_index=True)
-    if args.out:
-        table.to_csv(args.out, index=False)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(cli.run_cli(main, prog=PROG))
+def summarise_effort(samples: pd.DataFrame, trials) -> pd.DataFrame:
+    """One row per trial (in the order of `trials`) from the tidy (trial, sample)
+    table: trial, pair, level, effort (the mean over layouts, J s), effort_sd
+    (ddof 1) and samples. `pair` is empty for a trial of no pair."""
+    order = {t.id: i for i, t in enumerate(trials)}
+    g = samples.groupby("trial")["effort"]
+    df = pd.DataFrame({"effort": g.mean(), "effort_sd": g.std(ddof=1), "samples": g.size()}).reset_index()
+    df["pair"] = df["trial"].map({t.id: t.pair for t in trials}).astype("Int64")  # empty for a trial of no pair
+    df["level"] = df["trial"].map({t.id: t.level for t in trials})
+    return df.sort_values("trial", key=lambda s: s.map(order)).reset_index(drop=True)[["trial", "pair", "level", "effort", "effort_sd", "samples"]]

@@ -1,6 +1,6 @@
 """Looking at a solved plan (lgp.planner.Plan): a self-contained 3-D replay and a figure.
 
-    from lgp.view import write_html, write_png
+    from lgp.app.view import write_html, write_png
     write_html(plan, "7H.html"); write_png(plan, "7H.png")
 
 `write_html` records the arm and blocks into a Drake Meshcat animation
@@ -54,17 +54,6 @@ def order_colours(plan) -> dict[str, tuple[float, float, float]]:
     return colours
 
 
-def cumulative_effort(plan) -> np.ndarray:
-    """Effort (J s) integrated from time 0 to each slice; the last entry is the plan's effort."""
-    from models.effort import BLOCK_MASS
-
-    v = np.stack([np.diff(p, axis=0) for p in plan.p_WB.values()]) / plan.tau  # (blocks, n-1, 3)
-    # The same rule as models.effort.kinetic_energy, one slice interval at a time, so the
-    # last value equals kinetic_energy(plan) (checked in tests/test_view.py).
-    per_step = 0.5 * BLOCK_MASS * (v ** 2).sum(axis=(0, 2)) * plan.tau
-    return np.concatenate([[0.0], np.cumsum(per_step)])
-
-
 def camera_frame(plan) -> tuple[np.ndarray, np.ndarray]:
     """(p_WC, p_WT): a camera on the agent's side, above the table, looking at the work.
 
@@ -82,7 +71,7 @@ def camera_frame(plan) -> tuple[np.ndarray, np.ndarray]:
 
 def _caption_data(plan, title: str) -> dict:
     from lgp.planner import PHASE_DURATION
-    from models.effort import kinetic_energy_by_action
+    from models.effort import cumulative_effort, kinetic_energy_by_action
 
     cum = cumulative_effort(plan)
     energies = kinetic_energy_by_action(plan) if plan.actions else []
