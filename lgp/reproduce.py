@@ -6,6 +6,8 @@
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
     python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/app/sensitivity.py)
     python -m lgp.reproduce --fall-rule 3d --fall-threshold 0.1   # the risk model with another fall rule
+    python -m lgp.reproduce --sigma-grid wide       # risk past the paper's grid (0.05..0.30 d): "Pairs over sigma"
+    python -m lgp.reproduce --noise-rule settle     # noisy blocks set onto their supports instead of lifted
     python -m lgp.reproduce --approach-height 0 --slices 40       # effort with another motion design (docs/effort.md)
 
 Every expensive result (effort of one trial, risk curve of one trial) is cached
@@ -29,7 +31,7 @@ import pandas as pd
 
 import stimuli
 from lgp import cli
-from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, TRIAL_IDS
+from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, SIGMA_GRIDS, TRIAL_IDS
 from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
 from lgp.app.progress import Progress
 from lgp.app.progress import log as progress_log
@@ -57,7 +59,8 @@ def effort_key_inputs() -> dict:
             "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
 
 
-def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> dict:
+def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_threshold: float = 0.25,
+                    noise_rule: str = "lift") -> dict:
     """What a risk table depends on besides the trial and the parameters: the source
     of every project module risk_table can run (the engine module is loaded by name,
     so it is named here), the engine's settings, the fall rule, and the libraries."""
@@ -68,7 +71,7 @@ def risk_key_inputs(engine: str | None, fall_rule: str = "horizontal", fall_thre
     extra = (spec.requires,) if spec.requires else ()  # e.g. sapien for PhysX
     return {"code": modules_digest("models.risk.core", spec.target.split(":")[0], "stimuli"),
             "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra),
-            "fall_rule": fall_rule, "fall_threshold": float(fall_threshold)}
+            "fall_rule": fall_rule, "fall_threshold": float(fall_threshold), "noise_rule": noise_rule}
 
 
 def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
@@ -134,18 +137,27 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
     return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 
+#: The per-run columns a run caches (what the risk table and the required
+#: precision's bootstrap over runs are computed from).
+RUN_CACHE_COLUMNS = ["trial", "sigma", "run", "fell", "engine", "fall_rule", "fall_threshold", "noise_rule"]
+
+
 def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6,
-                fall_rule: str = "horizontal", fall_threshold: float = 0.25) -> pd.DataFrame:
+                fall_rule: str = "horizontal", fall_threshold: float = 0.25, noise_rule: str = "lift",
+                runs_out: list | None = None) -> pd.DataFrame:
     """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
 
+    Each trial's cached file holds its runs' verdicts (RUN_CACHE_COLUMNS); the
+    risk table (with its Wilson intervals) is summarised from them, and
+    `runs_out`, when given, receives the per-run table (for the required precision).
     Uncached trials are simulated a few at a time on the run's one executor, so
     the grid keeps every worker busy and an interruption loses at most one chunk.
     """
-    from models.risk import risk_table
+    from models.risk import risk_table, summarise
 
-    depends = risk_key_inputs(engine, fall_rule, fall_threshold)
+    depends = risk_key_inputs(engine, fall_rule, fall_threshold, noise_rule)
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
-    tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
+    tables = {t.id: cache.get("riskruns", keys[t.id]) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
     bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs")
     for k in range(0, len(todo), chunk):
@@ -153,16 +165,18 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
         t0 = time.perf_counter()
         base = bar.done
         table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
-                           fall_rule=fall_rule, fall_threshold=fall_threshold,
-                           progress=lambda done, total: bar.advance(base + done - bar.done))
+                           fall_rule=fall_rule, fall_threshold=fall_threshold, noise_rule=noise_rule, runs=True,
+                           progress=lambda done, total: bar.advance(base + done - bar.done))[RUN_CACHE_COLUMNS]
         for t in group:
-            tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
+            tables[t.id] = cache.put("riskruns", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     if todo:
         bar.close()
     out = []
     for k, trial in enumerate(trials, 1):
-        df = tables[trial.id]
+        if runs_out is not None:
+            runs_out.append(tables[trial.id])
+        df = summarise(tables[trial.id].assign(trial=tables[trial.id]["trial"].astype(str)))
         curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
         _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)
@@ -323,7 +337,8 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         "",
         f"Settings: trials {len(effort)}, M = {args.samples} layouts, N = {args.n_sims} runs per sigma, "
         f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), "
-        f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, seed {args.seed}, "
+        f"fall rule {getattr(args, 'fall_rule', 'horizontal')} > {getattr(args, 'fall_threshold', 0.25):g} d, "
+        f"noise rule {getattr(args, 'noise_rule', 'lift')}, seed {args.seed}, "
         f"effort planned with {_design_text(getattr(args, 'approach_height', None), getattr(args, 'slices', None))}"
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
         f"Risk engine: {engine or args.engine or 'default'}.",
@@ -391,7 +406,12 @@ def parse_args(argv=None) -> argparse.Namespace:
                    help="trial ids (case-insensitive), or 'all' for every trial file (default: the paper's 24)")
     p.add_argument("--samples", type=cli.positive_int, help="M, random layouts of A per trial (default 30; --quick 3)")
     p.add_argument("--n-sims", type=cli.positive_int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
-    p.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
+    grid = p.add_mutually_exclusive_group()
+    grid.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
+    grid.add_argument("--sigma-grid", choices=list(SIGMA_GRIDS),
+                      help="a named sigma grid: paper (default) or wide (0.05..0.30 d step 0.01 plus the paper's points)")
+    p.add_argument("--noise-rule", choices=["lift", "settle"], default="lift",
+                   help="heights of the noisy blocks: lift (default) or settle (every block rests on what lies beneath it; docs/risk.md)")
     p.add_argument("--engine", help="physics engine for risk: mujoco, drake, physx (optional extra) (default: mujoco)")
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
     p.add_argument("--fall-rule", default="horizontal", help="a run falls by horizontal (default) or 3d displacement")
@@ -414,7 +434,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--risk-chunk", type=cli.positive_int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
     p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/app/build_risk.py)")
     p.add_argument("--build-sigmas", type=cli.sigma, nargs="+", help="noise levels of --build-risk in (0, 1] (default 0.065 0.1)")
-    p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
+    p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care", "sequential"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
     p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
@@ -438,7 +458,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     q = QUICK if args.quick else {}
     args.samples = args.samples if args.samples is not None else q.get("samples", SAMPLES)
     args.n_sims = args.n_sims if args.n_sims is not None else q.get("n_sims", N_SIMS)
-    args.sigmas = tuple(dict.fromkeys(args.sigmas or q.get("sigmas", SIGMA_GRID)))
+    args.sigmas = tuple(dict.fromkeys(SIGMA_GRIDS[args.sigma_grid] if args.sigma_grid else
+                                      args.sigmas or q.get("sigmas", SIGMA_GRID)))
     args.n_boot = args.n_boot if args.n_boot is not None else q.get("n_boot", N_BOOT)
     from lgp.planner import APPROACH, SLICES_PER_PHASE
 
@@ -521,8 +542,10 @@ def run(args, argv=None) -> int:
                                        approach_height=args.approach_height, slices_per_phase=args.slices)
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
+        risk_runs: list = []
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
-                           fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
+                           fall_rule=args.fall_rule, fall_threshold=args.fall_threshold, noise_rule=args.noise_rule,
+                           runs_out=risk_runs)
         clock.lap("risk")
         sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log,
                                                                      effort_tables=effort_tables)) \
@@ -535,7 +558,7 @@ def run(args, argv=None) -> int:
             stages = build_risk.build_risk_tables(trials, args.build_sigmas or build_risk.BUILD_SIGMAS, args.n_sims,
                                                    args.samples, args.seed, args.engine, executor, cache,
                                                    fall_rule=args.fall_rule, fall_threshold=args.fall_threshold,
-                                                   approach_height=args.approach_height)
+                                                   approach_height=args.approach_height, noise_rule=args.noise_rule)
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,
@@ -544,9 +567,13 @@ def run(args, argv=None) -> int:
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
+    from models.risk.precision import required_precision
+
+    precision = required_precision(pd.concat(risk_runs, ignore_index=True), n_boot=args.n_boot, seed=args.seed)
+    written.append(write_csv_atomic(precision, out / "risk_precision.csv"))
     if replays:
         written += [Path(p) for p in replays.values()]
-    sections, build = [], None
+    sections, build, over_html = [], None, None
     for s in sensitive:  # --sensitivity (lgp/app/sensitivity.py)
         written += s.files
         sections.append("\n".join(s.lines))
@@ -567,6 +594,15 @@ def run(args, argv=None) -> int:
         e_samples, e_mean, r = (df[df["trial"].isin(TRIAL_IDS)] for df in (effort_samples, effort, risk))
         pairs = pair_orderings(e_mean, r, sigma, paper)
         written.append(write_csv_atomic(pairs, out / "pairs.csv"))
+        from lgp.app import over_sigma  # "Pairs over sigma" (issue 22)
+
+        over = over_sigma.pairs_over_sigma(e_mean, r)
+        written.append(write_csv_atomic(over, out / "pairs_over_sigma.csv"))
+        over_figure = over_sigma.plot_risk_over_sigma(over, out / "figures" / "risk_over_sigma.png",
+                                                      {t.pair: t.dimension for t in paper})
+        written.append(over_figure)
+        sections.insert(0, "\n".join(over_sigma.report_lines(over, precision, "figures/risk_over_sigma.png")))
+        over_html = over_sigma.page_section(over, over_figure, out)
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
                                 build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
@@ -580,6 +616,9 @@ def run(args, argv=None) -> int:
             written += paths
             sections.append(section)
     else:
+        from lgp.app.over_sigma import precision_lines
+
+        sections.insert(0, "\n".join(precision_lines(precision)))
         pairs = declared_pair_orderings(effort, risk, sigma, trials)
         if pairs is not None:
             written.append(write_csv_atomic(pairs, out / "pairs.csv"))
@@ -596,7 +635,8 @@ def run(args, argv=None) -> int:
 
         append_report(report, sections)
     written.append(report)
-    written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
+    written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays,
+                               over_sigma_html=over_html, precision=precision))
     if (out / "page").is_dir():
         written.append(out / "page")
     _log(f"cache: {cache.summary()}")
@@ -606,6 +646,7 @@ def run(args, argv=None) -> int:
                   "no_cache": args.no_cache, "build_risk": args.build_risk, "build_sigmas": args.build_sigmas,
                   "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
                   "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
+                  "sigma_grid": args.sigma_grid, "noise_rule": args.noise_rule,
                   "sensitivity": getattr(args, "sensitivity", None), "approach_height": args.approach_height,
                   "slices_per_phase": args.slices}
     inputs = {"trial_files": {t.id: t.digest for t in trials},

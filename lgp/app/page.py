@@ -293,11 +293,10 @@ def _extra_tables(out: Path, known: set[str]) -> dict[str, pd.DataFrame]:
 
 
 def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, picture: Path | None,
-                replay: Path | None, extras: dict[str, pd.DataFrame], out: Path) -> str:
+                replay: Path | None, extras: dict[str, pd.DataFrame], out: Path, precision: pd.DataFrame | None = None) -> str:
     e = samples["effort"].to_numpy(dtype=float)
     sd = float(np.std(e, ddof=1)) if len(e) > 1 else 0.0
     curve = risk.sort_values("sigma")
-    at = curve.loc[np.isclose(curve["sigma"], sigma), "risk"]
     if "n_actions" not in samples:
         plan_len = "length not recorded"
     else:
@@ -309,6 +308,11 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
     link = (f'<a class="replay" href="{_e(os.path.relpath(replay, out))}">3-D replay of sample 0 &#9654;</a>'
             if replay is not None else '<span class="replay none">no replay (--no-replays)</span>')
     more = ""
+    if precision is not None and len(precision):
+        from models.risk.precision import precision_text
+
+        more += ('<p class="precision"><b>required precision</b> ' + " &middot; ".join(
+            f"risk {r['level']:g} at sigma* {_e(precision_text(r))}" for _, r in precision.iterrows()) + "</p>")
     for title, df in extras.items():
         rows = df[df["trial"] == trial.id]
         if len(rows):
@@ -321,11 +325,22 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
 {pic}
 <div class="stats">
 <div><b>effort</b> {e.mean():.4g} &plusmn; {sd:.2g} J s<br><small>mean &plusmn; sd over {len(e)} layouts</small><br>{histogram_svg(e)}</div>
-<div><b>risk</b> {(f"{float(at.iloc[0]):.2f}" if len(at) else "n/a")} at sigma {sigma:g} d<br><small>over sigma (line: {sigma:g})</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma)}</div>
+<div><b>risk</b> {_risk_at(curve, sigma)} at sigma {sigma:g} d<br><small>over sigma (line: {sigma:g})</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma)}</div>
 </div>
 <p><b>plan</b> {plan_len} &middot; {link}</p>
 {more}
 </article>"""
+
+
+def _risk_at(curve: pd.DataFrame, sigma: float) -> str:
+    """'0.17 [0.11, 0.26]': the risk at `sigma` with its 95% Wilson interval when the table has one."""
+    at = curve[np.isclose(curve["sigma"], sigma)]
+    if not len(at):
+        return "n/a"
+    r = at.iloc[0]
+    if "risk_low" in at:
+        return f"{float(r['risk']):.2f} <small>[{float(r['risk_low']):.2f}, {float(r['risk_high']):.2f}]</small>"
+    return f"{float(r['risk']):.2f}"
 
 
 def _human_section(analysis: dict | None, out: Path) -> str:
@@ -378,7 +393,8 @@ def participant_table(zscored: pd.DataFrame, predictions: pd.DataFrame | None) -
 
 def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                pairs: pd.DataFrame | None = None, analysis: dict | None = None, figures=(),
-               pictures: dict | None = None, replays: dict | None = None) -> Path:
+               pictures: dict | None = None, replays: dict | None = None, over_sigma_html: str | None = None,
+               precision: pd.DataFrame | None = None) -> Path:
     """Write ``<out>/index.html`` (atomically) and return its path.
 
     `run`: command, parameters, engine, engine_settings, stages (name -> s),
@@ -388,7 +404,7 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
     out = Path(out)
     pictures = pictures or {}
     replays = replays or {}
-    known = {"effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv"}
+    known = {"effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv", "risk_precision.csv", "pairs_over_sigma.csv"}
     extras = _extra_tables(out, known)
     cards = []
     for trial in trials:
@@ -396,7 +412,8 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
         r = risk[risk["trial"] == trial.id]
         if not len(s) or not len(r):
             raise ValueError(f"results page: trial {trial.id} has no effort or no risk rows")
-        cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out))
+        prec = None if precision is None else precision[precision["trial"] == trial.id]
+        cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out, prec))
     nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
     title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"
     body = f"""<!DOCTYPE html>
@@ -404,12 +421,13 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
 <title>{_e(title)}</title><style>{_STYLE}</style></head>
 <body>
 <header><h1>{_e(title)}</h1>
-<nav><a href="#run">run</a> <a href="#pairs">pairs</a> <a href="#figures">figures</a> <a href="#trials">trials</a> <a href="#human">human data</a>
+<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#over-sigma">pairs over sigma</a>' if over_sigma_html else ''} <a href="#figures">figures</a> <a href="#trials">trials</a> <a href="#human">human data</a>
 &middot; files: <a href="report.md">report.md</a> <a href="effort.csv">effort.csv</a> <a href="effort_samples.csv">effort_samples.csv</a> <a href="risk.csv">risk.csv</a>{' <a href="pairs.csv">pairs.csv</a>' if pairs is not None else ''}</nav>
 </header>
 <main>
 {_run_section(run)}
 {_pairs_section(pairs, analysis)}
+{over_sigma_html or ""}
 {_figures_section([Path(f) for f in figures], out)}
 <section id="trials"><h2>Trials</h2><p class="trialnav">{nav}</p>
 <p>A is the layout of sample 0 (the one the replay plays); effort is over all {effort_samples.groupby("trial").size().max()} layouts.
@@ -445,7 +463,8 @@ class Stopwatch:
 
 def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                 pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock: Stopwatch,
-                replays: dict | None = None, argv=None) -> Path:
+                replays: dict | None = None, argv=None, over_sigma_html: str | None = None,
+                precision: pd.DataFrame | None = None) -> Path:
     """The page of a `lgp.reproduce` run (its parsed `args`): pictures, run record, index.html."""
     from models.risk import DEFAULT_ENGINE, get_engine
 
@@ -484,7 +503,7 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
     }
     return write_page(out, run=run, trials=trials, effort_samples=effort_samples, risk=risk, sigma=sigma, pairs=pairs,
                       analysis=analysis if getattr(args, "human_data", None) else None, figures=figures,
-                      pictures=pictures, replays=replays)
+                      pictures=pictures, replays=replays, over_sigma_html=over_sigma_html, precision=precision)
 
 
 _STYLE = """
@@ -510,6 +529,9 @@ svg text{font-size:9px;fill:#555}svg.hist rect{fill:#6b8fb5}svg.risk polyline{fi
 svg.risk circle{fill:#c0392b}svg.risk .frame{fill:#fafafa;stroke:#ccc}svg.risk .mark{stroke:#888;stroke-dasharray:2 2}
 a.replay{font-weight:600}.none{color:#999}details{font-size:12.5px;margin-top:4px}.warn{background:#fff3cd;padding:6px;font-weight:700}
 footer{padding:12px 24px;color:#777;font-size:12px}
+table.oversigma td,table.oversigma th{text-align:center;white-space:nowrap;font-variant-numeric:tabular-nums}
+table.oversigma tr.paper th,table.oversigma tr.paper td{background:#ececec}table.oversigma td.holds{background:#d9f2d9;font-weight:700}
+table.oversigma th.riskpair{font-weight:800;text-decoration:underline}figure.wide{max-width:100%;display:block}
 """
 
 # Sortable tables: click a header to sort by that column (numbers as numbers), again to reverse.
