@@ -25,7 +25,7 @@ import pandas as pd
 from lgp.paper import PAIRS, PAPER_SIGMA, RISK_PAIRS, SIGMA_GRID
 
 COLUMNS = ["pair", "sigma", "risk_E", "risk_E_low", "risk_E_high", "risk_H", "risk_H_low", "risk_H_high", "holds",
-           "paper_risk_pair", "effort_E", "effort_H", "full_E_lt_H_for_b2_over_b1"]
+           "paper_risk_pair", "effort_E", "effort_H", "tied", "full_E_lt_H_for_b2_over_b1"]
 EASY, HARD = "tab:red", "tab:blue"
 #: b2/b1 values swept for "how many pairs does one ratio order" (0 = effort weighted by 1 - R only).
 _KAPPAS = np.concatenate([[0.0], np.geomspace(0.01, 1000, 801)])
@@ -34,6 +34,7 @@ _KAPPAS = np.concatenate([[0.0], np.geomspace(0.01, 1000, 801)])
 def pairs_over_sigma(effort: pd.DataFrame, risk: pd.DataFrame) -> pd.DataFrame:
     """`effort`: trial, effort (mean over layouts); `risk`: the risk table (trial,
     sigma, risk, risk_low, risk_high). One row per (pair, sigma): COLUMNS."""
+    from analysis.pairs import pair_order
     from lgp.reproduce import kappa_range
 
     E = effort.set_index("trial")["effort"].astype(float)
@@ -49,19 +50,24 @@ def pairs_over_sigma(effort: pd.DataFrame, risk: pd.DataFrame) -> pd.DataFrame:
                          "risk_E_high": re["risk_high"], "risk_H": rh["risk"], "risk_H_low": rh["risk_low"],
                          "risk_H_high": rh["risk_high"], "holds": bool(rh["risk_low"] > re["risk_high"]),
                          "paper_risk_pair": pair in RISK_PAIRS, "effort_E": E[e], "effort_H": E[h],
+                         "tied": pair_order(E[e], E[h]) == "tie" and pair_order(re["risk"], rh["risk"]) == "tie",
                          "full_E_lt_H_for_b2_over_b1": kappa_range(E[e], re["risk"], E[h], rh["risk"])})
+            if rows[-1]["tied"]:  # the one tie rule (analysis.pairs.TIE_REL): tied in both, Eq. 1 ties it for every b
+                rows[-1]["full_E_lt_H_for_b2_over_b1"] = "none (tie)"
     return pd.DataFrame(rows, columns=COLUMNS)
 
 
 def ordered_by_one_ratio(table: pd.DataFrame) -> pd.DataFrame:
     """Per sigma: the most pairs one ratio b2/b1 >= 0 makes Eq. 1 order E < H, and
-    the range of ratios (of a fine sweep) that do so: sigma, best, of, k_min, k_max."""
+    the range of ratios (of a fine sweep) that do so: sigma, best, of, k_min, k_max.
+    A pair tied in effort and in risk (the tie rule) is ordered by no ratio."""
     rows = []
     for sigma, g in table.groupby("sigma", sort=True):
         Ee, Re, Eh, Rh = (g[c].to_numpy(float) for c in ("effort_E", "risk_E", "effort_H", "risk_H"))
         a = Eh * (1 - Rh) - Ee * (1 - Re)
         b = Eh * Rh - Ee * Re
-        counts = ((a[None, :] + _KAPPAS[:, None] * b[None, :]) > 0).sum(axis=1)
+        untied = ~g["tied"].to_numpy(bool)
+        counts = (((a[None, :] + _KAPPAS[:, None] * b[None, :]) > 0) & untied[None, :]).sum(axis=1)
         best = counts.max()
         ks = _KAPPAS[counts == best]
         rows.append({"sigma": sigma, "best": int(best), "of": len(g), "k_min": float(ks.min()), "k_max": float(ks.max())})
