@@ -20,6 +20,7 @@ from typing import Iterable, Mapping
 import numpy as np
 import pandas as pd
 
+from lgp.errors import InputError
 from lgp.paper import PAIRS, TRIAL_IDS  # noqa: F401  (re-exported)
 
 #: The 24 trial ids in the paper's order: pair 1 easy, pair 1 hard, ..., 12H.
@@ -33,6 +34,13 @@ SIMULATED_PREFIX = "simulated-"
 REQUIRED_COLUMNS: tuple[str, ...] = ("dataset", "participant", "trial", "response")
 #: Problems listed in one HumanDataError message before "... and N more".
 _MAX_LISTED = 20
+#: Most participants (all datasets together) a human-data file may hold unless the
+#: caller raises it (``--max-participants``): memory grows with participants x
+#: bootstrap resamples (bench/human_data.py measures the largest accepted file).
+MAX_PARTICIPANTS = 5_000
+#: Bytes a human-data file may have per allowed participant (24 rows of up to
+#: 200 bytes): the file is read through the bounded reader, at most this many bytes.
+BYTES_PER_PARTICIPANT = 24 * 200
 
 
 class HumanDataError(ValueError):
@@ -69,7 +77,8 @@ def ordered_datasets(names: Iterable[str]) -> list[str]:
     return sorted(set(map(str, names)), key=key)
 
 
-def load_human_data(path: str | Path, *, allow_simulated: bool = False) -> pd.DataFrame:
+def load_human_data(path: str | Path, *, allow_simulated: bool = False,
+                    max_participants: int = MAX_PARTICIPANTS) -> pd.DataFrame:
     """Read and validate a tidy human-response CSV (format: docs/human-data.md).
 
     Columns ``dataset`` (difficulty, time or build), ``participant``, ``trial``
@@ -86,9 +95,15 @@ def load_human_data(path: str | Path, *, allow_simulated: bool = False) -> pd.Da
     (dataset, participant, trial) row, or a participant with missing trials.
     Datasets named ``simulated-...`` are refused unless `allow_simulated`, so
     simulated participants cannot be loaded as human data by accident.
+
+    A file with more than `max_participants` participants, or more than
+    `max_participants` x BYTES_PER_PARTICIPANT bytes, is refused in one line
+    (never read past that many bytes); so is anything but a regular file (a
+    FIFO, a device, a dangling symbolic link).
     """
     path = Path(path)
-    text = _read_text(path)
+    max_participants = int(max_participants)
+    text = _read_text(path, max_participants * BYTES_PER_PARTICIPANT)
     reader = csv.reader(io.StringIO(text, newline=""))
     header = next(reader, None)
     if header is None:
@@ -110,6 +125,12 @@ def load_human_data(path: str | Path, *, allow_simulated: bool = False) -> pd.Da
     if not rows:
         raise HumanDataError(f"{path}: line 1 (header): no responses after the header; expected one row "
                              f"per (dataset, participant, trial)", line=1)
+    i_d, i_p = header.index("dataset"), header.index("participant")
+    people = len({(r[i_d].strip(), r[i_p].strip()) for r in rows})
+    if people > max_participants:
+        raise HumanDataError(f"{path}: {people} participants, more than the {max_participants} allowed "
+                             "(--max-participants raises the limit; memory grows with participants x bootstrap "
+                             "resamples, docs/human-data.md)", line=None)
     table = pd.DataFrame(rows, columns=header, dtype=str)
     return validate_human_data(table, lines=lines, source=str(path), allow_simulated=allow_simulated)
 
@@ -189,7 +210,44 @@ def validate_human_data(
     _raise_if(problems, source)
     problems += _unscalable(table)
     _raise_if(problems, source)
+    _raise_if(_nobody_left(table), source)
     return table
+
+
+def _nobody_left(table: pd.DataFrame) -> list[tuple[int, str]]:
+    """Datasets in which no participant can be z-scored: every one gave one
+    response on all trials (the paper's exclusion drops them all), or their
+    responses differ by so little that the SD underflows to 0 (tiny numbers such
+    as 1e-310). Such a dataset leaves nothing to fit, so it is refused here,
+    before any work, naming the rule."""
+    out = []
+    keys = [table["dataset"], table["participant"]]
+    r = table["response"]
+    with np.errstate(all="ignore"):
+        g = r.groupby(keys, sort=False)
+        stats = pd.DataFrame({"spread": g.max() - g.min(), "sd": g.std(ddof=0), "biggest": r.abs().groupby(keys, sort=False).max()})
+    stats["first_line"] = table["line"].groupby(keys, sort=False).min()
+    for dataset, group in stats.groupby(level=0, sort=False):
+        constant = group["spread"] == 0
+        underflow = ~constant & ~(group["sd"] > 0)
+        if len(group) and (constant | underflow).all():
+            line = int(group["first_line"].min())
+            if underflow.any():
+                out.append((line, f"dataset {dataset!r}: no participant can be z-scored: {int(constant.sum())} gave the "
+                                  f"same response on every trial and {int(underflow.sum())} gave responses so close to 0 "
+                                  f"(largest |response| {group.loc[underflow, 'biggest'].max():.3g}) that their SD "
+                                  "underflows to 0; rescale the responses"))
+            else:
+                out.append((line, f"dataset {dataset!r}: every one of its {len(group)} participant(s) gave the same "
+                                  "response on every trial, so all are excluded (as in the paper) and none is left "
+                                  "to fit"))
+    # one participant with an underflowing SD among good ones would break z-scoring later: name them now
+    for (dataset, participant), row in stats.iterrows():
+        if row["spread"] != 0 and not row["sd"] > 0 and not any(m.startswith(f"dataset {dataset!r}") for _, m in out):
+            out.append((int(row["first_line"]), f"participant {participant!r} in dataset {dataset!r}: responses so close to 0 "
+                                                f"(largest |response| {row['biggest']:.3g}) that their SD underflows to 0: "
+                                                "responses too small to z-score; rescale them"))
+    return out
 
 
 def _unscalable(table: pd.DataFrame) -> list[tuple[int, str]]:
@@ -251,7 +309,7 @@ def zscore_responses(responses: pd.DataFrame, ddof: int = 0) -> pd.DataFrame:
     flat = responses.loc[constant, ["dataset", "participant"]].drop_duplicates()
     if len(flat):
         d, p = flat.iloc[0]
-        raise ValueError(f"participant {p!r} in dataset {d!r} gave the same response on every "
+        raise InputError(f"participant {p!r} in dataset {d!r} gave the same response on every "
                          "trial, so their z-scores are undefined; use exclude_constant_participants")
     with np.errstate(over="ignore", invalid="ignore"):
         z = (responses["response"] - mean) / sd
@@ -272,7 +330,7 @@ def participant_matrices(zscored: pd.DataFrame) -> dict[str, tuple[list[str], np
             index="participant", columns="trial", values="z")
         wide = wide.reindex(columns=list(TRIAL_IDS))
         if wide.isna().any().any():
-            raise ValueError(f"dataset {dataset!r}: some participants lack z-scores for some "
+            raise InputError(f"dataset {dataset!r}: some participants lack z-scores for some "
                              "trials; validate the data with validate_human_data first")
         out[dataset] = (list(wide.index), wide.to_numpy(dtype=float))
     return out
@@ -388,10 +446,17 @@ def _parse_responses(raw: pd.Series) -> tuple[np.ndarray, list[tuple[int, str]]]
     return values, bad
 
 
-def _read_text(path: Path) -> str:
+def _read_text(path: Path, max_bytes: int = MAX_PARTICIPANTS * BYTES_PER_PARTICIPANT) -> str:
     """The file's text: UTF-8 (with or without BOM), or UTF-16/32 when a byte-order
-    mark says so; anything else raises HumanDataError naming file, line and encoding."""
-    data = path.read_bytes()
+    mark says so; anything else raises HumanDataError naming file, line and encoding.
+    Read through the bounded reader (lgp.inputs): a regular file of at most `max_bytes`."""
+    from lgp.inputs import InputFileError, read_bounded
+
+    try:
+        data = read_bounded(path, max_bytes, "human-data file",
+                            limit_name=f"room for {max_bytes // BYTES_PER_PARTICIPANT} participants; --max-participants raises it")
+    except InputFileError as e:
+        raise HumanDataError(str(e), line=None) from None
     for bom, encoding in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
                           (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"),
                           (codecs.BOM_UTF16_BE, "utf-16")):

@@ -58,11 +58,18 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="results/simulated", type=cli.output_dir)
     p.add_argument("--seed", type=cli.seed, default=0)
     p.add_argument("--n-boot", type=cli.positive_int, default=1000)
+    p.add_argument("--n-perm", type=cli.positive_int, default=1000, help="permutations per permutation test")
+    p.add_argument("--betas", type=float, nargs=3, metavar=("B0", "B1", "B2"), default=BETAS,
+                   help="Eq. 1 of the simulated participants (b1 = b2: effort only) (default %(default)s)")
+    p.add_argument("--noise", type=float, default=NOISE_SD, help="per-participant noise SD (default %(default)s)")
     args = p.parse_args(argv)
+    if not (np.isfinite(args.noise) and args.noise >= 0):
+        p.error(f"--noise must be a finite number >= 0, got {args.noise!r}")
     effort, risk = read_results(Path(args.results))
     rng = np.random.default_rng(args.seed)
-    people = simulate_participants(effort, risk, BETAS, SIGMA, PARTICIPANTS, NOISE_SD, rng, datasets=list(PARTICIPANTS))
-    run_analysis(people, effort, risk, args.out, seed=args.seed, n_boot=args.n_boot, jobs=2)
+    people = simulate_participants(effort, risk, tuple(args.betas), SIGMA, PARTICIPANTS, args.noise, rng,
+                                   datasets=list(PARTICIPANTS))
+    run_analysis(people, effort, risk, args.out, seed=args.seed, n_boot=args.n_boot, n_perm=args.n_perm, jobs=2)
     print(f"SIMULATED-participant analysis written to {Path(args.out).resolve()}")
     return 0
 

@@ -280,3 +280,119 @@ def _finish(fig: Figure, title: str, datasets: Iterable[str], out_dir: str | Pat
     fig.savefig(paths[0], dpi=150, metadata={"Title": flat_title})
     fig.savefig(paths[1], metadata={"Title": flat_title})
     return paths
+
+
+SCHEME_STYLE = {"in-sample": ("in-sample (fit and scored on all 24 trials)", 0.35, ""),
+                "leave-one-pair-out": ("out of sample: leave-one-pair-out", 1.0, ""),
+                "leave-one-trial-out": ("out of sample: leave-one-trial-out", 0.7, "//")}
+
+
+def plot_model_comparison(summary: pd.DataFrame, out_dir: str | Path, stem: str = "fig4_model_comparison",
+                          gain: pd.DataFrame | None = None) -> list[Path]:
+    """Figure 4 analog with in-sample and out-of-sample bars: per dataset and
+    model, the correlation of the model with the trial means in sample (pale)
+    and of its held-out predictions (full colour; hatched leave-one-trial-out),
+    with the bootstrap 95% intervals (`analysis.crossval.summarize_comparison`).
+    With `gain` (`gain_over_effort`) a second panel shows how much lower each
+    model's RMSE is than effort-only's under each scheme: in sample Eq. 1's gain
+    cannot be negative, out of sample it can. Returns the PNG and PDF paths."""
+    from matplotlib.patches import Patch
+
+    datasets = ordered_datasets(summary["dataset"].unique())
+    models = [m for m in MODELS if m in set(summary["model"])]
+    schemes = [s for s in SCHEME_STYLE if s in set(summary["scheme"])]
+    panels = 2 if gain is not None else 1
+    fig = Figure(figsize=(2.9 * len(datasets) + 2.6, 4.2 * panels + 0.4), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(panels, 1, squeeze=False)[:, 0]
+
+    def bars(ax, table, value, low, high, models_here):
+        width = 0.8 / (len(models_here) * len(schemes))
+        for i, dataset in enumerate(datasets):
+            for j, model in enumerate(models_here):
+                for k, scheme in enumerate(schemes):
+                    row = table[(table["dataset"] == dataset) & (table["model"] == model) & (table["scheme"] == scheme)]
+                    if row.empty:
+                        continue
+                    row = row.iloc[0]
+                    x = i - 0.4 + width * (j * len(schemes) + k + 0.5)
+                    _, alpha, hatch = SCHEME_STYLE[scheme]
+                    ax.bar(x, row[value], width * 0.92, color=MODEL_COLOURS[model], alpha=alpha, hatch=hatch,
+                           edgecolor="white" if hatch else MODEL_COLOURS[model], lw=0.5)
+                    if low in row and np.isfinite(row[low]):
+                        ax.errorbar(x, row[value], yerr=[[max(0.0, row[value] - row[low])], [max(0.0, row[high] - row[value])]],
+                                    fmt="none", ecolor="0.25", elinewidth=1, capsize=2)
+        ax.axhline(0, color="0.6", lw=0.8)
+        ax.set_xticks(np.arange(len(datasets)), [dataset_label(d) for d in datasets], fontsize=9)
+        ax.set_xlim(-0.5, len(datasets) - 0.5)
+        handles = [Patch(color=MODEL_COLOURS[m], label=MODEL_LABELS[m]) for m in models_here]
+        handles += [Patch(facecolor="0.3", alpha=SCHEME_STYLE[s][1], hatch=SCHEME_STYLE[s][2], edgecolor="white",
+                          label=SCHEME_STYLE[s][0]) for s in schemes]
+        ax.legend(handles=handles, fontsize=8, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
+
+    ax = axes[0]
+    bars(ax, summary, "r", "r_low", "r_high", models)
+    ax.set_ylabel("correlation with mean z-scores (r)")
+    low = np.nanmin(summary["r_low"]) if "r_low" in summary else np.nanmin(summary["r"])
+    ax.set_ylim(min(0.0, float(low) - 0.05), 1.02)
+    ax.set_title("r of each model: fit and scored on all trials (pale) or predicting held-out trials", fontsize=9)
+    if gain is not None:
+        ax = axes[1]
+        bars(ax, gain, "gain", "gain_low", "gain_high", ["full"])  # Eq. 1 only: risk-only's losses dwarf the scale
+        ax.set_ylabel("RMSE of effort-only minus\nthe model's (z units)")
+        ax.set_title("Eq. 1's gain over effort-only: above 0 it predicts better. In sample it cannot fall below 0; "
+                     "out of sample it can", fontsize=9)
+    n_boot = int(summary["n_boot"].max()) if "n_boot" in summary and summary["n_boot"].notna().any() else 0
+    title = ("Models in sample and out of sample (sigma chosen inside each fold); bars: full sample, whiskers: 95% "
+             f"interval over {n_boot} bootstrap resamples")
+    return _finish(fig, title, datasets, out_dir, stem)
+
+
+def plot_recovery(summary: pd.DataFrame, out_dir: str | Path, paper_sigma: float = 0.065,
+                  source: str = "stated", stem: str = "simulated_recovery", note: str = "") -> list[Path]:
+    """Model recovery on SIMULATED studies (analysis.recovery): left, the share of
+    studies whose verdict is the true model against participants, one line per
+    true model, out of sample (solid, leave-one-pair-out) and in sample (dotted),
+    at the table's sigma nearest `paper_sigma`; right, the share in which Eq. 1
+    beats effort-only out of sample against the true sigma, when Eq. 1 is true
+    (solid) and when effort-only is (dashed), one colour per participant count."""
+    s = summary[summary["source"] == source]
+    sigmas = np.sort(s["sigma"].unique())
+    sig = float(sigmas[np.argmin(np.abs(sigmas - paper_sigma))])
+    fig = Figure(figsize=(11, 4.3), layout="constrained")
+    FigureCanvasAgg(fig)
+    left, right = fig.subplots(1, 2)
+    at = s[np.isclose(s["sigma"], sig)]
+    markers = {"full": ("o", 9), "effort": ("s", 7), "risk": ("^", 5)}   # sizes differ so overlapping lines show
+    for model in MODELS:
+        for proc, ls in (("leave-one-pair-out", "-"), ("in-sample", ":")):
+            g = at[(at["true_model"] == model) & (at["procedure"] == proc)].sort_values("participants")
+            if len(g):
+                marker, ms = markers[model]
+                left.plot(g["participants"], g["p_right"], ls, marker=marker, ms=ms, color=MODEL_COLOURS[model],
+                          label=f"true: {MODEL_LABELS[model]}" + ("" if ls == "-" else " (in-sample)"))
+    left.set_xscale("log")
+    ns = sorted(at["participants"].unique())
+    left.set_xticks(ns, [str(n) for n in ns])
+    left.set_xticks([], minor=True)
+    left.set_ylim(-0.03, 1.03)
+    left.axhline(1 / 3, color="0.8", lw=0.8, ls="--")
+    left.set_xlabel("participants per study")
+    left.set_ylabel("share of studies: verdict = true model")
+    left.set_title(f"Right verdict at sigma = {sig:g} d (solid: leave-one-pair-out; dotted: in-sample)", fontsize=9)
+    left.legend(fontsize=7, frameon=False, loc="lower right")
+    lo = s[s["procedure"] == "leave-one-pair-out"]
+    colours = ["tab:purple", "tab:blue", "tab:cyan", "tab:olive", "tab:brown"]
+    for n, colour in zip(sorted(lo["participants"].unique()), colours * 3):
+        for model, ls in (("full", "-"), ("effort", "--")):
+            g = lo[(lo["participants"] == n) & (lo["true_model"] == model)].sort_values("sigma")
+            right.plot(g["sigma"], g["p_full_beats_effort"], ls, marker="o", ms=3, color=colour,
+                       label=f"n = {n}, true: {'Eq. 1' if model == 'full' else 'effort only'}")
+    right.axvline(paper_sigma, color="0.6", lw=0.8, ls=":")
+    right.set_ylim(-0.03, 1.03)
+    right.set_xlabel("true sigma (units of d)")
+    right.set_ylabel("share of studies: Eq. 1 beats effort-only")
+    right.set_title("Eq. 1 vs effort-only out of sample (leave-one-pair-out)", fontsize=9)
+    right.legend(fontsize=7, frameon=False, loc="best")
+    title = f"Model recovery on our effort and risk tables{f' ({note})' if note else ''}"
+    return _finish(fig, title, ["simulated-recovery"], out_dir, stem)

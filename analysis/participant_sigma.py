@@ -43,6 +43,7 @@ from analysis.data import (exclude_constant_participants, participant_matrices, 
                            zscore_responses)
 from analysis.models import ModelInputError, effort_per_trial, risk_at_sigma, risk_sigmas
 from analysis.data import TRIAL_IDS
+from lgp.errors import InputError
 
 #: Columns of the per-participant table.
 COLUMNS = ["dataset", "participant", "sigma", "sigma_grid", "rmse", "sigma_low", "sigma_high",
@@ -161,7 +162,7 @@ def fit_participant_sigma(human_df: pd.DataFrame, effort, risk_grid: pd.DataFram
     identified (False when the interval is the whole range), and the betas used.
     """
     if betas not in BETAS:
-        raise ValueError(f"betas must be one of {', '.join(BETAS)}, got {betas!r}")
+        raise InputError(f"betas must be one of {', '.join(BETAS)}, got {betas!r}")
     responses = validate_human_data(human_df, allow_simulated=True)
     kept, _ = exclude_constant_participants(responses)
     zscored = zscore_responses(kept, ddof=0)

@@ -7,23 +7,28 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis.crossval import (RISK_DRAW_STREAM, RISK_DRAWS, SCHEMES, bootstrap_comparison, comparison_tests, gain_over_effort,
+                               measure_grid, model_comparison, redraw_risk, risk_grid, summarize_comparison)
+from analysis.permutation import N_PERM, PERMUTATION_STREAM, check_count, permutation_test
 from analysis.bootstrap import COMPARISONS, bootstrap_model_correlations, bootstrap_tests, summarize_bootstrap
-from analysis.data import (exclude_constant_participants, is_simulated, load_human_data, ordered_datasets,
+from analysis.data import (TRIAL_IDS, exclude_constant_participants, is_simulated, load_human_data, ordered_datasets,
                            resample_trial_means, trial_mean_intervals, validate_human_data,
                            zscore_responses)
-from analysis.figures import (plot_effort_risk, plot_model_correlations, plot_sigma_profile,
+from analysis.figures import (plot_effort_risk, plot_model_comparison, plot_model_correlations, plot_sigma_profile,
                               plot_trial_means)
 from analysis.models import (MEASURE_BASES, MODELS, RISK_MEASURES, effort_per_trial, fit_models,
                              measure_at_sigma, measure_model, risk_at_sigma, risk_inputs, risk_sigmas)
 from analysis.pairs import pair_table
 from analysis.sigma import PAPER_SIGMA, choose_sigma, sigma_profile
+from lgp.errors import InputError
 
 
 def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
                  risk_table: pd.DataFrame, out_dir: str | Path, seed: int,
                  n_boot: int = 1000, jobs: int = 2, sigma: float | None = None,
                  sigmas=None, figures: bool = True, build_risk: pd.DataFrame | None = None,
-                 risk_measure: str | None = None) -> dict[str, pd.DataFrame]:
+                 risk_measure: str | None = None, compare: bool = True, n_perm: int = N_PERM,
+                 risk_draw: str = "binomial") -> dict[str, pd.DataFrame]:
     """Run the paper's analysis and write tidy CSVs and figures into `out_dir`.
 
     Parameters
@@ -56,6 +61,16 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     risk_measure : one of final, max, expected, any, care: the plain models
         full and risk use that aggregate as R instead of the final-state risk
         table (needs `build_risk`). None: the paper's R.
+    compare : with human data, also the out-of-sample comparison
+        (analysis.crossval: leave-one-pair-out and leave-one-trial-out, sigma
+        chosen inside each fold, the cross-validation redone in every bootstrap
+        resample) and the permutation tests of the risk term
+        (analysis.permutation).
+    n_perm : permutations per permutation test (default 1000), a whole number >= 1.
+    risk_draw : "binomial" (default): every bootstrap resample of the comparison
+        also redraws each trial's risk from its runs (run counts from the risk
+        table's n_sims or n column); "none": risk fixed at the table. The
+        comparison's intervals are reported both ways.
 
     Returns
     -------
@@ -66,16 +81,25 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     do not depend on it; order under the tie rule of analysis.pairs.TIE_REL) and, with human data, excluded_participants,
     zscored, trial_means (mean_z with 95% CI), sigma_profile, sigma_choice,
     fits, predictions, bootstrap_correlations, bootstrap_summary,
-    bootstrap_tests; plus files (kind, path) listing everything written.
+    bootstrap_tests (these in-sample, column scheme "in-sample"); with
+    `compare`, model_comparison (in-sample and out-of-sample scores of every
+    model side by side, with bootstrap intervals), model_comparison_gain (RMSE
+    below effort-only's, with intervals), model_comparison_tests,
+    cv_predictions, cv_bootstrap, permutation_test and permutation_null; plus
+    files (kind, path) listing everything written.
     """
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    check_count(n_boot, "the number of bootstrap resamples")
+    check_count(n_perm, "the number of permutations")
+    if risk_draw not in RISK_DRAWS:
+        raise InputError(f"unknown risk draw {risk_draw!r}; expected one of {', '.join(RISK_DRAWS)}")
     E = effort_per_trial(effort_by_trial)
     available = risk_sigmas(risk_table)
     results: dict[str, pd.DataFrame] = {}
     figure_paths: list[Path] = []
 
     if human_df is None:
+        out_dir.mkdir(parents=True, exist_ok=True)
         if sigma is None:
             sigma = float(available[np.argmin(np.abs(available - PAPER_SIGMA))])
             rule = "paper's sigma (or nearest in risk table); no human data to fit"
@@ -94,6 +118,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         responses = load_human_data(human_df)
     else:
         responses = validate_human_data(human_df, allow_simulated=True)
+    out_dir.mkdir(parents=True, exist_ok=True)
     simulated = is_simulated(responses)
     prefix = "simulated_" if simulated else ""
 
@@ -113,7 +138,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     R = risk_at_sigma(risk_table, sigma)
     models, comparisons, build_sigma = list(MODELS), list(COMPARISONS), None
     if risk_measure is not None and risk_measure not in RISK_MEASURES:
-        raise ValueError(f"unknown risk measure {risk_measure!r}; expected one of {', '.join(RISK_MEASURES)}")
+        raise InputError(f"unknown risk measure {risk_measure!r}; expected one of {', '.join(RISK_MEASURES)}")
     if build_risk is not None:
         have = np.unique(np.round(build_risk["sigma"].astype(float), 9))
         build_sigma = float(have[np.argmin(np.abs(have - sigma))])
@@ -123,7 +148,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         models += [measure_model(b, m) for m in RISK_MEASURES for b in MEASURE_BASES]
         comparisons += [(measure_model("full", m), "full") for m in RISK_MEASURES]
     elif risk_measure is not None:
-        raise ValueError(f"risk measure {risk_measure!r} needs the build-risk table (build_risk=...)")
+        raise InputError(f"risk measure {risk_measure!r} needs the build-risk table (build_risk=...)")
     else:
         inputs = R
     fits, predictions = fit_models(means, E, inputs, sigma, models=models)
@@ -158,17 +183,62 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         "bootstrap_tests": bootstrap_tests(boot, fits, comparisons),
         "orderings": _tidy_pairs(pd.concat(pairs, ignore_index=True)),
     })
+    for key in ("fits", "bootstrap_summary", "bootstrap_tests"):
+        results[key] = results[key].assign(scheme="in-sample")
+    if compare:
+        source_R = risk_grid(risk_table, sigmas) if risk_measure is None else measure_grid(build_risk, risk_measure)
+        grids = {"R": source_R}
+        if build_risk is not None:
+            grids.update({m: measure_grid(build_risk, m) for m in RISK_MEASURES})
+        in_sample = {"R": sigma if risk_measure is None else build_sigma}
+        in_sample.update({m: build_sigma for m in RISK_MEASURES if build_sigma is not None})
+        draw = risk_draw if source_R.runs is not None else "none"
+        results.update(_comparison(means, boot_means, E, grids, models, comparisons, in_sample, seed, n_perm, draw))
+        results["settings"] = results["settings"].assign(
+            n_perm=n_perm, risk_draw=draw, cv_sigma_rule="chosen inside each fold: least mean training RMSE of Eq. 1")
     if figures:
         full = fits[fits["model"] == "full"].set_index("dataset")[["b0", "b1", "b2"]]
         figure_paths += plot_trial_means(means, predictions, out_dir, stem=f"{prefix}fig3_trial_means")
         figure_paths += plot_model_correlations(results["bootstrap_summary"], out_dir,
                                                 stem=f"{prefix}fig4_model_correlations")
         figure_paths += plot_sigma_profile(profile, out_dir, choice, stem=f"{prefix}sigma_profile")
+        if compare:
+            figure_paths += plot_model_comparison(results["model_comparison"], out_dir,
+                                                  stem=f"{prefix}fig4_model_comparison",
+                                                  gain=results["model_comparison_gain"])
         figure_paths += plot_effort_risk(
             E, risk_table, sigma, out_dir,
             betas={d: tuple(full.loc[d]) for d in ordered_datasets(full.index)},  # the paper's order, as every figure
             stem=f"{prefix}effort_risk_pairs")
     return _write(results, out_dir, prefix, figure_paths)
+
+
+def _comparison(means: pd.DataFrame, boot_means, E: pd.Series, grids, models, comparisons, in_sample, seed: int,
+                n_perm: int, risk_draw: str) -> dict[str, pd.DataFrame]:
+    """The out-of-sample comparison and the permutation tests (analysis.crossval,
+    analysis.permutation) on the same participant resamples as the in-sample
+    bootstrap. Risk redraws and permutations come from their own streams,
+    ``default_rng([seed, RISK_DRAW_STREAM])`` and ``default_rng([seed, PERMUTATION_STREAM])``."""
+    y = {d: g.set_index("trial")["mean_z"].reindex(list(TRIAL_IDS)).to_numpy()
+         for d, g in means.groupby("dataset", sort=False)}
+    point, cv_pred = model_comparison(y, E, grids, models, SCHEMES, in_sample)
+    fixed = bootstrap_comparison(boot_means, E, grids, models, SCHEMES, in_sample)
+    n_boot = len(next(iter(boot_means.values())))
+    if risk_draw == "binomial":
+        draws = redraw_risk(grids["R"], n_boot, np.random.default_rng([seed, RISK_DRAW_STREAM]))
+        boot = bootstrap_comparison(boot_means, E, grids, models, SCHEMES, in_sample, risk_draws=draws)
+        summary = summarize_comparison(point, boot, fixed)
+        tests = comparison_tests(point, boot, comparisons, fixed)
+        cv_boot = pd.concat([boot.assign(risk_draw="binomial"), fixed.assign(risk_draw="none")], ignore_index=True)
+    else:
+        summary = summarize_comparison(point, fixed)
+        tests = comparison_tests(point, fixed, comparisons)
+        cv_boot = fixed.assign(risk_draw="none")
+    perm, null = permutation_test(y, E, grids["R"], n_perm, np.random.default_rng([seed, PERMUTATION_STREAM]))
+    gain = gain_over_effort(point, boot if risk_draw == "binomial" else fixed)
+    return {"model_comparison": summary, "model_comparison_gain": gain, "model_comparison_tests": tests,
+            "cv_predictions": cv_pred,
+            "cv_bootstrap": cv_boot, "permutation_test": perm, "permutation_null": null}
 
 
 def _model_pairs(E: pd.Series, R: pd.Series) -> pd.DataFrame:

@@ -16,6 +16,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from lgp.errors import InputError
 from lgp.paper import PAPER_SIGMA, SIGMA_GRID  # noqa: F401  (re-exported)
 from analysis.models import effort_per_trial, fit_model, risk_at_sigma, risk_sigmas
 
@@ -61,7 +62,7 @@ def choose_sigma(profile: pd.DataFrame) -> pd.DataFrame:
     datasets = profile["dataset"].nunique()
     counts = profile.groupby("sigma")["dataset"].nunique()
     if (counts != datasets).any():
-        raise ValueError("sigma profile is ragged: every dataset needs every sigma to pool")
+        raise InputError("sigma profile is ragged: every dataset needs every sigma to pool")
     mean_rmse = profile.groupby("sigma")["rmse"].mean().sort_index()
     k = int(np.argmin(mean_rmse.to_numpy()))
     rows.append(("pooled", float(mean_rmse.index[k]), float(mean_rmse.iloc[k]),

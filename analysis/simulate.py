@@ -16,6 +16,7 @@ import pandas as pd
 
 from analysis.data import DATASETS, SIMULATED_PREFIX, TRIAL_IDS, is_simulated_dataset
 from analysis.models import full_model_cost, risk_at_sigma
+from lgp.errors import InputError
 
 
 def simulate_participants(effort, risk_by_sigma: pd.DataFrame,
@@ -46,7 +47,7 @@ def simulate_participants(effort, risk_by_sigma: pd.DataFrame,
     frames = []
     for dataset in datasets:
         if is_simulated_dataset(dataset):
-            raise ValueError(f"dataset {dataset!r}: give the plain name; the "
+            raise InputError(f"dataset {dataset!r}: give the plain name; the "
                              f"{SIMULATED_PREFIX!r} prefix is added here")
         b = betas[dataset] if isinstance(betas, Mapping) else betas
         n = n_participants[dataset] if isinstance(n_participants, Mapping) else n_participants

@@ -118,7 +118,7 @@ def render(rows, notes, load0, load1, full_max) -> str:
     lines = [
         "## komo",
         "",
-        "Geometric planner of the effort model (`lgp/komo`, `lgp/planner.py`); written by `python bench/komo.py`.",
+        "Geometric planner of the effort model (`lgp/komo`, `lgp/planner/`); written by `python bench/komo.py`.",
         "",
         f"`python bench/komo.py`, drake {version('drake')}, {os.cpu_count()} cores shared with other jobs "
         f"(load average {load0:.1f} at the start, {load1:.1f} at the end): seconds are noisy, ratios within a row are "

@@ -9,7 +9,7 @@ shoulder S, joints 5-7 at the wrist W), so a gripper pose X_WG fixes W, the dist
 |W - S| fixes joint 4, and the one redundant degree of freedom is the swivel angle
 of the elbow about the line S-W. `ik_candidates` enumerates solutions over a grid
 of swivel angles and the 8 shoulder/elbow/wrist branches; the planner picks among
-them (lgp/planner.py) and KOMO refines them.
+them (lgp/planner/seeding.py) and KOMO refines them.
 """
 from __future__ import annotations
 

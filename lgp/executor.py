@@ -11,6 +11,9 @@ input order; ``on_result(index, result)`` as each arrives, for progress), with
   cancels what is queued and terminates the workers at once; workers die with
   their parent, even on ``kill -9`` (Linux: PR_SET_PDEATHSIG). Create it in the
   main thread: the kernel ties that signal to the thread that started the worker.
+  A worker that dies is noticed at once: its units are resubmitted to fresh
+  workers a bounded number of times, then `WorkerDied` names the unit and the
+  signal (never a hang).
 
 ``stop_signals()`` makes SIGTERM stop a command as Ctrl-C does.
 
@@ -31,6 +34,8 @@ import signal
 import sys
 import threading
 from typing import Any, Callable, Protocol, Sequence
+
+from lgp.errors import InputError
 
 
 class Executor(Protocol):
@@ -142,60 +147,257 @@ class stop_signals:
             signal.signal(s, handler)
 
 
+class WorkerDied(RuntimeError):
+    """A worker process died (killed by a signal, out of memory, a crash in C code)
+    while running a unit, and the unit was not retried or failed again.
+    ``unit`` is the index of the item, ``signal`` the signal name (or the exit code)."""
+
+    def __init__(self, message: str, unit: int | None = None, signal: str | None = None):
+        super().__init__(message)
+        self.unit = unit
+        self.signal = signal
+
+
+#: Tries of a unit whose worker died under it (1 = never retried); a map also
+#: gives up after MAX_RESTARTS broken pools, whoever was at fault.
+MAX_TRIES = 2
+MAX_RESTARTS = 4
+
+
+def _how_it_died(exitcode) -> str:
+    if exitcode is None:
+        return "unknown cause"
+    if exitcode < 0:
+        try:
+            return signal.Signals(-exitcode).name
+        except ValueError:
+            return f"signal {-exitcode}"
+    return f"exit status {exitcode}"
+
+
+def describe_unit(fn, item, limit: int = 100) -> str:
+    """A short name of a work unit for a message: ``fn(7H, 0, 3)``; an element with
+    an ``id`` or ``label`` (a trial, a scene) is named by it, an array by its shape."""
+    def one(x):
+        for attr in ("id", "label"):
+            if isinstance(getattr(x, attr, None), str):
+                return getattr(x, attr)
+        if isinstance(x, (int, float, str, bool)) or x is None:
+            return repr(x)
+        if hasattr(x, "shape"):
+            return f"array{tuple(x.shape)}"
+        if isinstance(x, (tuple, list)) and len(x) <= 4 and all(isinstance(v, (int, float, str)) for v in x):
+            return repr(tuple(x))
+        return type(x).__name__
+    parts = [one(x) for x in item] if isinstance(item, tuple) else [one(item)]
+    text = f"{getattr(fn, '__name__', 'task')}({', '.join(parts)})"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+# Per worker: its slot in the shared table of (pid, running unit) rows.
+_SLOTS = None
+_SLOT = -1
+
+
+def _worker_init(parent_pid: int, slots, lock) -> None:
+    """ProcessExecutor's worker initialiser: `_die_with_parent`, then claim a row of
+    the shared table where the worker notes the unit it runs (shared memory, so a
+    worker killed mid-unit leaves the parent a record of what it was doing)."""
+    global _SLOTS, _SLOT
+    _die_with_parent(parent_pid)
+    with lock:
+        for i in range(0, len(slots), 2):
+            if slots[i] == 0:
+                slots[i], slots[i + 1] = os.getpid(), -1
+                _SLOTS, _SLOT = slots, i
+                break
+
+
+def _tracked(fn, k, item):
+    if _SLOTS is not None:
+        _SLOTS[_SLOT + 1] = k
+    try:
+        return fn(item)
+    finally:
+        if _SLOTS is not None:
+            _SLOTS[_SLOT + 1] = -1
+
+
+def _noop():
+    return os.getpid()
+
+
 class ProcessExecutor:
-    """A pool of `jobs` warm worker processes (multiprocessing.Pool), created on
-    first use and kept until `close()`."""
+    """A pool of `jobs` warm worker processes (concurrent.futures.ProcessPoolExecutor),
+    created on first use and kept until `close()`.
+
+    A worker that dies (SIGKILL, the out-of-memory killer, a segfault) breaks the
+    pool; the map notices at once (BrokenProcessPool), says so in one line on
+    stderr, starts fresh workers and resubmits every unit that had not finished.
+    The unit the dead worker was running is tried at most MAX_TRIES times, and a
+    map survives at most MAX_RESTARTS broken pools; past either it raises
+    `WorkerDied` naming the unit and the signal. Results that arrived before are
+    kept (``on_result`` has seen each of them exactly once)."""
 
     def __init__(self, jobs: int | None = None, start_method: str | None = None):
         self.jobs = default_jobs() if jobs is None else int(jobs)
         if self.jobs < 1:
-            raise ValueError(f"jobs must be >= 1, got {jobs}")
+            raise InputError(f"jobs must be >= 1, got {jobs}")
         self.start_method = start_method
         self._pool = None
+        self._procs: list = []
+        self._slots = None
+        self.restarts = 0  # broken pools replaced over this executor's life
 
     def start(self) -> "ProcessExecutor":
         """Start the workers now (by default they start on the first map)."""
-        self._get_pool()
+        pool = self._get_pool()
+        for f in [pool.submit(_noop) for _ in range(self.jobs)]:
+            f.result()
         return self
 
     def _get_pool(self):
         if self._pool is None:
             import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor as Pool
 
             ctx = mp.get_context(self.start_method or _start_method())
-            self._pool = ctx.Pool(self.jobs, initializer=_die_with_parent, initargs=(os.getpid(),))
+            self._slots = ctx.RawArray("q", 2 * (self.jobs + 2))
+            self._pool = Pool(self.jobs, mp_context=ctx, initializer=_worker_init,
+                              initargs=(os.getpid(), self._slots, ctx.Lock()))
+            self._procs = []
         return self._pool
 
+    def _processes(self) -> list:
+        """Every worker process of the current pool seen so far (kept after they die,
+        for their exit codes)."""
+        known = {p.pid for p in self._procs}
+        for p in list(getattr(self._pool, "_processes", {}).values()):
+            if p.pid not in known:
+                self._procs.append(p)
+        return self._procs
+
+    def _post_mortem(self, running: set[int]) -> list[tuple[int, int | None, str]]:
+        """(pid, unit it was running or None, how it died) of every dead worker."""
+        table = {int(self._slots[i]): int(self._slots[i + 1]) for i in range(0, len(self._slots), 2) if self._slots[i]}
+        dead = []
+        for p in self._processes():
+            p.join(timeout=1.0)  # a killed worker is reaped at once
+            if p.exitcode not in (None, 0):
+                k = table.get(p.pid, -1)
+                dead.append((p.pid, k if k in running else None, _how_it_died(p.exitcode)))
+        return dead
+
     def map(self, fn, items, on_result=None) -> list:
+        from collections import deque
+        from concurrent.futures import ALL_COMPLETED, FIRST_COMPLETED, wait
+        from concurrent.futures.process import BrokenProcessPool
+
         items = list(items)
         results: list = [None] * len(items)
         if not items:
             return results
-        pool = self._get_pool()
+        todo = set(range(len(items)))
+        tries = [0] * len(items)
+        restarts = 0
+        window = 2 * self.jobs + 2
         try:
-            for k, result, error in pool.imap_unordered(_indexed, [(fn, k, it) for k, it in enumerate(items)]):
-                if error is not None:
-                    raise error
-                results[k] = result
-                if on_result is not None:
-                    on_result(k, result)
+            while todo:
+                pool = self._get_pool()
+                queue = deque(sorted(todo))
+                inflight: dict = {}
+                broken = False
+                while (queue or inflight) and not broken:
+                    try:  # a few units ahead of the workers, not the whole list at once
+                        while queue and len(inflight) < window:
+                            inflight[pool.submit(_tracked, fn, queue[0], items[queue[0]])] = queue[0]
+                            queue.popleft()
+                    except BrokenProcessPool:  # a worker died between maps, or just now
+                        broken = True
+                    self._processes()
+                    done, _ = wait(list(inflight), timeout=10.0 if broken else 1.0, return_when=ALL_COMPLETED if broken else FIRST_COMPLETED)
+                    for f in done:
+                        k = inflight.pop(f)
+                        error = f.exception()
+                        if isinstance(error, BrokenProcessPool):
+                            broken = True
+                            continue
+                        if error is not None:
+                            raise error
+                        results[k] = f.result()
+                        todo.discard(k)
+                        if on_result is not None:
+                            on_result(k, results[k])
+                    if broken and inflight:  # the break fails every future still pending, at once
+                        done, _ = wait(list(inflight), timeout=10.0)
+                        for f in done:
+                            k = inflight.pop(f)
+                            if f.exception() is None:
+                                results[k] = f.result()
+                                todo.discard(k)
+                                if on_result is not None:
+                                    on_result(k, results[k])
+                if not broken:
+                    continue
+                # The pool is broken: which worker died, running what?
+                dead = self._post_mortem(todo)
+                # A broken pool SIGTERMs its other workers: those died of the break, not of their units.
+                first = [d for d in dead if d[2] != "SIGTERM"]
+                dead = first or dead
+                self._discard_pool()
+                restarts += 1
+                self.restarts += 1
+                culprits = [(pid, k, how) for pid, k, how in dead if k is not None]
+                for _, k, _ in culprits:
+                    tries[k] += 1
+                what = "; ".join(f"worker process {pid} died ({how})" + (
+                    f" while running unit {k} of {len(items)}, {describe_unit(fn, items[k])}" if k is not None else "")
+                    for pid, k, how in dead) or "a worker process died"
+                worst = max(culprits, key=lambda c: tries[c[1]], default=None)
+                if worst is not None and tries[worst[1]] >= MAX_TRIES:
+                    pid, k, how = worst
+                    raise WorkerDied(f"worker process {pid} died ({how}) while running unit {k} of {len(items)}, "
+                                     f"{describe_unit(fn, items[k])}: its worker died in each of its {tries[k]} tries; "
+                                     "stopped (results that arrived are kept)", unit=k, signal=how)
+                if restarts > MAX_RESTARTS:
+                    k = worst[1] if worst else None
+                    raise WorkerDied(f"{what}; {restarts} broken pools in one map, gave up "
+                                     "(results that arrived are kept)", unit=k, signal=worst[2] if worst else None)
+                print(f"lgp.executor: {what}; starting new workers and resubmitting the {len(todo)} unfinished "
+                      f"unit(s) (restart {restarts} of at most {MAX_RESTARTS})", file=sys.stderr, flush=True)
         except BaseException:
             self.terminate()
             raise
         return results
 
+    def _discard_pool(self) -> None:
+        """Forget a broken pool (its workers are gone or being terminated)."""
+        self.terminate()
+
     def terminate(self) -> None:
         """Stop at once: queued work is dropped and the workers are killed."""
-        if self._pool is not None:
-            self._pool.terminate()
-            self._pool.join()
-            self._pool = None
+        pool = self._pool
+        if pool is None:
+            return
+        procs = self._processes()
+        self._pool, self._procs = None, []
+        for p in procs:
+            if p.exitcode is None:
+                p.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        for p in procs:
+            p.join(timeout=5.0)
+            if p.exitcode is None:
+                p.kill()
+                p.join(timeout=1.0)
+        thread = getattr(pool, "_executor_manager_thread", None)
+        if thread is not None:  # it sees the dead workers and exits; never wait for it forever
+            thread.join(timeout=5.0)
 
     def close(self) -> None:
         if self._pool is not None:
-            self._pool.close()
-            self._pool.join()
-            self._pool = None
+            self._pool.shutdown(wait=True)
+            self._pool, self._procs = None, []
 
     def __enter__(self):
         return self
@@ -205,16 +407,6 @@ class ProcessExecutor:
             self.close()
         else:
             self.terminate()
-
-
-def _indexed(args):
-    fn, k, item = args
-    try:
-        return k, fn(item), None
-    except Exception:
-        raise  # the pool carries it to the caller
-    except BaseException as e:  # a Pool worker would die on it and the map would hang
-        return k, None, e
 
 
 class SchedulerUnreachable(ConnectionError):
@@ -256,7 +448,7 @@ class DaskExecutor:
         elif address == "local-dask":
             n = default_jobs() if jobs is None else int(jobs)
             if n < 1:
-                raise ValueError(f"jobs must be >= 1, got {jobs}")
+                raise InputError(f"jobs must be >= 1, got {jobs}")
             self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                          dashboard_address=None, silence_logs=50)
             self.client = Client(self._cluster, set_as_default=False)
@@ -367,7 +559,7 @@ def executor_for(jobs: int | None) -> SerialExecutor | ProcessExecutor:
     """SerialExecutor for one job, a ProcessExecutor otherwise (None: all cores)."""
     jobs = default_jobs() if jobs is None else int(jobs)
     if jobs < 1:
-        raise ValueError(f"jobs must be >= 1, got {jobs}")
+        raise InputError(f"jobs must be >= 1, got {jobs}")
     return SerialExecutor() if jobs == 1 else ProcessExecutor(jobs)
 
 

@@ -63,14 +63,6 @@ def canonical_trial_id(text: str) -> str:
     return str(text).strip().upper()
 
 
-def sigma_grid(name: str) -> tuple[float, ...]:
-    """The sigma grid called `name` (SIGMA_GRIDS); ValueError naming the known ones."""
-    key = str(name).strip().lower()
-    if key not in SIGMA_GRIDS:
-        raise ValueError(f"unknown sigma grid {name!r}; known grids: {', '.join(SIGMA_GRIDS)}")
-    return SIGMA_GRIDS[key]
-
-
 def pair_of(trial_id: str) -> int:
     """Pair number of a trial id of the paper's form ("7H" -> 7)."""
     return int(trial_id[:-1])

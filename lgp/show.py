@@ -5,7 +5,7 @@ the planner are seeded as `models.effort.physical_effort` seeds them
 (`models.effort.plan_of_sample`), so the effort printed here equals that row's.
 Prints the action list with per-action kinetic energy, and optionally writes the
 3-D replay (HTML, works offline) and a figure of block paths and speeds (PNG).
-From a script, use ``lgp.plan(...)`` (lgp/planner.py) and ``lgp.app.view.write_html`` /
+From a script, use ``lgp.plan(...)`` (lgp/search.py; planner="paper" or "search") and ``lgp.app.view.write_html`` /
 ``lgp.app.view.write_png``; this module is the command line only.
 """
 from __future__ import annotations
@@ -13,6 +13,7 @@ from __future__ import annotations
 import sys
 
 from lgp import cli
+from lgp.planner.design import check_approach_height
 
 PROG = "python -m lgp.show"
 
@@ -27,17 +28,30 @@ def main(argv=None) -> int:
     parser.add_argument("--png", type=cli.output_file, help="write a figure of block paths and speeds here (its folder must exist)")
     parser.add_argument("--formulation", default="reduced", choices=("reduced", "full"))
     parser.add_argument("--solver", default="snopt", choices=("snopt", "ipopt"))
-    parser.add_argument("--approach-height", type=cli.approach_height, default=None,
+    parser.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=None,
                         help="approach leg (m) of the run, as `lgp.reproduce --approach-height` (default 0.05; 0 = none)")
     parser.add_argument("--slices", type=cli.positive_int, default=None,
                         help="slices per phase of the run, as `lgp.reproduce --slices` (default 20)")
+    parser.add_argument("--planner", type=cli.one_of(("paper", "search"), "planner"), default="paper",
+                        help="paper (default) or search, as `lgp.reproduce --planner`")
+    parser.add_argument("--budget-solves", type=cli.positive_int, default=None,
+                        help="--planner search: KOMO solves per layout, as `lgp.reproduce --budget-solves` (default 3)")
+    parser.add_argument("--budget-seconds", type=cli.positive_number, default=None,
+                        help="--planner search: seconds per layout, as `lgp.reproduce --budget-seconds` (default 120)")
     args = parser.parse_args(argv)
+    if args.planner != "search" and (args.budget_solves or args.budget_seconds):
+        parser.error("--budget-solves and --budget-seconds apply to --planner search only")
 
     import stimuli
     from models.effort import describe, kinetic_energy, plan_of_sample
 
     trial = stimuli.load_trial(args.trial)
     design = {k: v for k, v in (("approach_height", args.approach_height), ("slices_per_phase", args.slices)) if v is not None}
+    if args.planner == "search":
+        from lgp.search import Budget
+
+        design |= {"planner": "search", "budget": Budget(solves=args.budget_solves or Budget().solves,
+                                                         seconds=args.budget_seconds or Budget().seconds)}
     result = plan_of_sample(trial, args.seed, args.sample, formulation=args.formulation, solver=args.solver, **design)
     komo = result.komo
     print(f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})")

@@ -9,8 +9,10 @@ any extra trial file a user drops in (sorted after). Every loader takes a
 from __future__ import annotations
 
 import hashlib
+import os
 from collections import Counter
 import re
+import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -30,6 +32,10 @@ FREE_ID = re.compile(r"^[A-Z][A-Z0-9_-]{0,63}$")
 #: redraws before the region is declared too small.
 _TRIES_PER_BLOCK = 2000
 _LAYOUT_REDRAWS = 50
+#: Seconds one layout of scattered blocks may take before the trial is declared
+#: too crowded (a machine-independent bound would be a count of tries; this one
+#: says in one line how long it searched, instead of searching for minutes).
+SCATTER_SECONDS = 30.0
 #: Largest trial file read (bytes): a 10,000-block trial is about 0.6 MB.
 MAX_TRIAL_BYTES = 2_000_000
 #: Largest |coordinate| (m) a scatter region may have.
@@ -104,34 +110,15 @@ class StartState:
             blocks = [replace(b, colour=colour) if i in chosen else b for i, b in enumerate(blocks)]
         return Scene(blocks, self.fixed, self.label).validate()
 
-    def check_room(self) -> None:
+    def check_room(self, obstacles: bool = False) -> None:
         """Raise StimulusError at once when the region cannot hold the scattered
-        blocks whatever the draw: the blocks' outlines, each grown by min_gap / 2,
-        are disjoint and lie in the region's rectangle grown by d/sqrt(2) +
-        min_gap / 2 (centres lie in the rectangle), so their total area cannot
-        exceed that grown rectangle's (nor, with r_S, the grown annulus')."""
+        blocks whatever the draw (`room_check`); with `obstacles`, the footprints
+        of the fixed blocks, the fixed boxes and the target's blocks (which the
+        scattered ones keep `clearance` from) are taken out of the room too."""
         if not self.scattered:
             return
-        r, d, g = self.region, BLOCK_SIZE, self.min_gap
-        bounds = [*r.x, *r.y, *(r.r_S or ())]
-        if not all(np.isfinite(bounds)) or not np.isfinite(r.x[1] - r.x[0]) or not np.isfinite(r.y[1] - r.y[0]):
-            raise StimulusError(f"{self.label} scattered region: bounds must be finite numbers (x {r.x}, y {r.y}, r_S {r.r_S})")
-        if max(abs(v) for v in bounds) > MAX_REGION_EXTENT:
-            raise StimulusError(f"{self.label} scattered region: bounds beyond {MAX_REGION_EXTENT:g} m from the origin "
-                                f"(x {r.x}, y {r.y}, r_S {r.r_S}): a table top is not that large, and block outlines "
-                                "lose their millimetre precision there")
-        if r.x[0] > r.x[1] or r.y[0] > r.y[1] or (r.r_S is not None and not 0 <= r.r_S[0] <= r.r_S[1]):
-            raise StimulusError(f"{self.label} scattered region: each range must be [min, max] with min <= max (x {r.x}, y {r.y}, r_S {r.r_S})")
-        if not (np.isfinite(g) and g >= 0 and np.isfinite(self.clearance) and self.clearance >= 0):
-            raise StimulusError(f"{self.label} scattered: min_gap and clearance must be finite and >= 0 (got {g}, {self.clearance})")
-        grow = d / np.sqrt(2) + g / 2
-        room = (r.x[1] - r.x[0] + 2 * grow) * (r.y[1] - r.y[0] + 2 * grow)
-        if r.r_S is not None:
-            room = min(room, np.pi * ((r.r_S[1] + grow) ** 2 - max(0.0, r.r_S[0] - grow) ** 2))
-        need = len(self.scattered) * (d * d + 2 * d * g + np.pi * g * g / 4)
-        if need > room:
-            raise StimulusError(f"{self.label}: cannot scatter {len(self.scattered)} blocks in region {r}: they need at least "
-                                f"{need:.4g} m^2 with min_gap {g:g} m, the region offers at most {room:.4g} m^2 (too small)")
+        room_check(self.label, len(self.scattered), self.region, self.min_gap, self.clearance,
+                   [*self.blocks, *self.fixed, *self.keep_clear] if obstacles else ())
 
     def _scatter(self, rng: np.random.Generator) -> list[Block]:
         self.check_room()
@@ -142,10 +129,16 @@ class StartState:
         # against blocks in the 3 x 3 cells around it (cells wider than any two
         # inflated outlines can reach), so a layout costs O(n), not O(n^2).
         cell = np.sqrt(2) * (d + 2 * self.min_gap)
-        for _ in range(_LAYOUT_REDRAWS):
+        t0, best = time.monotonic(), 0
+        for redraw in range(_LAYOUT_REDRAWS):
             placed: list[Block] = []
             grid: dict[tuple[int, int], list[Block]] = {}
             for name, colour in self.scattered:
+                if time.monotonic() - t0 > SCATTER_SECONDS:
+                    raise StimulusError(
+                        f"{self.label}: cannot scatter {len(self.scattered)} blocks in region {self.region}: no layout "
+                        f"found in {SCATTER_SECONDS:g} s (at most {max(best, len(placed))} placed, {redraw + 1} "
+                        f"draw(s)): the region is too crowded (stimuli.SCATTER_SECONDS bounds the search)")
                 for _ in range(_TRIES_PER_BLOCK):
                     p = np.array([rng.uniform(*self.region.x), rng.uniform(*self.region.y), d / 2])
                     yaw = rng.uniform(0.0, np.pi / 2)  # a cube looks the same every quarter turn
@@ -171,8 +164,88 @@ class StartState:
                     break
             if len(placed) == len(self.scattered):
                 return placed
+            best = max(best, len(placed))
         raise StimulusError(f"{self.label}: cannot scatter {len(self.scattered)} blocks in region {self.region} "
                             f"(no layout found in {_LAYOUT_REDRAWS} redraws of {_TRIES_PER_BLOCK} tries per block: too small or too crowded)")
+
+
+def room_check(label: str, n: int, region: ScatterRegion, min_gap: float, clearance: float, obstacles=()) -> None:
+    """Raise StimulusError when `n` blocks cannot be scattered in `region` whatever
+    the draw; cheap, so it runs before anything of size `n` is built.
+
+    The blocks' outlines, each grown by g/2 (g = min_gap), are disjoint and lie in
+    the region's rectangle grown by d/sqrt(2) + g/2 (centres lie in the
+    rectangle), so their total area cannot exceed that grown rectangle's (nor,
+    with r_S, the grown annulus'). With `obstacles` (things the blocks keep
+    `clearance` c from): the outlines grown by h = min(g/2, c) are disjoint from
+    each other and from every obstacle's footprint, so they fit in the grown
+    rectangle minus the area the obstacles cover there (a lower bound of that
+    area: footprints of pairwise disjoint bounding boxes, clipped to it)."""
+    r, d, g = region, BLOCK_SIZE, min_gap
+    bounds = [*r.x, *r.y, *(r.r_S or ())]
+    if not all(np.isfinite(bounds)) or not np.isfinite(r.x[1] - r.x[0]) or not np.isfinite(r.y[1] - r.y[0]):
+        raise StimulusError(f"{label} scattered region: bounds must be finite numbers (x {r.x}, y {r.y}, r_S {r.r_S})")
+    if max(abs(v) for v in bounds) > MAX_REGION_EXTENT:
+        raise StimulusError(f"{label} scattered region: bounds beyond {MAX_REGION_EXTENT:g} m from the origin "
+                            f"(x {r.x}, y {r.y}, r_S {r.r_S}): a table top is not that large, and block outlines "
+                            "lose their millimetre precision there")
+    if r.x[0] > r.x[1] or r.y[0] > r.y[1] or (r.r_S is not None and not 0 <= r.r_S[0] <= r.r_S[1]):
+        raise StimulusError(f"{label} scattered region: each range must be [min, max] with min <= max (x {r.x}, y {r.y}, r_S {r.r_S})")
+    if not (np.isfinite(g) and g >= 0 and np.isfinite(clearance) and clearance >= 0):
+        raise StimulusError(f"{label} scattered: min_gap and clearance must be finite and >= 0 (got {g}, {clearance})")
+    grow = d / np.sqrt(2) + g / 2
+    rect = (r.x[1] - r.x[0] + 2 * grow) * (r.y[1] - r.y[0] + 2 * grow)
+    room = rect
+    if r.r_S is not None:
+        room = min(room, np.pi * ((r.r_S[1] + grow) ** 2 - max(0.0, r.r_S[0] - grow) ** 2))
+    need = n * (d * d + 2 * d * g + np.pi * g * g / 4)
+    if need > room:
+        raise StimulusError(f"{label}: cannot scatter {n} blocks in region {r}: they need at least "
+                            f"{need:.4g} m^2 with min_gap {g:g} m, the region offers at most {room:.4g} m^2 (too small)")
+    if len(obstacles):
+        h = min(g / 2, clearance)
+        grow_h = d / np.sqrt(2) + h
+        box = np.array([[r.x[0] - grow_h, r.y[0] - grow_h], [r.x[1] + grow_h, r.y[0] - grow_h],
+                        [r.x[1] + grow_h, r.y[1] + grow_h], [r.x[0] - grow_h, r.y[1] + grow_h]])
+        taken = _covered_area(obstacles, box)
+        free = (r.x[1] - r.x[0] + 2 * grow_h) * (r.y[1] - r.y[0] + 2 * grow_h) - taken
+        need_h = n * (d * d + 4 * d * h + np.pi * h * h)
+        if need_h > free:
+            raise StimulusError(f"{label}: cannot scatter {n} blocks in region {r}: they need at least {need_h:.4g} m^2 "
+                                f"(clearance {clearance:g} m, min_gap {g:g} m), the region offers at most {free:.4g} m^2 "
+                                f"once the {taken:.4g} m^2 covered by the target's blocks and the fixed things are taken "
+                                "out (too small)")
+
+
+def _covered_area(solids, box: np.ndarray) -> float:
+    """A lower bound of the area of `box` (a CCW rectangle, (4, 2)) the solids'
+    footprints cover: the footprints of a greedy set of solids whose bounding
+    boxes (seen from above) do not overlap, each clipped to `box`."""
+    from lgp.geometry import clip_convex, polygon_area
+    from lgp.scene import _box_pairs
+
+    solids = list(solids)
+    if not solids:
+        return 0.0
+    lo, hi = bounding_boxes(solids)
+    lo, hi = lo[:, :2], hi[:, :2]
+    blo, bhi = box.min(axis=0), box.max(axis=0)
+    inside = np.flatnonzero(np.all((lo < bhi) & (blo < hi), axis=1))
+    if not len(inside):
+        return 0.0
+    i, j = _box_pairs(lo[inside], hi[inside], lo[inside], hi[inside], True, margin=-1e-9)
+    neighbours: dict[int, list[int]] = {}
+    for a, b in zip(i.tolist(), j.tolist()):
+        neighbours.setdefault(b, []).append(a)  # a < b
+    chosen = np.zeros(len(inside), bool)
+    area = 0.0
+    for k in range(len(inside)):
+        if any(chosen[a] for a in neighbours.get(k, ())):
+            continue
+        chosen[k] = True
+        P = clip_convex(solids[inside[k]].footprint(), box)
+        area += abs(polygon_area(P)) if len(P) >= 3 else 0.0
+    return area
 
 
 @dataclass(frozen=True)
@@ -188,6 +261,7 @@ class Trial:
     target: Scene
     provenance: dict = field(default_factory=dict)
     path: Path | None = None
+    sha256: str = ""  # of the file's bytes as read and parsed (load_file)
 
     def sample_initial(self, rng: np.random.Generator) -> Scene:
         """Draw a concrete A (scattered blocks at random), validated."""
@@ -196,7 +270,9 @@ class Trial:
     @property
     def digest(self) -> str:
         """Hash of the trial file's bytes: keys caches of results computed from it."""
-        return hashlib.sha256(self.path.read_bytes()).hexdigest()[:16] if self.path else ""
+        if self.sha256:
+            return self.sha256[:16]
+        return hashlib.sha256(read_trial_bytes(self.path)).hexdigest()[:16] if self.path else ""
 
     def __repr__(self) -> str:
         return f"Trial({self.id}: {self.description})"
@@ -321,12 +397,6 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
         s = init["scattered"]
         _check_keys(f"{tid}-A scattered", s, _SCATTER_KEYS)
         where = f"{tid}-A scattered"
-        if "colours" in s:
-            colours = [_text(f"{where} colours", c) for c in _list(f"{where} colours", s["colours"])]
-        else:
-            colours = [_text(f"{where} colour", s.get("colour", "natural"))] * _integer(f"{where} count", s.get("count", 0), 0)
-        prefix = _text(f"{where} prefix", s.get("prefix", "s"))
-        scattered = tuple((f"{prefix}{i + 1}", c) for i, c in enumerate(colours))
         r = s.get("region") or {}
         _check_keys(f"{where} region", r, {"x", "y", "r_S"})
         if "x" not in r or "y" not in r:
@@ -342,6 +412,16 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
                 and region.x[0] <= region.x[1] and region.y[0] <= region.y[1]):
             raise StimulusError(f"{tid}-A scattered region: x {region.x}, y {region.y} must be finite ranges "
                                 f"[min, max] inside the workspace |x|, |y| <= {WORKSPACE_XY:g} m")
+        if "colours" in s:
+            colours = [_text(f"{where} colours", c) for c in _list(f"{where} colours", s["colours"])]
+        else:
+            count = _integer(f"{where} count", s.get("count", 0), 0)
+            # the room first: a count of 10**12 must not become a list of 10**12 colours
+            room_check(f"{tid}-A", count, region, kw.get("min_gap", StartState.min_gap),
+                       kw.get("clearance", StartState.clearance))
+            colours = [_text(f"{where} colour", s.get("colour", "natural"))] * count
+        prefix = _text(f"{where} prefix", s.get("prefix", "s"))
+        scattered = tuple((f"{prefix}{i + 1}", c) for i, c in enumerate(colours))
     recolour = None
     if "recolour" in init:
         rc = init["recolour"]
@@ -356,7 +436,7 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     if dup:
         raise StimulusError(f"{tid}-A: duplicate block name {sorted(dup)[0]!r}")
     start = StartState(f"{tid}-A", fixed_blocks, fixed, scattered, region, recolour=recolour, build_site=build_site, keep_clear=target.blocks, **kw)
-    start.check_room()
+    start.check_room(obstacles=True)  # the target's footprint and the fixed things take room too
 
     have = start.colour_counts()
     for colour, need in Counter(b.colour for b in target.blocks).items():
@@ -391,6 +471,30 @@ def _refuse_anchors(where: str, event) -> None:
                             "are not allowed in trial files")
 
 
+def _check_events(where: str, events) -> None:
+    """One pass over the parse events, before anything is built: no anchors or
+    aliases, and no key given twice in one mapping (YAML would keep the last value
+    silently; a trial file that says ``count`` twice is a mistake)."""
+    stack: list[list] = []  # per open collection: [keys seen (None for a sequence), next node is a key]
+    for event in events:
+        _refuse_anchors(where, event)
+        if isinstance(event, (yaml.ScalarEvent, yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            top = stack[-1] if stack else None
+            if top is not None and top[0] is not None:
+                if top[1] and isinstance(event, yaml.ScalarEvent):
+                    if event.value in top[0]:
+                        raise StimulusError(f"{where}: line {event.start_mark.line + 1}: key {event.value!r} given twice "
+                                            f"in one mapping (first on line {top[0][event.value]}); each field once")
+                    top[0][event.value] = event.start_mark.line + 1
+                top[1] = not top[1]
+            if isinstance(event, yaml.MappingStartEvent):
+                stack.append([{}, True])
+            elif isinstance(event, yaml.SequenceStartEvent):
+                stack.append([None, False])
+        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            stack.pop()
+
+
 def _at(mark) -> str:
     return f"line {mark.line + 1}, column {mark.column + 1}"
 
@@ -411,12 +515,13 @@ def yaml_error_line(e: yaml.YAMLError) -> str:
 
 
 def _safe_load(text: str, where: str):
-    """yaml.safe_load without anchors and aliases; libyaml's C parser when present
-    (a first pass over the parse events refuses anchors before anything is built)."""
+    """yaml.safe_load without anchors, aliases or duplicate keys; libyaml's C parser
+    when present (a first pass over the parse events refuses them before anything
+    is built)."""
     if getattr(yaml, "__with_libyaml__", False):
-        for event in yaml.parse(text, Loader=yaml.CSafeLoader):
-            _refuse_anchors(where, event)
+        _check_events(where, yaml.parse(text, Loader=yaml.CSafeLoader))
         return yaml.load(text, Loader=yaml.CSafeLoader)
+    _check_events(where, yaml.parse(text, Loader=yaml.SafeLoader))
     loader = _TrialLoader(text)
     loader.name = where
     try:
@@ -425,26 +530,34 @@ def _safe_load(text: str, where: str):
         loader.dispose()
 
 
-def load_file(path: str | Path) -> Trial:
-    """Read, parse and validate one trial file (at most MAX_TRIAL_BYTES)."""
+def read_trial_bytes(path: str | Path) -> bytes:
+    """The bytes of a trial file: a regular file of at most MAX_TRIAL_BYTES, read
+    through the one bounded reader (lgp.inputs: no FIFO, device or endless file)."""
+    from lgp.inputs import InputFileError, read_bounded
+
+    try:
+        return read_bounded(path, MAX_TRIAL_BYTES, "trial file", limit_name="stimuli.MAX_TRIAL_BYTES")
+    except InputFileError as e:
+        raise StimulusError(str(e)) from None
+
+
+def load_file(path: str | Path, data: bytes | None = None) -> Trial:
+    """Read, parse and validate one trial file (at most MAX_TRIAL_BYTES; `data`:
+    its bytes, already read)."""
     path = Path(path)
+    data = read_trial_bytes(path) if data is None else data
     try:
-        size = path.stat().st_size
-    except OSError as e:
-        raise StimulusError(f"{path}: cannot read the trial file ({e.strerror})") from None
-    if size > MAX_TRIAL_BYTES:
-        raise StimulusError(f"{path}: trial file is {size} bytes, more than the {MAX_TRIAL_BYTES} allowed (MAX_TRIAL_BYTES)")
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as e:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
         raise StimulusError(f"{path}: cannot read the trial file as UTF-8 text ({e})") from None
     try:
-        data = _safe_load(text, str(path))
+        fields = _safe_load(text, str(path))
     except yaml.YAMLError as e:
         raise StimulusError(f"{path}: {yaml_error_line(e)}") from None
-    if not isinstance(data, dict):
-        raise StimulusError(f"{path}: a trial file is a mapping of fields (id, pair, level, initial, target, ...), got {type(data).__name__}")
-    return parse_trial(data, path)
+    if not isinstance(fields, dict):
+        raise StimulusError(f"{path}: a trial file is a mapping of fields (id, pair, level, initial, target, ...), got {type(fields).__name__}")
+    trial = parse_trial(fields, path)
+    return replace(trial, sha256=hashlib.sha256(data).hexdigest())
 
 
 def _sort_key(tid: str):
@@ -468,10 +581,17 @@ def load_trial(trial_id: str, directory: str | Path | None = None) -> Trial:
     trial_id = canonical_trial_id(trial_id)
     path = directory / f"{trial_id}.yaml"
     if not path.exists():
+        if path.is_symlink():
+            raise StimulusError(f"no trial {trial_id!r}: {path} is a symbolic link to {os.readlink(path)}, which does not exist")
+        misnamed = [p.name for p in directory.glob("*.yaml") if p.stem.upper() == trial_id and p.stem != trial_id]
+        if misnamed:
+            raise StimulusError(f"no trial {trial_id!r}: {directory} has {misnamed[0]}, but a trial file is named by its "
+                                f"id in upper case: rename it {trial_id}.yaml")
         raise StimulusError(f"no trial {trial_id!r}: {path} does not exist (known: {', '.join(trial_ids(directory))})")
-    key = (str(path), hashlib.sha256(path.read_bytes()).hexdigest())
+    data = read_trial_bytes(path)
+    key = (str(path), hashlib.sha256(data).hexdigest())
     if key not in _cache:
-        trial = load_file(path)
+        trial = load_file(path, data)
         if trial.id != trial_id:
             raise StimulusError(f"{path}: file name says {trial_id} but the id field says {trial.id}")
         _cache[key] = trial
@@ -493,3 +613,28 @@ def load_paper(directory: str | Path | None = None) -> list[Trial]:
 def extra_ids(directory: str | Path | None = None) -> list[str]:
     """Ids of the trial files in `directory` that are not among the paper's 24."""
     return [t for t in trial_ids(directory) if t not in TRIAL_IDS]
+
+
+def select_trials(ids: list[str] | None = None, directory: str | Path | None = None) -> tuple[list[Trial], list[str]]:
+    """The trials of a run and the ids of the trial files it leaves out.
+
+    With no `ids`: the paper's 24 from the default folder (the other trial files
+    there are left out and returned, for the caller to name), or every trial file
+    of `directory` when one is given. ``["all"]``: every trial file. Otherwise the
+    trials named. Raises StimulusError for a `directory` with no trial files.
+    """
+    if not ids and directory is not None:  # a user's stimulus set: every trial file in it
+        if not trial_ids(directory):
+            raise StimulusError(f"--stimuli {directory}: no trial files (*.yaml) there")
+        return load_all(directory), []
+    if not ids:
+        return load_paper(directory), extra_ids(directory)
+    if [t.lower() for t in ids] == ["all"]:
+        return load_all(directory), []
+    return [load_trial(t, directory) for t in ids], []
+
+
+def declared_pairs(trials) -> list[int]:
+    """The pairs whose easy and hard trials (ids ``<pair>E``, ``<pair>H``) are both among `trials`."""
+    ids = {t.id for t in trials}
+    return sorted({t.pair for t in trials if t.pair is not None and {f"{t.pair}E", f"{t.pair}H"} <= ids})

@@ -18,6 +18,16 @@ N files.
 | pyramid | rows of 2-4, 1-3, ... blocks, each block on the seam of two below |
 | stack | 1-3 columns of 1-4 blocks, each block shifted at random by up to d/6 |
 
+``--kind rearrange`` writes rearrangement tasks instead (``R0001.yaml`` ...), where
+A's structures stand in B's way, so a plan must set blocks aside (lgp.search;
+the paper's pipeline has no plan for them):
+
+| kind | A -> B |
+|---|---|
+| reverse | a tower of 2-4 blocks of distinct colours at S, rebuilt in place upside down |
+| swap | two towers of 1-3 blocks (one red, one blue) at y = -s and +s, trading places |
+| rebuild | a tower of 3-5 coloured blocks at y = -s, rebuilt at y = +s with its colours in another order |
+
 Each file is loaded back with the loader's checks (`stimuli.load_file`) and its B
 is checked stable without noise by the risk model's own check
 (`models.risk.check_stable`, a physics run at sigma = 0); a draw that fails
@@ -34,10 +44,15 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from lgp.errors import InputError
 from lgp.paper import BLOCK_SIZE as d
 from lgp.paper import BUILD_SITE
 
 KINDS = ("tower", "line", "wall", "staircase", "bridge", "pyramid", "stack")
+#: Rearrangement tasks (--kind rearrange): A's structures stand where B needs its blocks.
+REARRANGE_KINDS = ("reverse", "swap", "rebuild")
+#: Colours of rearrangement tasks' blocks.
+PALETTE = ("red", "green", "blue", "yellow")
 #: Scatter region of A (m), the same as the paper's trial files use.
 REGION = {"x": [0.2, 0.55], "y": [-0.25, 0.25]}
 #: Draws of one trial before giving up (a random stack can come out unstable).
@@ -88,7 +103,7 @@ def structure(kind: str, rng: np.random.Generator) -> tuple[list[tuple[float, fl
                 dy += rng.uniform(-d / 6, d / 6)
         text = f"random stack of {len(cells)} blocks in {cols} column{'s' if cols > 1 else ''}"
     else:
-        raise ValueError(f"unknown structure kind {kind!r} (known: {', '.join(KINDS)})")
+        raise InputError(f"unknown structure kind {kind!r} (known: {', '.join(KINDS)})")
     return [(x, y, d / 2 + level * d) for x, y, level in cells], text
 
 
@@ -112,6 +127,53 @@ def trial_data(index: int, seed: int, kind: str | None = None) -> dict:
     }
 
 
+def _tower(prefix: str, x: float, y: float, colours) -> list[dict]:
+    return [{"name": f"{prefix}{k + 1}", "p_WB": [round(x, 5), round(y, 5), round(d / 2 + k * d, 5)], "colour": c}
+            for k, c in enumerate(colours)]
+
+
+def rearrange_data(index: int, seed: int, kind: str | None = None) -> dict:
+    """The mapping of rearrangement task `index` (--kind rearrange), drawn from
+    default_rng([seed, index]): its kind (REARRANGE_KINDS), size and colours."""
+    rng = np.random.default_rng([seed, index])
+    kind = kind or REARRANGE_KINDS[int(rng.integers(len(REARRANGE_KINDS)))]
+    sx, sy = BUILD_SITE
+    if kind == "reverse":
+        n = int(rng.integers(2, 5))
+        colours = [PALETTE[i] for i in rng.permutation(len(PALETTE))[:n]]
+        A, B = _tower("a", sx, sy, colours), _tower("b", sx, sy, colours[::-1])
+        text = f"{n}-block tower reversed in place"
+    elif kind == "swap":
+        h1, h2 = int(rng.integers(1, 4)), int(rng.integers(1, 4))
+        s = float(rng.uniform(0.08, 0.14))
+        A = _tower("r", sx, sy - s, ["red"] * h1) + _tower("u", sx, sy + s, ["blue"] * h2)
+        B = _tower("b", sx, sy - s, ["blue"] * h2) + _tower("c", sx, sy + s, ["red"] * h1)
+        text = f"red tower of {h1} and blue tower of {h2}, {2 * s:.2f} m apart, trading places"
+    elif kind == "rebuild":
+        n = int(rng.integers(3, 6))
+        s = float(rng.uniform(0.08, 0.14))
+        colours = [PALETTE[i] for i in rng.integers(0, 3, n)]
+        while len(set(colours)) < 2:
+            colours = [PALETTE[i] for i in rng.integers(0, 3, n)]
+        order = list(colours)
+        while order == colours:
+            order = [colours[i] for i in rng.permutation(n)]
+        A, B = _tower("a", sx, sy - s, colours), _tower("b", sx, sy + s, order)
+        text = f"{n}-block tower rebuilt {2 * s:.2f} m away in another colour order"
+    else:
+        raise InputError(f"unknown rearrangement kind {kind!r} (known: {', '.join(REARRANGE_KINDS)})")
+    return {
+        "id": f"R{index + 1:04d}",
+        "dimension": f"generated rearrangement: {kind}",
+        "description": text,
+        "build_site": [float(sx), float(sy)],
+        "provenance": {"generated": [f"python -m stimuli.generate --kind rearrange --seed {seed}: task {index + 1}, "
+                                     f"kind {kind}; B checked stable without noise (models.risk.check_stable)"]},
+        "initial": {"blocks": A},
+        "target": {"blocks": B},
+    }
+
+
 def write_trial(data: dict, directory: Path) -> Path:
     path = directory / f"{data['id']}.yaml"
     tmp = path.with_suffix(".yaml.tmp")
@@ -121,22 +183,28 @@ def write_trial(data: dict, directory: Path) -> Path:
     return path
 
 
-def generate(directory: str | Path, count: int, seed: int = 0, engine: str | None = None) -> list[Path]:
-    """Write `count` valid, statically stable random trials into `directory`."""
+def generate(directory: str | Path, count: int, seed: int = 0, engine: str | None = None,
+             kind: str = "scatter") -> list[Path]:
+    """Write `count` valid, statically stable random trials into `directory`:
+    scattered blocks -> a structure (kind "scatter"), or rearrangement tasks
+    (kind "rearrange", `rearrange_data`)."""
     import stimuli
     from models.risk import check_stable
     from models.risk.core import UnstableSceneError
 
     if count < 1:
-        raise ValueError(f"count must be >= 1, got {count}")
+        raise InputError(f"count must be >= 1, got {count}")
+    if kind not in ("scatter", "rearrange"):
+        raise InputError(f"kind must be scatter or rearrange, got {kind!r}")
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     paths = []
     for i in range(count):
         for attempt in range(_ATTEMPTS):
             # a redraw uses its own stream: trial i's first draw does not depend on the attempts of others
-            data = trial_data(i, seed if attempt == 0 else seed + 1_000_003 * attempt)
-            data["id"] = f"G{i + 1:04d}"
+            draw = rearrange_data if kind == "rearrange" else trial_data
+            data = draw(i, seed if attempt == 0 else seed + 1_000_003 * attempt)
+            data["id"] = f"{'R' if kind == 'rearrange' else 'G'}{i + 1:04d}"
             path = write_trial(data, directory)
             try:
                 trial = stimuli.load_file(path)
@@ -158,14 +226,17 @@ def main(argv=None) -> int:
     p.add_argument("--count", type=int, required=True, help="number of trials")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--engine", help="engine of the stability check (default: the risk model's)")
+    p.add_argument("--kind", choices=("scatter", "rearrange"), default="scatter",
+                   help="scatter: scattered blocks -> a structure (default); rearrange: A's structures in B's way")
     args = p.parse_args(argv)
     if args.count < 1:
         p.error(f"--count must be >= 1, got {args.count}")
     try:
-        paths = generate(args.out, args.count, args.seed, args.engine)
+        paths = generate(args.out, args.count, args.seed, args.engine, args.kind)
     except (OSError, RuntimeError, ValueError) as e:
         p.exit(1, f"{p.prog}: error: {e}\n")
-    print(f"wrote {len(paths)} trials to {Path(args.out).resolve()} (python -m lgp.reproduce --stimuli {args.out})")
+    planner = " --planner search" if args.kind == "rearrange" else ""
+    print(f"wrote {len(paths)} trials to {Path(args.out).resolve()} (python -m lgp.reproduce --stimuli {args.out}{planner})")
     return 0
 
 

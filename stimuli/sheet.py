@@ -52,14 +52,13 @@ def draw_scene(ax, scene: Scene, title: str = "", limits=None) -> None:
 
 
 def contact_sheet(trials, seed: int = 0, out: str = "stimuli.png") -> str:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     cols = 4  # trials per row, each as A | B
     rows = int(np.ceil(len(trials) / cols))
-    fig = plt.figure(figsize=(cols * 5.0, rows * 2.6))
+    fig = Figure(figsize=(cols * 5.0, rows * 2.6))
+    FigureCanvasAgg(fig)
     for k, trial in enumerate(trials):
         A = trial.sample_initial(np.random.default_rng(seed))
         r, c = divmod(k, cols)
@@ -69,7 +68,6 @@ def contact_sheet(trials, seed: int = 0, out: str = "stimuli.png") -> str:
     fig.suptitle(f"The {len(trials)} trials (A: start, one random layout, seed {seed}; B: finish; each panel zoomed to its content)", fontsize=12)
     fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.95, wspace=0.02, hspace=0.12)
     fig.savefig(out, dpi=90)
-    plt.close(fig)
     return out
 
 

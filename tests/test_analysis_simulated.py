@@ -125,7 +125,7 @@ def test_run_analysis_on_simulated_participants_writes_labelled_tables_and_figur
     for key in ("fits", "sigma_profile", "bootstrap_tests", "orderings", "trial_means"):
         assert (tmp_path / f"simulated_{key}.csv").exists()
     pngs = [p for p in paths if p.endswith(".png")]
-    assert len(pngs) == 4 and sum(p.endswith(".pdf") for p in paths) == 4
+    assert len(pngs) == 5 and sum(p.endswith(".pdf") for p in paths) == 5  # Fig. 3, 4, its comparison, sigma, pairs
     for png in pngs:
         assert Image.open(png).text["Title"].startswith(SIMULATED_TITLE)
 

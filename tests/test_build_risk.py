@@ -148,3 +148,22 @@ def test_work_shares_follow_the_effort_runs_approach_height():
     flat = [st.work_share for st in plan_stages(trial, 0, 0, approach_height=0.0)]
     assert default[-1] == pytest.approx(1.0) and flat[-1] == pytest.approx(1.0)
     assert not np.allclose(default[:-1], flat[:-1])
+
+
+@pytest.mark.slow
+def test_work_shares_are_the_same_numbers_whatever_the_hash_seed():
+    """Same seed, same numbers: the shares summed the placed blocks' weights over a
+    set of names, whose order follows Python's string-hash seed, so a share came out
+    one ulp apart between two runs (2E, layout 2: 0.7087041801898485 or ...486)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import stimuli\nfrom models.risk.build import plan_stages\n"
+            "print([repr(s.work_share) for k in (1, 2) for s in plan_stages(stimuli.load_trial('2E'), 0, k)])\n")
+    root = Path(__file__).resolve().parents[1]
+    out = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root,
+                          env={**os.environ, "PYTHONPATH": str(root), "PYTHONHASHSEED": str(h)}).stdout
+           for h in (1, 2, 3)}
+    assert len(out) == 1, out

@@ -1,4 +1,5 @@
-"""`python -m lgp.reproduce --build-risk` and `--per-participant-sigma` (lgp/app/build_risk.py):
+"""`python -m lgp.reproduce --build-risk` and `--per-participant-sigma` (lgp/app/build_risk.py,
+lgp/app/participant_sigma.py):
 cached per trial, report sections, the pair table of aggregates. Participants here
 are SIMULATED."""
 import numpy as np
@@ -8,6 +9,7 @@ import pytest
 import models.risk.build
 from lgp import reproduce
 from lgp.app import build_risk
+from lgp.app.participant_sigma import participant_sigma_outputs
 from lgp.paper import TRIAL_IDS
 
 ARGS = ["--trials", "6E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.065", "--jobs", "1", "--build-risk",
@@ -76,7 +78,7 @@ def test_participant_sigma_outputs_are_labelled_simulated(tmp_path):
     grid = pd.DataFrame([(t, s, min(1.0, s * (i % 5))) for i, t in enumerate(TRIAL_IDS) for s in (0.05, 0.075, 0.1)],
                         columns=["trial", "sigma", "risk"])
     sim = simulate_participants(effort, grid, (0, 1, 3), 0.075, 8, 1.0, rng, datasets=("time",))
-    paths, section = build_risk.participant_sigma_outputs(sim, effort, grid, tmp_path, "shared", "cmd")
+    paths, section = participant_sigma_outputs(sim, effort, grid, tmp_path, "shared", "cmd")
     assert (tmp_path / "simulated_participant_sigma.csv").exists()
     assert any(p.name == "simulated_participant_sigma.png" for p in paths)
     assert "SIMULATED" in section and "simulated-time" in section

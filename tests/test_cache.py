@@ -1,5 +1,6 @@
 """Cached results are keyed by everything they depend on, checked on every read,
 and written atomically with the file mode the user's umask gives."""
+import json
 import os
 import shutil
 import stat
@@ -10,6 +11,7 @@ import pandas as pd
 import pytest
 
 from lgp.app import cache as cache_module
+from lgp.app import stages
 from lgp.app.cache import (PACKAGES, ROOT, Cache, import_closure, input_key, library_versions, module_imports,
                        modules_digest, write_csv_atomic)
 
@@ -165,7 +167,6 @@ def test_the_risk_key_covers_what_a_risk_run_loads_and_not_the_planner():
     modules of the risk key's closure, and neither holds the planner or KOMO, so
     editing the motion planner keeps cached risks (build risk, which plans, is
     re-exported by models.risk lazily)."""
-    from lgp import reproduce
 
     loaded = _project_modules_loaded_by("import stimuli\n"
                                         "from models.risk import risk_table\n"
@@ -174,14 +175,14 @@ def test_the_risk_key_covers_what_a_risk_run_loads_and_not_the_planner():
     assert {"models.risk.core", "models.risk.mujoco_engine", "stimuli"} <= loaded
     assert loaded <= closure, loaded - closure
     assert not {"lgp.planner", "lgp.komo", "models.effort", "models.risk.build"} & (loaded | closure)
-    assert reproduce.risk_key_inputs(None)["code"] == modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli")
+    assert stages.risk_key_inputs(None)["code"] == modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli")
 
 
 def test_editing_the_planner_keeps_the_risk_key(tmp_path):
     root = _copy_project(tmp_path)
     risk = modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli", root=root)
     effort = modules_digest("models.effort", "stimuli", root=root)
-    for module in ("lgp/planner.py", "lgp/komo/solve.py", "models/risk/build.py"):
+    for module in ("lgp/planner/__init__.py", "lgp/planner/clearance.py", "lgp/komo/solve.py", "models/risk/build.py"):
         (root / module).write_text((root / module).read_text() + "\n# edited\n")
     assert modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli", root=root) == risk
     assert modules_digest("models.effort", "stimuli", root=root) != effort
@@ -238,12 +239,11 @@ def test_the_effort_key_does_not_hash_the_command_line(tmp_path):
     """The effort CLI is models/effort/__main__.py: its help strings and the shared
     argument checks of lgp.cli are no input of an effort, so editing them keeps
     every cached effort (before the split, models.effort imported lgp.cli)."""
-    from lgp import reproduce
 
     closure = set(import_closure("models.effort", "stimuli"))
     assert "models.effort" in closure and "lgp.planner" in closure
     assert not {"models.effort.__main__", "lgp.cli"} & closure
-    assert reproduce.effort_key_inputs()["code"] == modules_digest("models.effort", "stimuli")
+    assert stages.effort_key_inputs()["code"] == modules_digest("models.effort", "stimuli")
     root = _copy_project(tmp_path)
     before = modules_digest("models.effort", "stimuli", root=root)
     for module in ("models/effort/__main__.py", "lgp/cli.py"):
@@ -282,20 +282,52 @@ def test_a_file_that_appears_is_followed_though_the_importer_is_unchanged(tmp_pa
 
 
 def test_reproduce_keys_cover_libraries_and_engine_settings(monkeypatch):
-    from lgp import reproduce
     from models.risk import get_engine
 
-    risk = reproduce.risk_key_inputs(None)
+    risk = stages.risk_key_inputs(None)
     assert risk["engine"] == "mujoco" and risk["engine_settings"] == get_engine("mujoco").settings()
     assert risk["libraries"] == library_versions()
-    drake = reproduce.risk_key_inputs("drake")
+    drake = stages.risk_key_inputs("drake")
     assert drake["engine_settings"]["engine"] == "drake" and drake["code"] != risk["code"]
-    effort = reproduce.effort_key_inputs()
+    effort = stages.effort_key_inputs()
     assert {"drake", "numpy", "scipy", "pandas"} <= set(effort["libraries"])
 
     # a library upgrade changes both keys
     real = cache_module.metadata.version
     monkeypatch.setattr(cache_module.metadata, "version", lambda name: "99.0" if name == "mujoco" else real(name))
-    assert reproduce.risk_key_inputs(None)["libraries"] != risk["libraries"]
+    assert stages.risk_key_inputs(None)["libraries"] != risk["libraries"]
     monkeypatch.setattr(cache_module.metadata, "version", lambda name: "99.0" if name == "drake" else real(name))
-    assert reproduce.effort_key_inputs() != effort
+    assert stages.effort_key_inputs() != effort
+
+
+def test_the_manifest_is_written_without_setting_the_umask(tmp_path, monkeypatch):
+    """Issue 21: manifest._umask read the mask with os.umask(0), the race this
+    module's writer avoids; every output now goes through lgp.app.files, which reads
+    /proc/self/status (Linux) and gives the mode the umask gives."""
+    from lgp.app.files import umask
+    from lgp.app.manifest import write_manifest
+
+    mask = umask()
+    (tmp_path / "a.csv").write_text("x\n")
+
+    def no_umask(*a):
+        raise AssertionError("os.umask called: it changes the mask of every thread")
+
+    monkeypatch.setattr(os, "umask", no_umask)
+    path = write_manifest(tmp_path, [tmp_path / "a.csv"], command=["x"])
+    assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~mask
+    assert json.loads(path.read_text())["files"][0]["path"] == "a.csv"
+
+
+def test_the_build_risk_key_names_the_engines_own_library_as_the_risk_key_does(monkeypatch):
+    """Issue 21: the build-risk key left out sapien (PhysX's library), so `--engine
+    physx --build-risk` reused stale stage tables after a sapien upgrade."""
+    pytest.importorskip("sapien")
+    from lgp.app.build_risk import build_key_inputs
+
+    physx = build_key_inputs("physx")
+    assert "sapien" in physx["libraries"] and physx["libraries"] == stages.risk_key_inputs("physx")["libraries"]
+    real = cache_module.metadata.version
+    monkeypatch.setattr(cache_module.metadata, "version", lambda name: "99.0" if name == "sapien" else real(name))
+    assert build_key_inputs("physx")["libraries"] != physx["libraries"]
+    assert build_key_inputs("mujoco")["libraries"] == library_versions()  # no engine library of its own

@@ -207,6 +207,49 @@ def test_a_bug_keeps_its_traceback_and_a_known_error_is_one_line(capsys):
                                        "(and 1 more line(s); --debug shows all)\n")
 
 
+def test_a_plain_value_error_from_the_projects_own_code_is_a_bug_with_its_traceback(capsys):
+    """A ValueError raised in project code by a mistake (a tuple unpacked wrongly:
+    an effort unit with two fields instead of three) is a bug, not bad input: it
+    keeps its traceback. A check of input raises a class of the project."""
+    from lgp.errors import InputError
+    from lgp.executor import executor_for
+    from models.effort import effort_of_unit
+
+    def bug(argv):
+        effort_of_unit(("7H", 0))  # not enough values to unpack, inside models/effort
+
+    with pytest.raises(ValueError, match="not enough values to unpack"):
+        cli.run_cli(bug, [], prog="p")
+    assert capsys.readouterr().err == ""
+
+    def check(argv):
+        executor_for(0)  # the project's own check of a count: InputError
+
+    with pytest.raises(InputError):
+        executor_for(0)
+    assert cli.run_cli(check, [], prog="p") == 1
+    assert capsys.readouterr().err == "p: error: jobs must be >= 1, got 0\n"
+
+
+def test_no_project_module_raises_a_plain_value_error():
+    """A check of input raises a class of the project (lgp.errors.InputError or a
+    domain one), so that run_cli prints it in one line; a plain ``raise
+    ValueError(...)`` would now reach the user as a traceback. Read with ast."""
+    import ast
+
+    from lgp.app.cache import PACKAGES
+
+    found = []
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+                if isinstance(node, ast.Raise) and node.exc is not None:
+                    exc = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
+                    if isinstance(exc, ast.Name) and exc.id == "ValueError":
+                        found.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert not found, "raise lgp.errors.InputError (or a domain error class) instead of ValueError at: " + ", ".join(found)
+
+
 def test_debug_flag_and_environment_variable_show_the_traceback(capsys, monkeypatch):
     from stimuli import StimulusError
 

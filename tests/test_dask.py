@@ -78,7 +78,7 @@ def test_pipeline_tables_survive_a_killed_worker_and_the_client_writes_the_cache
     import stimuli
     import lgp.app.cache
     from lgp.app.cache import Cache
-    from lgp.reproduce import effort_tables, risk_tables
+    from lgp.app.stages import effort_tables, risk_tables
 
     trials = [stimuli.load_trial(t) for t in ("1E", "4H")]
     calm = (effort_tables(trials, 2, 0, SerialExecutor(), Cache(tmp_path / "calm")),

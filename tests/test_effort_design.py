@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import stimuli
-from lgp.planner import APPROACH, APPROACH_TIME, PHASE_DURATION, SLICES_PER_PHASE, plan
+from lgp.planner import APPROACH, APPROACH_TIME, PHASE_DURATION, SLICES_PER_PHASE, Design, plan
 from lgp.scene import OVERLAP_TOLERANCE
 from models.effort import BLOCK_MASS, effort_of_unit, effort_units, kinetic_energy, path_kinetic_energy, plan_of_sample
 
@@ -36,7 +36,7 @@ def test_slices_per_phase_sets_the_time_step_of_the_plan():
 def test_units_carry_the_design_to_the_workers():
     trial = stimuli.load_trial("9E")  # fixed A: one unit
     (unit,) = effort_units(trial, 3, 0, approach_height=0.02, slices_per_phase=40)
-    assert unit[3] == (0.02, 40)
+    assert unit[3] == Design(0.02, 40) and unit[3].approach_height == 0.02 and unit[3].slices_per_phase == 40
     row = effort_of_unit(unit)
     assert row["effort"] == pytest.approx(kinetic_energy(plan_of_sample(trial, 0, 0, approach_height=0.02,
                                                                          slices_per_phase=40)), rel=1e-9)
@@ -52,8 +52,52 @@ def test_a_bad_approach_height_is_refused_naming_the_rule(bad):
         plan(trial.sample_initial(np.random.default_rng(0)), trial.target, approach_height=bad)
 
 
+def test_one_rule_for_the_design_in_the_planner_the_units_the_command_lines_and_the_key(capsys):
+    # The approach height is in [0, 0.5) m and the slices an integer >= 1, refused
+    # alike by Design (the planner, the effort units, the cache key) and by every
+    # command line, whose check is Design's own (lgp.cli.checked).
+    import argparse
+
+    from lgp import cli
+    from lgp.planner import MAX_APPROACH_HEIGHT, DesignError, check_approach_height
+    from lgp.app.stages import effort_key
+    from lgp.reproduce import parse_args
+
+    assert MAX_APPROACH_HEIGHT == 0.5
+    assert Design(0.0, 1) == Design("0", 1.0) and Design(0.4999, 40).legs and not Design(0.0).legs
+    trial = stimuli.load_trial("9E")
+    for bad in (0.5, 0.7, -1e-9):
+        with pytest.raises(DesignError, match=r"approach height .*\[0, 0.5\)"):
+            Design(bad)
+        with pytest.raises(DesignError):
+            effort_units(trial, 3, 0, approach_height=bad)
+        with pytest.raises(DesignError):
+            effort_key(trial, 3, 0, bad)
+        with pytest.raises(argparse.ArgumentTypeError, match=r"\[0, 0.5\)"):
+            cli.checked(check_approach_height, "approach height")(str(bad))
+        with pytest.raises(SystemExit):
+            parse_args([f"--approach-height={bad}"])
+        assert "[0, 0.5)" in capsys.readouterr().err
+    for bad in (0, 2.5, True):
+        with pytest.raises(DesignError, match="slices_per_phase"):
+            Design(APPROACH, bad)
+    with pytest.raises(TypeError):
+        Design.of(Design(), approach_height=0.02)  # a design or its values, not both
+
+
+def test_the_design_and_the_planners_entry_points_load_no_drake():
+    # Command lines refuse a bad design, and cache keys are computed, before Drake loads.
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom lgp.planner import Design, Plan, plan, APPROACH\nDesign(0.02, 40)\n"
+            "assert 'pydrake' not in sys.modules, sorted(m for m in sys.modules if 'drake' in m)\n"
+            "from lgp.planner import declare\nassert 'pydrake' in sys.modules\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
 def test_the_design_is_part_of_the_effort_cache_key():
-    from lgp.reproduce import effort_key
+    from lgp.app.stages import effort_key
 
     trial = stimuli.load_trial("2E")
     default = effort_key(trial, 3, 0)
@@ -261,9 +305,9 @@ def test_clearance_design_lifts_a_tower_clear_with_less_effort_than_the_legs():
 
 def test_face_gaps_of_aligned_boxes_are_minus_their_penetration():
     # For boxes of the same yaw, the carried one not lower, the largest gap beyond a
-    # face plane of the other (lgp.planner._face_gaps, on corners) is minus the
+    # face plane of the other (lgp.planner.clearance.face_gaps, on corners) is minus the
     # separating-axis depth of lgp.scene.penetration, overlapping or apart.
-    from lgp.planner import _box_corners, _face_gaps, _Obstacle
+    from lgp.planner.clearance import Obstacle as _Obstacle, box_corners as _box_corners, face_gaps as _face_gaps
     from lgp.scene import Block, penetration
 
     rng = np.random.default_rng(3)
@@ -281,12 +325,12 @@ def test_face_gaps_of_aligned_boxes_are_minus_their_penetration():
 
 
 def test_separation_of_boxes_of_any_yaws_is_minus_their_penetration():
-    # The verdict "entered" of the design without legs (lgp.planner._separation: the
+    # The verdict "entered" of the design without legs (lgp.planner.clearance.separation: the
     # largest gap beyond a face plane of either box) agrees with the separating-axis
     # depth of lgp.scene.penetration for blocks of different yaws, apart or
     # overlapping, at any height; with the obstacle's planes alone a 45-degree block
     # 1 mm away read as 8 mm inside.
-    from lgp.planner import _box_corners, _Obstacle, _separation
+    from lgp.planner.clearance import Obstacle as _Obstacle, box_corners as _box_corners, separation as _separation
     from lgp.scene import Block, penetration
 
     def rotation(yaw):
@@ -318,6 +362,29 @@ def test_separation_of_boxes_of_any_yaws_is_minus_their_penetration():
     assert gap == pytest.approx(0.001, abs=1e-9) == pytest.approx(-penetration(moving, other), abs=1e-9)
 
 
+def test_snopts_cannot_improve_is_usable_only_without_legs_and_read_from_its_code():
+    # Without legs SNOPT's info 41 ("cannot be improved") at a feasible point is
+    # accepted (a degenerate active set, lgp.planner.clearance.usable); the decision
+    # reads the typed code, and the status column reads as solved only for kSolutionFound.
+    import dataclasses
+
+    from pydrake.solvers import SolutionResult
+
+    from lgp.planner.clearance import usable
+    from models.effort import converged
+
+    result = _layout_0_plan("9E", APPROACH).komo
+    assert usable(result, APPROACH) and result.solver == "snopt"
+    stalled = dataclasses.replace(result, success=False, solution_result=SolutionResult.kSolverSpecificError, solver_info=41)
+    assert usable(stalled, 0.0) and not usable(stalled, APPROACH)
+    assert not usable(dataclasses.replace(stalled, solver_info=42), 0.0)
+    assert not usable(dataclasses.replace(stalled, solver="ipopt"), 0.0)  # IPOPT's code 41 is not SNOPT's
+    assert not usable(dataclasses.replace(result, max_violation=1e-5), APPROACH)
+    statuses = [result.status, stalled.status, "kSolutionFound", "nothing to move", "failed"]
+    assert statuses[:2] == ["kSolutionFound (snopt info 1)", "kSolverSpecificError (snopt info 41)"]
+    assert list(converged(statuses)) == [True, False, True, True, False]
+
+
 def test_the_design_without_legs_fails_loudly_when_its_reference_plan_fails(monkeypatch):
     # The design without legs starts from the legs plan; if that plan is not usable
     # (here: SNOPT's info 41, forced), planning raises and says so, instead of
@@ -325,13 +392,14 @@ def test_the_design_without_legs_fails_loudly_when_its_reference_plan_fails(monk
     import dataclasses
 
     import lgp.planner as planner
+    from lgp.planner import turns as quarter_turns
 
-    real = planner._solve
+    real = quarter_turns.solve
 
     def failing(*args, **kwargs):
         komo, result, turns = real(*args, **kwargs)
-        return komo, dataclasses.replace(result, success=False, status="SolutionFound (snopt info 41)"), turns
+        return komo, dataclasses.replace(result, success=False, solver_info=41), turns
 
-    monkeypatch.setattr(planner, "_solve", failing)
+    monkeypatch.setattr(quarter_turns, "solve", failing)
     with pytest.raises(planner.PlanningError, match="reference plan with 0.05 m legs"):
         plan_of_sample(stimuli.load_trial("10E"), 0, 0, approach_height=0.0)  # not _layout_0_plan's cached plan

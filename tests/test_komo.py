@@ -65,6 +65,20 @@ def test_free_point_converges_to_the_cubic_with_kinetic_energy_integral_0_6_m_L2
     assert errors[-1] < 1e-3 * 0.6
 
 
+def test_the_solvers_verdict_is_kept_as_fields_and_the_status_text_is_made_from_them():
+    # Drake's SolutionResult and SNOPT's own info code are fields of the result
+    # (1: optimal; 32: major iteration limit, forced here with one major iteration);
+    # the text in effort tables (column status) is written from them, not the reverse.
+    from pydrake.solvers import SolutionResult
+
+    solved = cubic_komo(25).solve()
+    assert (solved.solution_result, solved.solver_info, solved.success) == (SolutionResult.kSolutionFound, 1, True)
+    assert solved.status == "kSolutionFound (snopt info 1)"
+    stopped = cubic_komo(25).solve(options={"Major iterations limit": 1})
+    assert (stopped.solution_result, stopped.solver_info, stopped.success) == (SolutionResult.kIterationLimit, 32, False)
+    assert stopped.status == "kIterationLimit (snopt info 32)"
+
+
 def test_free_point_full_and_reduced_programs_agree():
     komo = cubic_komo(20)
     reduced, full = komo.solve("reduced"), komo.solve("full")

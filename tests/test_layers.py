@@ -27,12 +27,14 @@ APP_WING = ["lgp.app", "lgp.app.*", "lgp.reproduce", "lgp.show"]
 #: (layer, module-name patterns, layers it may import besides its own; None = all lower)
 LAYERS = [
     # lgp.cli (argument checks, one-line errors) is used by CLIs on every floor, so it sits here
-    ("ground", ["lgp.paper", "lgp.scene", "lgp.geometry", "lgp.executor", "lgp.cli"], None),
+    ("ground", ["lgp.paper", "lgp.scene", "lgp.geometry", "lgp.executor", "lgp.cli", "lgp.inputs", "lgp.errors"], None),
     ("stimuli and logic", ["stimuli", "lgp.assignment", "lgp.symbolic"], None),
     ("arm", ["lgp.arm"], None),
     ("KOMO", ["lgp.komo", "lgp.komo.*"], None),
-    # the package lgp re-exports lgp.plan (lazily), so it sits with the planner
-    ("planner", ["lgp.planner", "lgp.planner.*", "lgp"], None),
+    ("planner", ["lgp.planner", "lgp.planner.*"], None),
+    # the logic layer that searches (issue 24): skeletons over the planner's KOMO;
+    # the package lgp re-exports lgp.plan (lazily: planner="paper" or "search"), so it sits here
+    ("search", ["lgp.search", "lgp.search.*", "lgp"], None),
     ("models", ["models", "models.*"], None),
     # analysis imports nothing of the physics: no stimuli, scene, planner or models
     ("analysis", ["analysis", "analysis.*"], ["ground"]),

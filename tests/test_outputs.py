@@ -118,3 +118,20 @@ def test_the_tie_threshold_is_above_the_plan_to_plan_noise_and_pair_6_is_within_
     e6, h6 = physical_effort("6E", samples=1).mean, physical_effort("6H", samples=1).mean
     assert pair_order(e6, h6) == "tie"
     assert abs(h6 - e6) > 0  # a tie by the rule, not equal numbers
+
+
+def test_a_later_run_removes_every_output_an_earlier_one_may_have_left(tmp_path):
+    """Issue 21: manifest.OUTPUT_NAMES lacked the effort sensitivity tables (and the
+    simulated participant-sigma table), so a folder written before manifests
+    existed kept them beside the next run's outputs."""
+    from lgp.app.manifest import OUTPUT_NAMES, clear_previous
+
+    names = ["effort_sensitivity.csv", "effort_sensitivity_pairs.csv", "risk_sensitivity.csv",
+             "participant_sigma.csv", "simulated_participant_sigma.csv", "effort.csv"]
+    for name in names:
+        (tmp_path / name).write_text("x\n")
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "cache" / "effort-k.csv").write_text("kept\n")
+    assert set(names) <= set(OUTPUT_NAMES)
+    assert clear_previous(tmp_path) == sorted(names)
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["cache", "effort-k.csv"]

@@ -13,7 +13,10 @@ from models.effort import describe, kinetic_energy, kinetic_energy_by_action
 
 
 def test_plan_is_exported_from_lgp():
-    assert lgp.plan is plan and lgp.Plan is Plan
+    # lgp.plan dispatches to the paper's pipeline (lgp.planner.plan, the default) or the search
+    from lgp import search
+
+    assert lgp.plan is search.plan and lgp.Plan is Plan
 
 
 def test_lgp_plan_stays_a_function_after_every_submodule_is_imported():
@@ -25,7 +28,7 @@ def test_lgp_plan_stays_a_function_after_every_submodule_is_imported():
 
     modules = [m.name for m in pkgutil.walk_packages(lgp.__path__, "lgp.")]
     code = "import importlib, lgp\n" + "".join(f"importlib.import_module({m!r})\n" for m in modules)
-    code += "import lgp.planner\nassert callable(lgp.plan) and lgp.plan is lgp.planner.plan, type(lgp.plan)\n"
+    code += "import lgp.search\nassert callable(lgp.plan) and lgp.plan is lgp.search.plan, type(lgp.plan)\n"
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
@@ -150,7 +153,7 @@ def test_viterbi_step_picks_what_the_full_distance_matrix_picks():
     # re-evaluates near-ties exactly: the picks and costs must be those of argmin
     # down the full |a_i - b_j|^2 / dt^3 + cost_i matrix, to the bit, ties (equal
     # and 1e-13-apart rows) going to the first row as argmin's do.
-    from lgp.planner import _best_predecessors, _squared_distances
+    from lgp.planner.seeding import best_predecessors as _best_predecessors, squared_distances as _squared_distances
 
     rng = np.random.default_rng(5)
     a = rng.uniform(-3, 3, (300, 7))
@@ -170,7 +173,7 @@ def test_viterbi_step_picks_what_the_full_distance_matrix_picks():
 def test_turn_candidates_are_every_run_of_consecutive_turnable_actions():
     # Brute force: every step and every run i..j whose keyframes all stay within the
     # joint-7 limits when turned, in the order (step, i, j).
-    from lgp.planner import _turn_steps
+    from lgp.planner.turns import turn_steps as _turn_steps
 
     rng = np.random.default_rng(4)
     for n in (1, 5, 12):
@@ -196,25 +199,25 @@ def test_fast_turn_ranking_picks_what_the_exact_ranking_picks(monkeypatch):
     # The quarter-turn re-choice ranks candidates with single-thread BLAS blocks and
     # decides on them only when nothing is within its error band; the pick must be the
     # exact ranking's, whatever has been tried, and also when it falls back.
-    import lgp.planner as planner
+    from lgp.planner import turns
 
     captured = []
-    real = planner._best_untried_turn
-    monkeypatch.setattr(planner, "_best_untried_turn", lambda *a: captured.append(a) or real(*a))
+    real = turns.best_untried_turn
+    monkeypatch.setattr(turns, "best_untried_turn", lambda *a: captured.append(a) or real(*a))
     trial = stimuli.load_trial("7H")
     plan(trial.sample_initial(np.random.default_rng(1)), trial.target, 0)
     arm, e, X_K, B, slots, threshold, _ = captured[0]
-    ranked = planner._predicted_turn_changes(arm, e.G, e.g, X_K, B, slots)
+    ranked = turns.predicted_turn_changes(arm, e.G, e.g, X_K, B, slots)
     assert all(change >= threshold for change, _ in ranked)  # the plan is at a turn optimum: none is taken
     mid = len(ranked) // 2
     threshold = (ranked[mid - 1][0] + ranked[mid][0]) / 2  # half of them pass: exercise the ranking
     exact = [d for change, d in ranked if change < threshold]
     assert len(exact) > 3
-    fast, band, sure = planner._predicted_turn_changes(arm, e.G, e.g, X_K, B, slots, fast=True)
+    fast, band, sure = turns.predicted_turn_changes(arm, e.G, e.g, X_K, B, slots, fast=True)
     assert sure and [tuple(d) for _, d in fast] == [tuple(d) for _, d in ranked]
     ways = []
-    ranking = planner._predicted_turn_changes
-    monkeypatch.setattr(planner, "_predicted_turn_changes", lambda *a, **k: ways.append(k.get("fast", False)) or ranking(*a, **k))
+    ranking = turns.predicted_turn_changes
+    monkeypatch.setattr(turns, "predicted_turn_changes", lambda *a, **k: ways.append(k.get("fast", False)) or ranking(*a, **k))
     for tried in (0, 1, 3, len(exact)):
         skip = {tuple(d) for d in exact[:tried]}
         pick = real(arm, e, X_K, B, slots, threshold, lambda d: tuple(d) not in skip)
@@ -222,6 +225,6 @@ def test_fast_turn_ranking_picks_what_the_exact_ranking_picks(monkeypatch):
     assert ways[:3] == [True] * 3  # the picks were decided on the fast ranking (none among all can fall back)
     del ways[:]
     wide = lambda *a, **k: (lambda out: (out[0], 1e300, out[2]) if k.get("fast") else out)(ranking(*a, **k))  # noqa: E731
-    monkeypatch.setattr(planner, "_predicted_turn_changes", lambda *a, **k: ways.append(k.get("fast", False)) or wide(*a, **k))
+    monkeypatch.setattr(turns, "predicted_turn_changes", lambda *a, **k: ways.append(k.get("fast", False)) or wide(*a, **k))
     assert np.array_equal(real(arm, e, X_K, B, slots, threshold, lambda d: tuple(d) != tuple(exact[0])), exact[1])
     assert ways == [True, False]  # every decision uncertain: the exact ranking decided

@@ -86,25 +86,34 @@ def test_interrupted_run_resumes_to_the_same_results(tmp_path, monkeypatch, caps
         pd.testing.assert_frame_equal(df, _tables(whole)[name])
 
 
-def test_kappa_range_matches_brute_force_over_ratios():
+def test_the_ratio_range_of_eq1_matches_brute_force_over_ratios():
+    """analysis.pairs.ratio_range (numbers) against Eq. 1 evaluated on a fine grid of
+    b2/b1, and its words in pairs.csv (lgp.app.report.ratio_text) against the same."""
+    import math
+
     import numpy as np
+
+    from analysis.pairs import ratio_range
+    from lgp.app.report import ratio_text
 
     rng = np.random.default_rng(0)
     kappas = np.linspace(0, 50, 50001)
     for _ in range(200):
         E_e, E_h = rng.uniform(0.05, 1, 2)
         R_e, R_h = rng.choice([0.0, 0.01, 0.2, 0.5], 2)
-        text = reproduce.kappa_range(E_e, R_e, E_h, R_h)
+        r = ratio_range(E_e, R_e, E_h, R_h)
         ok = E_h * (1 - R_h) + kappas * E_h * R_h > E_e * (1 - R_e) + kappas * E_e * R_e
-        if text == "any":
-            assert ok.all()
-        elif text == "none":
-            assert not ok.any()
+        assert (ok == ((kappas > r.low) & (kappas < r.high))).all()
+        assert (not r.every or ok.all()) and (not r.empty or not ok.any())
+        text = ratio_text(r)
+        if r.every:
+            assert text == "any"
+        elif r.empty:
+            assert text == "none"
         else:
-            bound = float(text[2:])
-            expect = kappas > bound if text[0] == ">" else kappas < bound
-            far = np.abs(kappas - bound) > 1e-2 * max(1, bound)  # away from the 3-digit rounding
-            assert (ok[far] == expect[far]).all()
+            bound = r.low if r.high == math.inf else r.high
+            assert text == f"{'>' if r.high == math.inf else '<'} {bound:.3g}"
+    assert ratio_text(ratio_range(1.0, 0.0, 1.0, 0.0, tie=True)) == "none (tie)"
 
 
 @pytest.mark.slow

@@ -11,6 +11,7 @@ import pytest
 import stimuli
 from lgp import reproduce
 from lgp.app import sensitivity
+from lgp.app import stages
 from lgp.app.cache import Cache
 from lgp.executor import SerialExecutor
 from models.risk import available_engines, risk_table
@@ -21,7 +22,7 @@ ENGINES = [e for e in ("mujoco", "physx", "physx:game-defaults") if e in availab
 def context(tmp_path, trials):
     args = SimpleNamespace(n_sims=6, seed=2, engine=None, sensitivity_engines=ENGINES)
     return sensitivity.Context(args, trials, SerialExecutor(), Cache(tmp_path / "cache"), tmp_path,
-                               reproduce.risk_key_inputs, lambda m: None)
+                               stages.risk_key_inputs, lambda m: None)
 
 
 @pytest.mark.slow
@@ -90,5 +91,17 @@ def test_bad_risk_options_of_reproduce_are_one_error_line(capsys, args, message)
 
 
 def test_fall_rule_is_part_of_the_risk_cache_key():
-    keys = {str(sorted(reproduce.risk_key_inputs(None, r, t).items())) for r, t in sensitivity.RISK_RULES}
+    keys = {str(sorted(stages.risk_key_inputs(None, r, t).items())) for r, t in sensitivity.RISK_RULES}
     assert len(keys) == len(sensitivity.RISK_RULES)
+
+
+def test_the_help_of_sensitivity_says_it_also_runs_the_slow_effort_section():
+    """Issue 21: the help said "risk by engine and fall rule" only, but the flag also
+    plans every trial under three more motion designs (the effort section)."""
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    sensitivity.add_arguments(parser)
+    text = next(a.help for a in parser._actions if "--sensitivity" in a.option_strings)
+    assert "risk by engine and fall rule" in text and "effort by motion design" in text and "slow" in text
+    assert [s.__name__ for s in sensitivity.SECTIONS] == ["risk_section", "effort_section"]  # what the help names

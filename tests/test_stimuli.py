@@ -9,6 +9,7 @@ import yaml
 
 import stimuli
 from lgp.scene import BLOCK_SIZE as d
+from lgp.paper import TRIAL_IDS
 from lgp.scene import StimulusError, support_graph
 
 IDS = [f"{p}{l}" for p in range(1, 13) for l in "EH"]
@@ -207,3 +208,24 @@ def test_an_absurd_scatter_region_is_refused_before_drawing():
     _bad(lambda t: t["initial"]["scattered"].__setitem__("region", {"x": [0.2, 1e300], "y": [-0.2, 0.2]}),
          r"4E-A scattered region: .* inside the workspace")
     _bad(lambda t: t["initial"]["scattered"].__setitem__("clearance", 1e300), r"4E-A scattered clearance")
+
+
+def test_the_trials_of_a_run_and_the_files_it_leaves_out(tmp_path, monkeypatch):
+    """stimuli.select_trials: the paper's 24 by default, with the other trial files
+    of the folder returned (for the caller to name), not logged."""
+    import shutil
+
+    for path in stimuli.TRIAL_DIR.glob("*.yaml"):
+        shutil.copy(path, tmp_path / path.name)
+    text = (tmp_path / "7H.yaml").read_text().replace("id: 7H", "id: 13E").replace("pair: 7", "pair: 13").replace("level: H", "level: E")
+    (tmp_path / "13E.yaml").write_text(text)
+    monkeypatch.setattr(stimuli, "TRIAL_DIR", tmp_path)  # the default folder, with a 13E in it
+    trials, extra = stimuli.select_trials(None, None)
+    assert [t.id for t in trials] == list(TRIAL_IDS) and extra == ["13E"]
+    trials, extra = stimuli.select_trials(None, tmp_path)  # a folder named: every trial file in it
+    assert len(trials) == 25 and extra == []
+    trials, extra = stimuli.select_trials(["all"], tmp_path)
+    assert [t.id for t in trials][-1] == "13E" and extra == []
+    trials, extra = stimuli.select_trials(["7h", "1E"], tmp_path)
+    assert [t.id for t in trials] == ["7H", "1E"] and extra == []
+    assert stimuli.declared_pairs(trials) == [] and stimuli.declared_pairs(stimuli.load_paper()) == list(range(1, 13))

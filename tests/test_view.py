@@ -61,19 +61,42 @@ def test_the_camera_sees_the_build_site_the_blocks_and_the_hand(trial_id):
 
 
 def test_pair_verdicts_mark_where_the_paper_and_we_differ():
+    import math
+
+    from analysis.pairs import pair_verdicts as verdicts
     from lgp.app.page import pair_verdicts
 
-    pairs = pd.DataFrame({
+    inf = math.inf
+    pairs = pd.DataFrame({  # the Eq. 1 columns of analysis.pairs.pair_orderings
         "pair": [4, 6, 11, 7],
-        "effort_rel_diff": [-0.02, 1e-5, -8e-4, 0.8],
-        "risk_E": [0.0, 0.0, 0.0, 0.0], "risk_H": [0.17, 0.0, 0.0, 0.02],
-        "full_E_lt_H_for_b2_over_b1": ["> 1.14", "any", "none", "any"],
+        "eq1_ratio_low": [1.14, 0.0, 0.0, -inf], "eq1_ratio_high": [inf, 0.0, 0.0, inf],
+        "eq1_tie": [False, True, False, False],
     })
-    v = pair_verdicts(pairs).set_index("pair")
+    n = verdicts(pairs).set_index("pair")
+    assert n["paper_ordered"].to_dict() == {4: True, 6: True, 11: False, 7: True}
+    assert n["ordered"].to_dict() == {4: True, 6: False, 11: False, 7: True}
+    assert n["differs"].to_dict() == {4: False, 6: True, 11: False, 7: False}
+    v = pair_verdicts(pairs).set_index("pair")  # the page's words for them
     assert v.loc[4, "ours (Eq. 1)"] == "E < H for b2/b1 > 1.14" and not v.loc[4, "differs"]
     assert v.loc[6, "ours (Eq. 1)"] == "tie" and v.loc[6, "differs"]  # the paper ordered pair 6
     assert v.loc[11, "ours (Eq. 1)"] == "not ordered" and not v.loc[11, "differs"]  # nor did it order 11
-    assert not v.loc[7, "differs"]
+    assert v.loc[7, "ours (Eq. 1)"] == "E < H for any b2/b1" and not v.loc[7, "differs"]
+
+
+def test_the_pair_table_ties_by_the_one_rule():
+    """A pair tied in effort and risk under analysis.pairs.TIE_REL is tied by Eq. 1
+    (eq1_tie), and one just outside it is not: one rule for pairs.csv and the page."""
+    from analysis.pairs import TIE_REL, pair_orderings
+    from lgp.paper import TRIAL_IDS
+
+    effort = {t: 1.0 + 0.5 * t.endswith("H") for t in TRIAL_IDS}
+    effort["6H"] = 1.0 + 0.5 * TIE_REL  # inside the rule
+    effort["9H"] = 1.0 + 2.0 * TIE_REL  # outside it
+    e = pd.DataFrame({"trial": list(effort), "effort": list(effort.values())})
+    r = pd.DataFrame({"trial": list(TRIAL_IDS), "sigma": 0.065, "risk": 0.1})
+    t = pair_orderings(e, r, 0.065, {p: "d" for p in range(1, 13)}).set_index("pair")
+    assert t.loc[6, "eq1_tie"] and t.loc[6, "effort_order"] == "tie"
+    assert not t.loc[9, "eq1_tie"] and t.loc[9, "effort_order"] == "E<H" and t.loc[9, "eq1_ratio_low"] < 0
 
 
 def test_histogram_draws_every_layout_once():
@@ -120,3 +143,28 @@ def test_the_page_shows_fits_profile_bootstrap_and_every_participant(tmp_path):
         assert title in human
     participants = human[human.index("<h3>Participants</h3>"):]
     assert participants.count("<tr>") - 1 == 12  # one row per participant, plus the header
+
+
+def test_drawing_a_figure_leaves_the_callers_matplotlib_backend_alone(tmp_path):
+    """Issue 21: the figure writers called matplotlib.use("Agg"), which switched a
+    notebook's backend off; they draw on their own Figure now."""
+    import matplotlib
+
+    from lgp.app.pictures import trial_picture
+    from lgp.app.sensitivity import risk_sensitivity_figure
+    from stimuli.sheet import contact_sheet
+
+    before = matplotlib.get_backend()
+    matplotlib.use("svg")  # not Agg, as a notebook's inline backend is not
+    try:
+        trial = stimuli.load_trial("1E")
+        trial_picture(trial, 0, tmp_path / "1E.png")
+        contact_sheet([trial], out=str(tmp_path / "sheet.png"))
+        table = pd.DataFrame({"engine": "mujoco", "faithful": True, "fall_rule": "horizontal", "fall_threshold": 0.25,
+                              "trial": ["4E", "4E", "4H", "4H"], "sigma": [0.065, 0.1] * 2, "risk": [0.0, 0.1, 0.0, 0.2]})
+        risk_sensitivity_figure(table, tmp_path / "figures" / "risk.png")
+        assert matplotlib.get_backend() == "svg"
+    finally:
+        matplotlib.use(before)
+    for name in ("1E.png", "sheet.png", "figures/risk.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -3,13 +3,18 @@
 The planning library (the rest of lgp/: scene, logic, KOMO, planner) imports
 nothing from here; this wing is the only part of lgp/ that imports models/,
 analysis/ and stimuli/ (tests/test_layers.py). Its commands are
-``python -m lgp.reproduce`` (lgp/reproduce.py) and ``python -m lgp.show``
-(lgp/show.py).
+``python -m lgp.reproduce`` (lgp/reproduce.py: the command line and `run`) and
+``python -m lgp.show`` (lgp/show.py).
 
-- cache: results cached by a hash of their inputs, checked on read, written atomically
+- stages: the computing stages (target check, effort, risk) and their cache keys
+- cache: results cached by a hash of their inputs, checked on read
+- files: the one atomic writer of every output and cache entry
 - manifest: what a run wrote (manifest.json) and the compute time of its results
-- progress: progress lines of long stages
+- progress: progress lines of long stages, wall time per stage
 - build_risk: the --build-risk stage (risk through the build) and its outputs
+- participant_sigma: --per-participant-sigma's table, figure and report section
 - sensitivity: the --sensitivity sections (risk by engine and fall rule, effort by motion design)
-- page: the results page index.html; replays: its 3-D replays; view: replay and figure of one plan
+- report: report.md, and the pair tables in words
+- page: the results page index.html (page.css, page.js); pictures: its trial
+  pictures; replays: its 3-D replays; view: replay and figure of one plan
 """

@@ -1,25 +1,23 @@
-"""The main job's beyond-the-paper options (issue 11), kept out of lgp/reproduce.py:
-
-* ``--build-risk``: risk through the build (models/risk/build.py) of every trial,
-  cached per trial, its aggregates, the pair table of aggregates, the
-  small-multiples figure of risk by stage and a report section;
-* ``--per-participant-sigma``: each participant's sigma
-  (analysis.fit_participant_sigma), its table, histogram and a report section.
+"""The build-risk stage of `python -m lgp.reproduce --build-risk` (issue 11): risk
+through the build (models/risk/build.py) of every trial, cached per trial, its
+aggregates, the pair table of aggregates, the small-multiples figure of risk by
+stage and a report section.
 """
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from lgp.app.cache import Cache, input_key, library_versions, modules_digest, write_csv_atomic
-from lgp.paper import PAIRS
+from lgp.app.cache import Cache, input_key
+from lgp.app.files import write_csv_atomic
+from lgp.app.progress import log as _log
+from lgp.paper import PAIRS, PAPER_SIGMA
 
-#: The noise levels the build-risk report uses (issue 11: 0.065 d and 0.10 d).
-BUILD_SIGMAS: tuple[float, ...] = (0.065, 0.1)
+#: The noise levels the build-risk report uses (issue 11: the paper's sigma, 0.065 d, and 0.10 d).
+BUILD_SIGMAS: tuple[float, ...] = (PAPER_SIGMA, 0.1)
 #: Layouts whose plan the sequential build (mode="sequential") is run on: one,
 #: sample 0 (a tower's plan is the same for every layout; a sequential build of
 #: 30 layouts of a floor is 30 builds of 15 stages per run).
@@ -27,19 +25,13 @@ SEQUENTIAL_SAMPLES = 1
 EASY, HARD = "tab:red", "tab:blue"
 
 
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
 def build_key_inputs(engine: str | None) -> dict:
-    """What a stage table depends on besides the trial and the parameters: the source
-    of every project module build_risk can run (the engine module is loaded by name),
-    the engine's settings and the libraries."""
-    from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
+    """What a stage table depends on besides the trial and the parameters:
+    lgp.app.stages.engine_key_inputs of models.risk.build (its code, the engine's
+    settings, the libraries and the engine's own, e.g. sapien for PhysX)."""
+    from lgp.app.stages import engine_key_inputs
 
-    name = DEFAULT_ENGINE if engine is None else engine
-    return {"code": modules_digest("models.risk.build", ENGINES[name].target.split(":")[0], "stimuli"),
-            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions()}
+    return engine_key_inputs(engine, "models.risk.build")
 
 
 def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, engine: str | None, executor,
@@ -188,41 +180,3 @@ def build_risk_outputs(stages: pd.DataFrame, out: Path, command: str) -> tuple[l
     else:
         lines += ["A subset of trials: no pair table or figure (they need all 24).", ""]
     return written, "\n".join(lines), measure_table(aggregates)
-
-
-def participant_sigma_outputs(human: pd.DataFrame, effort_samples: pd.DataFrame, risk: pd.DataFrame, out: Path,
-                              betas: str, command: str) -> tuple[list[Path], str]:
-    """Each participant's sigma: table, histogram and report section."""
-    from analysis import fit_participant_sigma
-    from analysis.figures import plot_participant_sigma
-
-    table = fit_participant_sigma(human, effort_samples, risk, betas=betas)
-    simulated = table["dataset"].astype(str).str.startswith("simulated-").any()
-    prefix = "simulated_" if simulated else ""
-    written = [write_csv_atomic(table, out / f"{prefix}participant_sigma.csv")]
-    written += plot_participant_sigma(table, out / "figures")
-    summary = (table.groupby("dataset", sort=False)
-               .agg(participants=("participant", "size"), median_sigma=("sigma", "median"),
-                    identified=("identified", "sum"),
-                    median_interval_width=("sigma_high", "median"))
-               .reset_index())
-    widths = (table["sigma_high"] - table["sigma_low"]).groupby(table["dataset"]).median()
-    summary["median_interval_width"] = summary["dataset"].map(widths)
-    lines = ["## Each participant's sigma (beyond the paper)" + (" -- SIMULATED participants" if simulated else ""), "",
-             f"Command: `{command}`. Betas: {betas} (analysis/participant_sigma.py). A participant counts as "
-             "identified when the 95% profile-likelihood interval is narrower than the whole sigma range.", "",
-             "| dataset | participants | median sigma | identified | median interval width |", "|---|---|---|---|---|"]
-    for _, r in summary.iterrows():
-        lines.append(f"| {r['dataset']} | {r['participants']} | {r['median_sigma']:.3f} | {int(r['identified'])} | "
-                     f"{r['median_interval_width']:.3f} |")
-    lines.append("")
-    return written, "\n".join(lines)
-
-
-def append_report(report: Path, sections: list[str]) -> Path:
-    """Add sections to report.md (written atomically by the caller first)."""
-    if sections:
-        tmp = report.with_suffix(".md.tmp")
-        tmp.write_text(report.read_text() + "\n" + "\n".join(sections))
-        tmp.replace(report)
-    return report

@@ -23,17 +23,17 @@ import ast
 import hashlib
 import io
 import json
-import os
 import platform
 import re
 import sys
-import tempfile
 from collections import Counter
 from importlib import metadata
 from pathlib import Path
 from typing import Callable, Iterable
 
 import pandas as pd
+
+from lgp.app.files import write_bytes_atomic, write_csv_atomic  # noqa: F401  (the one atomic writer)
 
 ROOT = Path(__file__).resolve().parents[2]  # lgp/app/cache.py -> the repository
 #: The project's top-level packages: imports of anything else are libraries.
@@ -192,72 +192,62 @@ def input_key(**inputs) -> str:
     return hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
 
-# ----------------------------------------------------------------------------- files
-
-
-def _umask() -> int:
-    """The process umask, read without changing it where Linux allows
-    (os.umask can only be read by setting it, which races with other threads)."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("Umask:"):
-                return int(line.split()[1], 8)
-    except (OSError, ValueError, IndexError):
-        pass
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def write_bytes_atomic(data: bytes, path: str | Path) -> Path:
-    """Write `data` to `path` whole or not at all, with the mode a new file gets
-    from the user's umask (0644 under the usual 022), not mkstemp's private 0600."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
-def write_csv_atomic(df: pd.DataFrame, path: str | Path) -> Path:
-    """Write `df` as CSV (no index) to `path` atomically (see write_bytes_atomic)."""
-    return write_bytes_atomic(df.to_csv(index=False).encode(), path)
-
-
 # ----------------------------------------------------------------------------- entries
 
-_HEADER = re.compile(rb"# lgp\.cache v1 rows=(\d+) sha256=([0-9a-f]{64})")
+_HEADER = re.compile(rb"# lgp\.cache v2 kind=([A-Za-z0-9_.-]*) key=([A-Za-z0-9_.-]*) trial=(\S*) rows=(\d+) sha256=([0-9a-f]{64})")
+_OLD_HEADER = re.compile(rb"# lgp\.cache v1 rows=(\d+) sha256=([0-9a-f]{64})")
+#: Largest cache entry read (bytes); a risk entry of the full run is about 2 kB,
+#: a build-risk stage table under 10 MB.
+MAX_ENTRY_BYTES = 256 * 2**20
 
 
 class DamagedEntry(ValueError):
     """A cache entry whose bytes are not what was written (the message says how)."""
 
 
-def entry_bytes(df: pd.DataFrame) -> bytes:
-    """A cache entry: the checksum header line, then the CSV of `df`."""
+def _trial_of(df: pd.DataFrame) -> str:
+    """The one trial id of a table's ``trial`` column ("" when there is none or several)."""
+    if "trial" not in df.columns or not len(df):
+        return ""
+    ids = pd.unique(df["trial"].astype(str))
+    return str(ids[0]) if len(ids) == 1 and re.fullmatch(r"[A-Za-z0-9_-]+", str(ids[0])) else ""
+
+
+def entry_bytes(df: pd.DataFrame, kind: str = "", key: str = "") -> bytes:
+    """A cache entry: the header line (what it is: its kind, its key, its trial;
+    and its row count and the SHA-256 of the CSV), then the CSV of `df`."""
     body = df.to_csv(index=False).encode()
-    return b"# lgp.cache v1 rows=%d sha256=%s\n" % (len(df), hashlib.sha256(body).hexdigest().encode()) + body
+    return (b"# lgp.cache v2 kind=%s key=%s trial=%s rows=%d sha256=%s\n"
+            % (kind.encode(), key.encode(), _trial_of(df).encode(), len(df), hashlib.sha256(body).hexdigest().encode())
+            + body)
 
 
-def read_entry(path: Path, dtype=None) -> pd.DataFrame:
-    """The DataFrame of a cache entry, or DamagedEntry if its checksum or row count fails."""
-    data = Path(path).read_bytes()
+def read_entry(path: Path, dtype=None, kind: str | None = None, key: str | None = None,
+               within: Path | None = None) -> pd.DataFrame:
+    """The DataFrame of a cache entry, or DamagedEntry if its checksum or row count
+    fails, or if it is not the entry of `kind` and `key` (when given): an entry
+    copied over another's has the right checksum but the wrong key. Read through
+    the bounded reader (a regular file of at most MAX_ENTRY_BYTES, inside `within`)."""
+    from lgp.inputs import read_bounded
+
+    data = read_bounded(path, MAX_ENTRY_BYTES, "cache entry", within=within, limit_name="lgp.app.cache.MAX_ENTRY_BYTES")
     header, newline, body = data.partition(b"\n")
     match = _HEADER.fullmatch(header)
+    if newline and _OLD_HEADER.fullmatch(header):
+        raise DamagedEntry("written by an older version, without its key (lgp.cache v1)")
     if not newline or match is None:
         raise DamagedEntry(f"no checksum header ({len(data)} bytes)")
-    if hashlib.sha256(body).hexdigest().encode() != match[2]:
+    if hashlib.sha256(body).hexdigest().encode() != match[5]:
         raise DamagedEntry(f"checksum mismatch ({len(body)} bytes of CSV)")
+    if kind is not None and match[1].decode() != kind or key is not None and match[2].decode() != key:
+        raise DamagedEntry(f"it holds the {match[1].decode()} entry {match[2].decode()}"
+                           + (f" of trial {match[3].decode()}" if match[3] else "")
+                           + f", not {kind} {key} (copied or renamed from another entry)")
     df = pd.read_csv(io.BytesIO(body), dtype=dtype)
-    if len(df) != int(match[1]):  # only a hash collision gets here
-        raise DamagedEntry(f"{len(df)} rows, header says {int(match[1])}")
+    if len(df) != int(match[4]):  # only a hash collision gets here
+        raise DamagedEntry(f"{len(df)} rows, header says {int(match[4])}")
+    if _trial_of(df) != match[3].decode():
+        raise DamagedEntry(f"its rows are of trial {_trial_of(df) or '(several)'}, its header says {match[3].decode() or '(none)'}")
     return df
 
 
@@ -278,6 +268,9 @@ class Cache:
         self.enabled = enabled
         self.dtype = {"trial": str} if dtype is None else dtype
         self.counts: Counter = Counter()  # (kind, outcome) -> lookups
+        #: (kind, "hit" | "miss") of files kept beside the tables (the page's pictures
+        #: and replays), counted apart from `counts`, which are about computed results.
+        self.files: Counter = Counter()
         self.damaged: list[Path] = []
 
     def count(self, outcome: str, kind: str | None = None) -> int:
@@ -307,11 +300,11 @@ class Cache:
     def get(self, kind: str, key: str) -> pd.DataFrame | None:
         """The cached table, or None when it must be computed (absent, disabled or damaged)."""
         path = self.path(kind, key)
-        if not self.enabled or not path.exists():
+        if not self.enabled or not (path.exists() or path.is_symlink()):
             self.counts[kind, "miss"] += 1
             return None
         try:
-            df = read_entry(path, dtype=self.dtype)
+            df = read_entry(path, dtype=self.dtype, kind=kind, key=key, within=self.root)
         except (DamagedEntry, OSError, ValueError, UnicodeDecodeError, pd.errors.ParserError) as e:
             print(f"lgp.cache: damaged entry {path}: {e}; recomputing it", file=sys.stderr, flush=True)
             self.counts[kind, "recomputed"] += 1
@@ -322,7 +315,7 @@ class Cache:
 
     def put(self, kind: str, key: str, df: pd.DataFrame) -> pd.DataFrame:
         """Write `df` as the entry (kind, key), atomically, with its checksum; return `df`."""
-        write_bytes_atomic(entry_bytes(df), self.path(kind, key))
+        write_bytes_atomic(entry_bytes(df, kind, key), self.path(kind, key))
         return df
 
     def get_or_compute(self, kind: str, key: str, compute: Callable[[], pd.DataFrame]) -> pd.DataFrame:

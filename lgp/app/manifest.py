@@ -4,8 +4,9 @@ An output folder describes one run only. Before the expensive stages a run
 removes what an earlier run left in the folder (the files its manifest lists,
 and the pipeline's own names for a folder written before manifests existed:
 effort_samples.csv, effort.csv, risk.csv, pairs.csv, report.md, index.html,
-build_risk*.csv, participant_sigma.csv, figures/, analysis/, replays/, page/); the cache (``<out>/cache``) is kept, so nothing expensive is lost and
-a rerun of the earlier command rewrites its outputs in seconds. At the end it
+build_risk*.csv, [simulated_]participant_sigma.csv, risk_sensitivity*.csv,
+effort_sensitivity*.csv, figures/, analysis/, replays/, page/); the cache
+(``<out>/cache``) is kept, so nothing expensive is lost and a rerun of the earlier command rewrites its outputs in seconds. At the end it
 writes ``manifest.json``: the command's parameters, a hash of its inputs, the
 engine, both times (see below) and every file it wrote (path, bytes, sha256).
 The list the command prints is the manifest's.
@@ -19,19 +20,20 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import shutil
-import tempfile
 import time
 from pathlib import Path
 
 from lgp.app.cache import Cache
+from lgp.app.files import write_json_atomic
 
 MANIFEST = "manifest.json"
 #: What the pipeline writes at the top of an output folder (besides the manifest and the cache).
 OUTPUT_NAMES = ("effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv", "report.md", "index.html",
                 "build_risk_stages.csv", "build_risk.csv", "build_risk_pairs.csv", "participant_sigma.csv",
-                "risk_sensitivity.csv", "risk_sensitivity_summary.csv",
+                "simulated_participant_sigma.csv",
+                "risk_sensitivity.csv", "risk_sensitivity_summary.csv", "effort_sensitivity.csv",
+                "effort_sensitivity_pairs.csv",
                 "figures", "analysis", "replays", "page")
 TIMES = "compute_times.json"
 
@@ -73,27 +75,6 @@ def clear_previous(out: Path) -> list[str]:
         removed.append(name)
     dirs = {name for name in removed if name in OUTPUT_NAMES and not name.endswith((".csv", ".md", ".html"))}
     return sorted({name for name in removed if Path(name).parts[0] not in dirs or name in dirs})
-
-
-def write_json_atomic(data, path: Path) -> Path:
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=2, default=str)
-            f.write("\n")
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def write_manifest(out: Path, files: list[Path], **record) -> Path:

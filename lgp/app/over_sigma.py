@@ -7,7 +7,7 @@ At the paper's grid (0.05..0.10 d) most faithful risks are 0; past it (about
 * ``pairs_over_sigma.csv``: per (pair, sigma) the risk of E and H with 95% Wilson
   intervals, whether H is riskier beyond Monte Carlo noise (``holds``: H's
   interval lies wholly above E's) and the ratios b2/b1 for which Eq. 1 orders
-  the pair E < H (lgp.reproduce.kappa_range);
+  the pair E < H (analysis.pairs.ratio_range);
 * ``figures/risk_over_sigma.png``: the 24 risk curves, a panel per pair (E and H
   with their intervals), the paper's grid shaded;
 * ``risk_precision.csv``: sigma* per trial (models/risk/precision.py);
@@ -35,7 +35,6 @@ def pairs_over_sigma(effort: pd.DataFrame, risk: pd.DataFrame) -> pd.DataFrame:
     """`effort`: trial, effort (mean over layouts); `risk`: the risk table (trial,
     sigma, risk, risk_low, risk_high). One row per (pair, sigma): COLUMNS."""
     from analysis.pairs import pair_order
-    from lgp.reproduce import kappa_range
 
     E = effort.set_index("trial")["effort"].astype(float)
     rows = []
@@ -50,11 +49,24 @@ def pairs_over_sigma(effort: pd.DataFrame, risk: pd.DataFrame) -> pd.DataFrame:
                          "risk_E_high": re["risk_high"], "risk_H": rh["risk"], "risk_H_low": rh["risk_low"],
                          "risk_H_high": rh["risk_high"], "holds": bool(rh["risk_low"] > re["risk_high"]),
                          "paper_risk_pair": pair in RISK_PAIRS, "effort_E": E[e], "effort_H": E[h],
-                         "tied": pair_order(E[e], E[h]) == "tie" and pair_order(re["risk"], rh["risk"]) == "tie",
-                         "full_E_lt_H_for_b2_over_b1": kappa_range(E[e], re["risk"], E[h], rh["risk"])})
-            if rows[-1]["tied"]:  # the one tie rule (analysis.pairs.TIE_REL): tied in both, Eq. 1 ties it for every b
-                rows[-1]["full_E_lt_H_for_b2_over_b1"] = "none (tie)"
+                         "tied": pair_order(E[e], E[h]) == "tie" and pair_order(re["risk"], rh["risk"]) == "tie"})
+            rows[-1]["full_E_lt_H_for_b2_over_b1"] = _ratio_text(E[e], re["risk"], E[h], rh["risk"], rows[-1]["tied"])
     return pd.DataFrame(rows, columns=COLUMNS)
+
+
+def _ratio_text(E_e, R_e, E_h, R_h, tie: bool) -> str:
+    """The ratios b2/b1 >= 0 for which Eq. 1 orders the pair E < H, as text:
+    'any', 'none', 'none (tie)', '> 1.07' or '< 3.2' (analysis.pairs.ratio_range)."""
+    from analysis.pairs import ratio_range
+
+    r = ratio_range(E_e, R_e, E_h, R_h, tie=tie)
+    if r.tie:
+        return "none (tie)"
+    if r.every:
+        return "any"
+    if r.empty:
+        return "none"
+    return f"> {r.low:.3g}" if r.high == np.inf else f"< {r.high:.3g}"
 
 
 def ordered_by_one_ratio(table: pd.DataFrame) -> pd.DataFrame:

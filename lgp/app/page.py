@@ -15,29 +15,22 @@ from __future__ import annotations
 
 import datetime
 import html
-import importlib.metadata
 import os
 import platform
 import shlex
-import shutil
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from lgp.app.cache import Cache, input_key, modules_digest
-from lgp.app.replays import page_files
+from lgp.app.cache import Cache, library_versions
+from lgp.app.files import write_text_atomic
+from lgp.app.report import ratio_text
+from lgp.app.pictures import trial_pictures
+from lgp.errors import InputError
 
-#: |(H - E) / E| below this is a solver-level tie of effort (docs/results.md, pair 6).
-EFFORT_TIE = 1e-4
-
-#: Pairs the paper's fitted full model ordered E < H ("correct rank order ... in all
-#: of the pairs. The only exception is the pair 11E and 11H, where humans did not show
-#: any difference"; Results, Figure 3).
-PAPER_ORDERED = {pair: pair != 11 for pair in range(1, 13)}
-
+#: Libraries named on the page (the cache keys name their own).
 LIBRARIES = ("drake", "mujoco", "numpy", "scipy", "pandas", "matplotlib", "pyyaml")
 
 CAPTIONS = {
@@ -49,7 +42,19 @@ CAPTIONS = {
                                "with each dataset, 95% intervals from the bootstrap over participants.",
     "sigma_profile": "RMSE of the fitted full model (Eq. 1) over the noise level sigma, per dataset; "
                      "the chosen sigma marked.",
+    "fig4_model_comparison": "Figure 4 in sample and out of sample: correlation of each model with each dataset when "
+                             "fit and scored on all 24 trials (pale; Eq. 1 cannot lose to effort-only there) and of its "
+                             "held-out predictions (leave-one-pair-out, full colour; leave-one-trial-out, hatched), "
+                             "sigma chosen inside each fold; 95% bootstrap intervals.",
+    "recovery": "Model recovery on SIMULATED studies from our effort and risk tables: how often the comparison names "
+                "the true model, against participants per study (left) and how often Eq. 1 beats effort-only out of "
+                "sample against the true sigma (right).",
 }
+
+
+def _asset(name: str) -> str:
+    """The page's style (page.css) or script (page.js), inlined so the page needs no other file."""
+    return (Path(__file__).parent / name).read_text()
 
 
 def _e(x) -> str:
@@ -67,7 +72,7 @@ def _fmt(v) -> str:
 
 
 def table_html(df: pd.DataFrame, cls: str = "sortable", row_attrs=None, max_rows: int | None = None) -> str:
-    """A DataFrame as an HTML table whose header cells sort it (see _SCRIPT)."""
+    """A DataFrame as an HTML table whose header cells sort it (see page.js)."""
     if max_rows is not None and len(df) > max_rows:
         df = df.head(max_rows)
     head = "".join(f"<th>{_e(c)}</th>" for c in df.columns)
@@ -128,74 +133,12 @@ def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height:
             f'<text x="{left}" y="{height - 2}">{s0:g}</text><text x="{left + pw}" y="{height - 2}" text-anchor="end">{s1:g} d</text></svg>')
 
 
-# ----------------------------------------------------------------------------- trial pictures
-
-
-def trial_picture(trial, seed: int, path: Path) -> Path:
-    """A (the layout of sample 0 of `seed`, as the replay shows it) and B, side by side."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from models.effort import sample_rng
-    from stimuli.sheet import draw_scene
-
-    A = trial.sample_initial(sample_rng(seed, 0))
-    fig = plt.figure(figsize=(4.4, 2.2))
-    for j, (scene, state) in enumerate(((A, "A: start (sample 0)"), (trial.target, "B: finish"))):
-        ax = fig.add_subplot(1, 2, j + 1, projection="3d")
-        draw_scene(ax, scene, state)
-    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.92, wspace=0.0)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
-
-
-
-def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None) -> dict[str, Path]:
-    """Picture of every trial under `out_dir`, copied from `cache` when drawn before."""
-    version = modules_digest("stimuli.sheet", "stimuli", "models.effort")
-    paths = {}
-    for trial in trials:
-        path = Path(out_dir) / f"{trial.id}.png"
-        cached = None
-        if cache is not None and cache.enabled:
-            cached = cache.root / f"picture-{input_key(trial=trial.id, digest=trial.digest, seed=seed, code=version)}.png"
-            if cached.exists():
-                path.parent.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(cached, path)
-                page_files(cache)["picture", "hit"] += 1
-                paths[trial.id] = path
-                continue
-        trial_picture(trial, seed, path)
-        if cached is not None:
-            cached.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(path, cached)
-            page_files(cache)["picture", "miss"] += 1
-        paths[trial.id] = path
-    return paths
-
-
 # ----------------------------------------------------------------------------- sections
-
-
-def library_versions() -> dict[str, str]:
-    out = {"python": platform.python_version()}
-    for name in LIBRARIES:
-        try:
-            out[name] = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            out[name] = "not installed"
-    return out
 
 
 def _run_section(run: dict) -> str:
     chips = " ".join(f"<code>{_e(k)}={_e(v)}</code>" for k, v in run.get("parameters", {}).items())
-    versions = pd.DataFrame(list(library_versions().items()), columns=["library", "version"])
+    versions = pd.DataFrame(list(library_versions(LIBRARIES).items()), columns=["library", "version"])
     stages = pd.DataFrame(list(run.get("stages", {}).items()), columns=["stage", "wall time (s)"])
     settings = pd.DataFrame(list(run.get("engine_settings", {}).items()), columns=["setting", "value"])
     cache = run.get("cache", {})
@@ -215,24 +158,27 @@ def _run_section(run: dict) -> str:
 
 
 def pair_verdicts(pairs: pd.DataFrame) -> pd.DataFrame:
-    """The pair table with the paper's claim beside ours and whether they differ.
+    """The pair table with the paper's claim beside ours and whether they differ
+    (analysis.pairs.pair_verdicts), in words.
 
     Ours: whether Eq. 1 (b1 > 0) can order the pair E < H for some b2/b1 >= 0, from
-    the ratio range of `lgp.reproduce.pair_orderings`; an effort difference below
-    EFFORT_TIE with equal risks is a tie.
+    the ratio range of analysis.pairs.pair_orderings; a pair tied in effort and in
+    risk (the tie rule, analysis.pairs.TIE_REL) is a tie.
     """
+    from analysis.pairs import pair_verdicts as verdicts, ratio_ranges
+
+    v = verdicts(pairs)
     df = pairs.copy()
-    tie = (df["effort_rel_diff"].abs() < EFFORT_TIE) & np.isclose(df["risk_E"], df["risk_H"])
-    rng = df["full_E_lt_H_for_b2_over_b1"].astype(str)
-    ours_ordered = (~tie) & (rng != "none")
-    df["paper (full model)"] = [("E < H" if PAPER_ORDERED[int(p)] else "not ordered (humans: no difference)") for p in df["pair"]]
-    df["ours (Eq. 1)"] = [("tie" if t else ("E < H for b2/b1 " + r if r not in ("any", "none") else ("E < H for any b2/b1" if r == "any" else "not ordered")))
-                          for t, r in zip(tie, rng)]
-    df["differs"] = [PAPER_ORDERED[int(p)] != bool(o) for p, o in zip(df["pair"], ours_ordered)]
+    df["paper (full model)"] = ["E < H" if o else "not ordered (humans: no difference)" for o in v["paper_ordered"]]
+    df["ours (Eq. 1)"] = ["tie" if r.tie else "E < H for any b2/b1" if r.every else "not ordered" if r.empty
+                          else f"E < H for b2/b1 {ratio_text(r)}" for r in ratio_ranges(pairs)]
+    df["differs"] = v["differs"].to_numpy()
     return df
 
 
 def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None) -> str:
+    from analysis.pairs import TIE_REL
+
     if pairs is None:
         return '<section id="pairs"><h2>Easy/hard pairs</h2><p>A subset of trials was run: the pair table needs all 24.</p></section>'
     df = pair_verdicts(pairs)
@@ -256,7 +202,8 @@ def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None) -> str:
 <section id="pairs"><h2>Easy/hard pairs</h2>
 <p>Effort in J s (mean over layouts), risk at sigma = {sigma:g} d. The paper's fitted full model ordered 11 of 12 pairs
 E &lt; H, pair 11 the exception. Without fitted betas ours says for which ratios b2/b1 (b1 &gt; 0) Eq. 1 would order
-the pair E &lt; H; |(H-E)/E| &lt; {EFFORT_TIE:g} with equal risks is a solver-level tie.
+the pair E &lt; H; a pair tied in effort and in risk (|H - E| &le; {TIE_REL:g} max(E, H), the tie rule of
+every table) is a tie.
 <strong>{n_diff} of {len(df)} pairs differ from the paper</strong> (marked <span class="differs-key">&#x2260;</span>).</p>
 {table_html(show.assign(differs=show["differs"].map(lambda v: "≠" if v else "")), row_attrs=attrs)}
 </section>"""
@@ -355,9 +302,11 @@ def _human_section(analysis: dict | None, out: Path) -> str:
         parts.append('<p class="warn">SIMULATED participants, not human data.</p>')
     if settings is not None:
         parts.append(table_html(settings.T.reset_index().set_axis(["setting", "value"], axis=1), "plain"))
-    for key, title in (("fits", "Fits of Eq. 1 and its lesions"), ("sigma_choice", "Sigma chosen by RMSE"),
-                       ("sigma_profile", "RMSE profile over sigma"), ("bootstrap_summary", "Bootstrap over participants"),
-                       ("bootstrap_tests", "Direct bootstrap tests"), ("excluded_participants", "Excluded participants")):
+    for key, title in (("fits", "Fits of Eq. 1 and its lesions (in-sample)"), ("sigma_choice", "Sigma chosen by RMSE"),
+                       ("sigma_profile", "RMSE profile over sigma"),
+                       ("bootstrap_summary", "Bootstrap over participants (in-sample)"),
+                       ("bootstrap_tests", "Direct bootstrap tests (in-sample; full vs effort cannot fail there)"),
+                       ("excluded_participants", "Excluded participants")):
         df = analysis.get(key)
         if isinstance(df, pd.DataFrame) and len(df):
             parts.append(f"<h3>{_e(title)}</h3>{table_html(df, max_rows=400)}")
@@ -367,6 +316,35 @@ def _human_section(analysis: dict | None, out: Path) -> str:
         parts.append(f"<h3>Participants</h3>{table_html(participant_table(z, pred), max_rows=2000)}")
     parts.append("</section>")
     return "".join(parts)
+
+
+def _comparison_section(analysis: dict | None, out: Path) -> str:
+    """Model comparison: in-sample and out-of-sample side by side, the tests, the
+    permutation tests (with human data), and the recovery table of SIMULATED
+    studies when recovery/ holds one (--recovery)."""
+    from analysis import compare_report as cr
+
+    parts = []
+    if analysis is not None and "model_comparison" in analysis:
+        parts += [f"<p>{_e(cr.CANNOT_FAIL)}</p>",
+                  f"<h3>Scores in sample and out of sample</h3>{table_html(cr.side_by_side(analysis['model_comparison']), 'plain')}",
+                  f"<h3>Eq. 1 against effort-only: direct bootstrap tests</h3>"
+                  f"{table_html(cr.tests_table(analysis['model_comparison_tests']), 'plain')}",
+                  f"<p>{_e(cr.widening_text(analysis['model_comparison']))}</p>"]
+        if "permutation_test" in analysis:
+            parts.append(f"<h3>Permutation tests of the risk term</h3>"
+                         f"{table_html(cr.permutation_table(analysis['permutation_test']), 'plain')}")
+    summary_path = out / "recovery" / "simulated_recovery_summary.csv"
+    if summary_path.is_file():
+        summary = pd.read_csv(summary_path)
+        parts.append('<h3>Model recovery on SIMULATED studies (not human data)</h3>'
+                     '<p class="warn">SIMULATED participants, not human data: could a study of this design tell the '
+                     'models apart on these effort and risk tables?</p>')
+        for source in summary["source"].unique():
+            parts.append(f"<p>Parameters {_e(source)}:</p>{table_html(cr.recovery_table(summary, source=source), 'plain')}")
+    if not parts:
+        return ""
+    return '<section id="comparison"><h2>Model comparison: in-sample and out of sample</h2>' + "".join(parts) + "</section>"
 
 
 def participant_table(zscored: pd.DataFrame, predictions: pd.DataFrame | None) -> pd.DataFrame:
@@ -411,17 +389,17 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
         s = effort_samples[effort_samples["trial"] == trial.id]
         r = risk[risk["trial"] == trial.id]
         if not len(s) or not len(r):
-            raise ValueError(f"results page: trial {trial.id} has no effort or no risk rows")
+            raise InputError(f"results page: trial {trial.id} has no effort or no risk rows")
         prec = None if precision is None else precision[precision["trial"] == trial.id]
         cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out, prec))
     nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
     title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"
     body = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{_e(title)}</title><style>{_STYLE}</style></head>
+<title>{_e(title)}</title><style>{_asset('page.css')}</style></head>
 <body>
 <header><h1>{_e(title)}</h1>
-<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#over-sigma">pairs over sigma</a>' if over_sigma_html else ''} <a href="#figures">figures</a> <a href="#trials">trials</a> <a href="#human">human data</a>
+<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#over-sigma">pairs over sigma</a>' if over_sigma_html else ''} <a href="#figures">figures</a> <a href="#trials">trials</a> <a href="#human">human data</a> <a href="#comparison">model comparison</a>
 &middot; files: <a href="report.md">report.md</a> <a href="effort.csv">effort.csv</a> <a href="effort_samples.csv">effort_samples.csv</a> <a href="risk.csv">risk.csv</a>{' <a href="pairs.csv">pairs.csv</a>' if pairs is not None else ''}</nav>
 </header>
 <main>
@@ -434,35 +412,18 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
 Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over the run's sigma grid.</p>
 <div class="cards">{"".join(cards)}</div></section>
 {_human_section(analysis, out)}
+{_comparison_section(analysis, out)}
 </main>
 <footer>Written by <code>python -m lgp.reproduce</code>; every file it links is beside this page.</footer>
-<script>{_SCRIPT}</script>
+<script>{_asset('page.js')}</script>
 </body></html>
 """
-    path = out / "index.html"
-    tmp = out / ".index.html.tmp"
-    tmp.write_text(body)
-    os.replace(tmp, path)
-    return path
+    return write_text_atomic(body, out / "index.html")
 
-
-
-class Stopwatch:
-    """Wall time per stage of a run: ``lap(name)`` closes the stage that ended now."""
-
-    def __init__(self):
-        self.laps: dict[str, float] = {}
-        self._t = time.perf_counter()
-
-    def lap(self, name: str) -> float:
-        now = time.perf_counter()
-        self.laps[name] = self.laps.get(name, 0.0) + now - self._t
-        self._t = now
-        return self.laps[name]
 
 
 def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
-                pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock: Stopwatch,
+                pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock,
                 replays: dict | None = None, argv=None, over_sigma_html: str | None = None,
                 precision: pd.DataFrame | None = None) -> Path:
     """The page of a `lgp.reproduce` run (its parsed `args`): pictures, run record, index.html."""
@@ -492,11 +453,11 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         "engine": engine,
         "engine_settings": settings,
         "stages": dict(clock.laps),
-        "cache": {"hits": cache.hits + sum(n for (_, o), n in page_files(cache).items() if o == "hit"),
-                  "misses": cache.misses + sum(n for (_, o), n in page_files(cache).items() if o == "miss"),
+        "cache": {"hits": cache.hits + sum(n for (_, o), n in cache.files.items() if o == "hit"),
+                  "misses": cache.misses + sum(n for (_, o), n in cache.files.items() if o == "miss"),
                   "root": str(cache.root),
-                  "summary": "; ".join([cache.summary()] + [f"{k} {page_files(cache)[k, 'hit']} hit, {page_files(cache)[k, 'miss']} miss"
-                                                            for k in sorted({k for k, _ in page_files(cache)})])},
+                  "summary": "; ".join([cache.summary()] + [f"{k} {cache.files[k, 'hit']} hit, {cache.files[k, 'miss']} miss"
+                                                            for k in sorted({k for k, _ in cache.files})])},
         "finished": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": f"{platform.node()}, {os.cpu_count()} cores",
         "load": "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),
@@ -504,49 +465,3 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
     return write_page(out, run=run, trials=trials, effort_samples=effort_samples, risk=risk, sigma=sigma, pairs=pairs,
                       analysis=analysis if getattr(args, "human_data", None) else None, figures=figures,
                       pictures=pictures, replays=replays, over_sigma_html=over_sigma_html, precision=precision)
-
-
-_STYLE = """
-body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#1d1d1f;background:#f6f6f4}
-header{background:#26323a;color:#fff;padding:14px 24px}header h1{margin:0 0 6px;font-size:20px;font-weight:600}
-header a{color:#cfe3ff;margin-right:8px}main{padding:8px 24px 24px;max-width:1500px}
-h2{margin:22px 0 8px;font-size:18px;border-bottom:1px solid #ccc;padding-bottom:3px}h3{margin:8px 0 4px;font-size:14px}
-code{background:#e9e9e4;padding:1px 4px;border-radius:3px}.cmd code{display:inline-block;white-space:pre-wrap;word-break:break-all}
-table{border-collapse:collapse;background:#fff;font-size:12.5px;margin:4px 0}th,td{border:1px solid #d8d8d2;padding:3px 6px;text-align:left;vertical-align:top}
-th{background:#eceae4}table.sortable th{cursor:pointer;user-select:none}table.sortable th:after{content:" \\2195";color:#999}
-th.asc:after{content:" \\2191"!important;color:#333}th.desc:after{content:" \\2193"!important;color:#333}
-tr.differs td{background:#fde8e6}tr.differs td:last-child{color:#b3261e;font-weight:700;font-size:15px}.differs-key{color:#b3261e;font-weight:700}
-.grid4{display:grid;grid-template-columns:repeat(auto-fit,minmax(240px,max-content));gap:24px}
-#figures{display:block}figure{display:inline-block;vertical-align:top;margin:6px 12px 12px 0;max-width:calc(50% - 36px);background:#fff;padding:8px;border:1px solid #ddd}
-figure img{max-width:100%;height:auto}figcaption{font-size:12.5px;color:#333}.file{color:#888}
-.trialnav a{display:inline-block;margin:0 4px 4px 0;padding:1px 6px;background:#fff;border:1px solid #ccc;border-radius:3px;text-decoration:none}
-.cards{display:grid;grid-template-columns:repeat(auto-fill,minmax(380px,1fr));gap:12px}.params code{display:inline-block;margin:0 4px 4px 0}
-.card{background:#fff;border:1px solid #d6d6d0;border-radius:6px;padding:8px 10px}.card:target{outline:3px solid #3b82f6}
-.card h3{font-size:16px;margin:0}.card h3 a{color:inherit;text-decoration:none}.dim{font-weight:400;color:#666;font-size:13px}
-.desc{margin:2px 0 4px;color:#444;font-size:12.5px}.card img{display:block;max-width:100%;height:auto}
-.stats{display:flex;flex-wrap:wrap;gap:14px;font-size:12.5px}.stats small{color:#777}
-svg text{font-size:9px;fill:#555}svg.hist rect{fill:#6b8fb5}svg.risk polyline{fill:none;stroke:#c0392b;stroke-width:1.5}
-svg.risk circle{fill:#c0392b}svg.risk .frame{fill:#fafafa;stroke:#ccc}svg.risk .mark{stroke:#888;stroke-dasharray:2 2}
-a.replay{font-weight:600}.none{color:#999}details{font-size:12.5px;margin-top:4px}.warn{background:#fff3cd;padding:6px;font-weight:700}
-footer{padding:12px 24px;color:#777;font-size:12px}
-table.oversigma td,table.oversigma th{text-align:center;white-space:nowrap;font-variant-numeric:tabular-nums}
-table.oversigma tr.paper th,table.oversigma tr.paper td{background:#ececec}table.oversigma td.holds{background:#d9f2d9;font-weight:700}
-table.oversigma th.riskpair{font-weight:800;text-decoration:underline}figure.wide{max-width:100%;display:block}
-"""
-
-# Sortable tables: click a header to sort by that column (numbers as numbers), again to reverse.
-_SCRIPT = """
-document.querySelectorAll('table.sortable').forEach(function (table) {
-  table.querySelectorAll('th').forEach(function (th, col) {
-    th.addEventListener('click', function () {
-      var asc = !th.classList.contains('asc');
-      table.querySelectorAll('th').forEach(function (h) { h.classList.remove('asc', 'desc'); });
-      th.classList.add(asc ? 'asc' : 'desc');
-      var body = table.tBodies[0], rows = Array.prototype.slice.call(body.rows);
-      var key = function (r) { var v = r.cells[col].getAttribute('data-v'), n = Number(v); return (v !== '' && !isNaN(n)) ? n : v; };
-      rows.sort(function (a, b) { var x = key(a), y = key(b); var c = (typeof x === typeof y) ? (x < y ? -1 : x > y ? 1 : 0) : (typeof x === 'number' ? -1 : 1); return asc ? c : -c; });
-      rows.forEach(function (r) { body.appendChild(r); });
-    });
-  });
-});
-"""

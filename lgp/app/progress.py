@@ -96,3 +96,17 @@ class Progress:
 
     def __exit__(self, *exc):
         self.close()
+
+
+class Stopwatch:
+    """Wall time per stage of a run: ``lap(name)`` closes the stage that ended now."""
+
+    def __init__(self):
+        self.laps: dict[str, float] = {}
+        self._t = time.perf_counter()
+
+    def lap(self, name: str) -> float:
+        now = time.perf_counter()
+        self.laps[name] = self.laps.get(name, 0.0) + now - self._t
+        self._t = now
+        return self.laps[name]

@@ -9,20 +9,11 @@ design and code is copied from the run's cache.
 from __future__ import annotations
 
 import logging
-import os
 import shutil
-from collections import Counter
 from pathlib import Path
 
 from lgp.app.cache import Cache, files_digest, input_key, library_versions, modules_digest
-
-
-def page_files(cache: Cache) -> Counter:
-    """(kind, "hit" | "miss") counts of the page's files (pictures, replays) kept beside
-    `cache`'s own table counts, which are about computed results only."""
-    if not hasattr(cache, "page_files"):
-        cache.page_files = Counter()
-    return cache.page_files
+from lgp.app.files import write_text_atomic
 
 
 #: The viewer's JavaScript library, shared by the replays of a run (3 MB; each replay
@@ -40,13 +31,6 @@ def split_library(page: str) -> tuple[str, str | None]:
     return page[:start] + f'<script src="{REPLAY_LIBRARY}"></script>' + page[end + len("</script>"):], page[start + len(_LIB_TAG):end]
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def _replay_job(item) -> float:
     """Plan sample 0 of a trial and write its replay; returns the wall time (s)."""
     import time
@@ -62,8 +46,8 @@ def _replay_job(item) -> float:
     page, library = split_library(replay_html(plan, title))
     path = Path(path)
     if library is not None and not (path.parent / REPLAY_LIBRARY).exists():
-        _write_atomic(path.parent / REPLAY_LIBRARY, library)
-    _write_atomic(path, page)
+        write_text_atomic(library, path.parent / REPLAY_LIBRARY)
+    write_text_atomic(page, path)
     return time.perf_counter() - t0
 
 
@@ -99,7 +83,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
         c = cached.get(trial.id)
         if c is not None and c.exists() and lib.exists():
             shutil.copyfile(c, paths[trial.id])
-            page_files(cache)["replay", "hit"] += 1
+            cache.files["replay", "hit"] += 1
         else:
             todo.append(trial)
     if todo:
@@ -111,7 +95,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
             if trial.id in cached:
                 cached[trial.id].parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(paths[trial.id], cached[trial.id])
-                page_files(cache)["replay", "miss"] += 1
+                cache.files["replay", "miss"] += 1
         if lib_cache is not None and lib.exists():
             lib_cache.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(lib, lib_cache)

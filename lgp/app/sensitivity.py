@@ -38,15 +38,17 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from lgp.app.cache import Cache, input_key, write_csv_atomic
+from lgp.app.cache import Cache, input_key
+from lgp.app.files import atomic_path, write_csv_atomic
 from lgp.paper import BLOCK_SIZE, PAPER_SIGMA, RISK_PAIRS
+from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
 
 #: The noise levels of the risk section: the paper's sigma and the top of its grid.
 RISK_SIGMAS = (PAPER_SIGMA, 0.10)
 #: Fall rules of the risk section: (rule, threshold in units of d). The runs are
 #: simulated once per engine and judged by each rule (exact: every threshold
 #: here has the same early-stop distance, models.risk.engine.fall_certain).
-RISK_RULES = (("horizontal", 0.25), ("3d", 0.25), ("3d", 0.1))
+RISK_RULES = ((DEFAULT_FALL_RULE, FALL_THRESHOLD), ("3d", FALL_THRESHOLD), ("3d", 0.1))
 #: Noise rules of the risk section (each simulated: they give other scenes).
 NOISE_RULES = ("lift", "settle")
 #: Approach heights (m) of the effort section: the default legs, shorter legs, and
@@ -62,6 +64,14 @@ DEFAULT_RISK_ENGINES = ("mujoco", "physx", "physx:game-defaults")
 
 COLUMNS = ["engine", "faithful", "fall_rule", "fall_threshold", "noise_rule", "trial", "sigma", "risk", "falls", "n",
            "stands_unperturbed"]
+
+
+def planner_choice(args) -> dict:
+    """The planner of a run's effort (lgp.reproduce --planner): {} for the paper's
+    pipeline (its cache keys and manifests as before the search existed), else
+    {"planner": "search", "budget": lgp.search.Budget}."""
+    planner = getattr(args, "planner", "paper")
+    return {} if planner == "paper" else {"planner": planner, "budget": getattr(args, "budget", None)}
 
 
 @dataclass
@@ -91,7 +101,9 @@ class Section:
 def add_arguments(parser) -> None:
     """The command-line options of the sensitivity sections."""
     parser.add_argument("--sensitivity", action="store_true",
-                        help="also run the sensitivity sections (risk by engine and fall rule; docs/risk.md), cached")
+                        help="also run the sensitivity sections, cached: risk by engine and fall rule (docs/risk.md) and "
+                             "effort by motion design (approach legs 5 and 2 cm, none, twice the slices; docs/effort.md), "
+                             "which plans every trial three more times and is slow (the clearance design most)")
     parser.add_argument("--sensitivity-engines", nargs="+", metavar="ENGINE",
                         help="engines of the risk sensitivity (default: mujoco, physx, physx:game-defaults when "
                              "installed; add drake to include it)")
@@ -135,7 +147,7 @@ def _engine_runs(ctx: Context, engine: str, n_sims: int, seed: int, noise_rule: 
     left out (they are flagged by `_stands`)."""
     from models.risk import UnstableSceneError, check_stable, risk_table
 
-    depends = ctx.risk_key(engine, "horizontal", 0.25, noise_rule)
+    depends = ctx.risk_key(engine, noise_rule=noise_rule)  # the runs are judged by every rule of RISK_RULES afterwards
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(RISK_SIGMAS), n_sims=n_sims, seed=seed,
                             table="runs", **depends) for t in ctx.trials}
     tables = {t.id: ctx.cache.get("sensitivity", keys[t.id]) for t in ctx.trials}
@@ -218,17 +230,17 @@ def risk_sensitivity_summary(table: pd.DataFrame) -> pd.DataFrame:
 def risk_sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
     """Risk of every trial over sigma, one panel per engine and rule (hard trials
     solid, easy dashed; the risk-contrast pairs in colour)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     if "noise_rule" not in table:
         table = table.assign(noise_rule="lift")
     panels = list(table.groupby(["engine", "noise_rule", "fall_rule", "fall_threshold"], sort=False))
     ncol = len(RISK_RULES)
     nrow = -(-len(panels) // ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.6 * ncol, 2.9 * nrow), sharex=True, sharey=True, squeeze=False)
+    fig = Figure(figsize=(3.6 * ncol, 2.9 * nrow))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrow, ncol, sharex=True, sharey=True, squeeze=False)
     colours = dict(zip(RISK_PAIRS, ("tab:red", "tab:blue", "tab:green", "tab:purple")))
     for ax, ((engine, noise_rule, rule, thr), g) in zip(axes.flat, panels):
         for trial, c in g.groupby("trial", sort=False):
@@ -250,8 +262,8 @@ def risk_sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
     fig.suptitle("Risk by engine, noise rule and fall rule (grey: pairs without a risk contrast)", fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
     return path
 
 
@@ -341,6 +353,7 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
     """(per design and trial, per design and pair, notes on designs that failed)."""
     from analysis import pair_table
     from lgp.paper import TRIAL_IDS
+    from models.effort import converged
 
     args = ctx.args
     samples = EFFORT_QUICK_SAMPLES if getattr(args, "quick", False) else args.samples
@@ -349,13 +362,13 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
         t0 = time.perf_counter()
         try:
             table = ctx.effort_tables(ctx.trials, samples, args.seed, ctx.executor, ctx.cache,
-                                      approach_height=h, slices_per_phase=S)
+                                      approach_height=h, slices_per_phase=S, **planner_choice(args))
         except Exception:  # a trial the planner cannot do with this design: the others, one by one (cached ones at once)
             parts = []
             for t in ctx.trials:
                 try:
                     parts.append(ctx.effort_tables([t], samples, args.seed, ctx.executor, ctx.cache,
-                                                   approach_height=h, slices_per_phase=S))
+                                                   approach_height=h, slices_per_phase=S, **planner_choice(args)))
                 except Exception as e:  # said in the report and the table (effort NaN), not hidden
                     notes.append(f"{label}, {t.id}: {type(e).__name__}: {e}")
                     ctx.log(f"[sensitivity] effort, {label}, {t.id}: failed ({type(e).__name__})")
@@ -366,7 +379,7 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
         for trial, df in g:
             rows.append({"design": label, "approach_height": h, "slices_per_phase": S, "trial": trial,
                          "effort": float(df["effort"].mean()), "samples": len(df),
-                         "not_converged": int((~df["status"].astype(str).str.contains("SolutionFound|failed")).sum())})
+                         "not_converged": int((~converged(df["status"]) & (df["status"] != "failed")).sum())})
     table = pd.DataFrame(rows, columns=["design", "approach_height", "slices_per_phase", "trial", "effort", "samples",
                                         "not_converged"])
     pairs = []

@@ -69,6 +69,18 @@ def camera_frame(plan) -> tuple[np.ndarray, np.ndarray]:
     return p_WC, p_WT
 
 
+def script_json(data) -> str:
+    """JSON safe to put inside a <script> element of an HTML page: ``<``, ``>`` and
+    ``&`` as \\u escapes (so text such as ``</script><script>...`` from a trial
+    file cannot close the element and run), and U+2028/U+2029 too (line
+    terminators in older JavaScript). The value a script reads is unchanged."""
+    text = json.dumps(data)
+    for char, escape in (("<", "\\u003c"), (">", "\\u003e"), ("&", "\\u0026"),
+                         ("\u2028", "\\u2028"), ("\u2029", "\\u2029")):
+        text = text.replace(char, escape)
+    return text
+
+
 def _caption_data(plan, title: str) -> dict:
     from lgp.planner import PHASE_DURATION
     from models.effort import cumulative_effort, kinetic_energy_by_action
@@ -110,7 +122,7 @@ def caption_html(plan, title: str) -> str:
 </div>
 <script>
 (function () {{
-  var D = {json.dumps(data)};
+  var D = {script_json(data)};
   var action = document.getElementById('lgp-action'), effort = document.getElementById('lgp-effort');
   function update() {{
     var t = (typeof viewer !== 'undefined' && viewer.animator) ? viewer.animator.time : 0;
@@ -194,18 +206,20 @@ def write_html(plan, path, title: str = "") -> str:
 
 def write_png(plan, path, title: str = "") -> str:
     """Write a figure of block paths (top view x-y, side view x-z) and speeds to `path`."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import BoundaryNorm
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
 
     from lgp.planner import PHASE_DURATION
     from models.effort import kinetic_energy, kinetic_energy_by_action
 
     order = placement_order(plan)
     colours = order_colours(plan)
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8), gridspec_kw={"width_ratios": [1, 1, 1.5]})
+    fig = Figure(figsize=(16, 4.8))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1, 1, 1.5]})
     top, side, speed = axes
     for b in plan.initial.blocks:
         c = colours[b.name]
@@ -217,7 +231,7 @@ def write_png(plan, path, title: str = "") -> str:
         top.scatter(p[-1, 1], p[-1, 0], color=c, edgecolor="k", marker="o", s=30, zorder=3)
     for box in plan.initial.fixed:
         x0, y0 = box.p_WO[0] - box.size[0] / 2, box.p_WO[1] - box.size[1] / 2
-        top.add_patch(plt.Rectangle((y0, x0), box.size[1], box.size[0], color="0.6", alpha=0.5))
+        top.add_patch(Rectangle((y0, x0), box.size[1], box.size[0], color="0.6", alpha=0.5))
     top.set(xlabel="y (m, left +)", ylabel="x (m, away from the agent)", title="block paths, top view (square: start, dot: end)")
     top.invert_xaxis()
     top.set_aspect("equal", adjustable="datalim")
@@ -242,15 +256,12 @@ def write_png(plan, path, title: str = "") -> str:
                     f"effort {kinetic_energy(plan):.3f} J s over {len(plan.actions)} actions")
     if order:
         n = len(order)
-        from matplotlib.colors import ListedColormap
-
         listed = ListedColormap([colours[name] for name in order])
-        sm = plt.cm.ScalarMappable(cmap=listed, norm=BoundaryNorm(np.arange(n + 1) + 0.5, n))
+        sm = ScalarMappable(cmap=listed, norm=BoundaryNorm(np.arange(n + 1) + 0.5, n))
         bar = fig.colorbar(sm, ax=axes, fraction=0.02, pad=0.01, ticks=np.arange(1, n + 1))
         bar.ax.set_yticklabels([f"{k + 1}: {name}" for k, name in enumerate(order)], fontsize=7)
         bar.set_label(f"placement order ({ORDER_CMAP}; grey: not moved)")
     fig.suptitle(title or f"{plan.initial.label} -> {plan.target.label}", y=1.06, fontweight="bold")
     path = Path(path)
     fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
     return str(path)

@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from pydrake.solvers import SolutionResult
 
 from lgp.komo.constraints import violation
 from lgp.komo.declaration import Declaration, Objective
@@ -17,7 +18,8 @@ class KomoResult:
     q: np.ndarray  # (n, nq)
     cost: float  # control cost (+ sos terms) of the full trajectory
     success: bool
-    status: str
+    solution_result: SolutionResult  # Drake's verdict (kSolutionFound, kIterationLimit, ...)
+    solver_info: int | None  # the solver's own code: SNOPT's info (1 optimal, 41 cannot be improved), IPOPT's status
     solver: str
     formulation: str
     solve_time: float  # wall-clock seconds: building, solving, promotions
@@ -26,6 +28,14 @@ class KomoResult:
     max_violation: float  # largest violation of a declared eq/ineq constraint
     worst_objective: Objective | None  # the objective with that violation
     X_WB: dict[str, np.ndarray] = field(default_factory=dict)  # object poses (n, 4, 4)
+
+    @property
+    def status(self) -> str:
+        """The verdict as text, for tables and messages: ``kSolutionFound (snopt info 1)``
+        (SNOPT's info appended), ``kSolutionFound`` (IPOPT, whose code stays in
+        `solver_info`): the text effort tables have always held (column status)."""
+        text = self.solution_result.name
+        return f"{text} (snopt info {self.solver_info})" if self.solver == "snopt" else text
 
     def p_WB(self, name: str) -> np.ndarray:
         """Position of object `name` at every slice, (n, 3)."""

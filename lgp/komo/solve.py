@@ -156,11 +156,10 @@ class Komo(Declaration):
         elapsed = _time.perf_counter() - start
         q = np.vstack([self.q_home, X])
         worst, worst_o = worst_violation(self, X, nonlinear)
-        status = str(result.get_solution_result()).split(".")[-1]
-        if solver == "snopt":
-            status += f" (snopt info {result.get_solver_details().info})"
+        details = result.get_solver_details()
+        info = details.info if solver == "snopt" else details.status  # SNOPT's info, IPOPT's ApplicationReturnStatus
         return KomoResult(t=np.arange(self.N + 1) * self.tau, q=q, cost=linear.cost(X), success=bool(result.is_success()),
-                          status=status, solver=solver, formulation=formulation, solve_time=elapsed, n_variables=int(nvar),
+                          solution_result=result.get_solution_result(), solver_info=int(info), solver=solver, formulation=formulation, solve_time=elapsed, n_variables=int(nvar),
                           keyframes=tuple(K), max_violation=worst, worst_objective=worst_o, X_WB=object_poses(self, q))
 
 

@@ -15,11 +15,12 @@ Each action takes one phase of 1 s (lgp.planner.PHASE_DURATION). The measure is
 `kinetic_energy_by_action`), computed here from the Plan's block trajectories
 p_WB; the planner only produces trajectories.
 
-Two modelling choices the paper leaves open are parameters of every function
-here (and of the planner): `approach_height` (m; default lgp.planner.APPROACH =
-0.05, the vertical leg at every grasp and place; 0 plans each carry with a
-clearance constraint instead) and `slices_per_phase` (default
-lgp.planner.SLICES_PER_PHASE = 20). docs/effort.md says how much each moves effort.
+Two modelling choices the paper leaves open make the planner's motion design
+(lgp.planner.Design), a parameter of every function here: `approach_height` (m;
+default lgp.planner.APPROACH = 0.05, the vertical leg at every grasp and place; 0
+plans each carry with a clearance constraint instead) and `slices_per_phase`
+(default lgp.planner.SLICES_PER_PHASE = 20), given as ``design=Design(h, S)`` or
+as the two keywords. docs/effort.md says how much each moves effort.
 
 The command line (the table of docs/effort.md) is models/effort/__main__.py,
 kept out of this module so that the effort cache key (lgp.app.cache.modules_digest of
@@ -36,10 +37,21 @@ import numpy as np
 import pandas as pd
 
 from lgp.paper import SAMPLES
+from lgp.errors import InputError
 from lgp.executor import borrowed
-from lgp.planner import APPROACH, PHASE_DURATION, SLICES_PER_PHASE, PlanningError, check_design, plan
+from lgp.planner import PHASE_DURATION, Design, PlanningError
+from lgp.search import Budget, check_planner, describe_search, plan
 
 COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "status"]
+#: planner="search" adds what the search found: the lower bound of the best
+#: unexplored branch (J s), the gap to the plan's effort, set-asides, KOMO solves,
+#: and the paper skeleton's effort on the same layout (empty when it has none).
+SEARCH_COLUMNS = COLUMNS + ["bound", "gap", "set_asides", "solves", "paper_effort"]
+#: Column status of a layout whose plan needs no motion (A is already B).
+NOTHING_TO_MOVE = "nothing to move"
+#: Column status of a solved plan starts with this: Drake's SolutionResult
+#: kSolutionFound by name, as lgp.komo.KomoResult.status writes it.
+SOLUTION_FOUND = "kSolutionFound"
 #: Mass of a unit block [paper: "a unit mass to a unit block"], kg.
 BLOCK_MASS = 1.0
 
@@ -88,10 +100,13 @@ def cumulative_effort(plan) -> np.ndarray:
 
 
 def describe(plan) -> str:
-    """The plan's action list with times and per-action energies, one line each, and its effort."""
+    """The plan's action list (its skeleton) with times and per-action energies, one
+    line each, and its effort; a searched plan also its bound and gap."""
     energies = kinetic_energy_by_action(plan) if plan.actions else []
     lines = [f"{k + 1:3d}  t = {k + 1:5.1f} s  {a}   E = {e:.4f} J s" for k, (a, e) in enumerate(zip(plan.actions, energies))]
     lines.append(f"physical effort: {kinetic_energy(plan):.4f} J s over {len(plan.actions)} actions")
+    if describe_search(plan):
+        lines.append(describe_search(plan))
     return "\n".join(lines)
 
 
@@ -116,27 +131,49 @@ def plan_of_sample(trial, seed: int, sample: int, **planner_options):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): {e}", e.action) from e
 
 
-def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float = APPROACH,
-                     slices_per_phase: int = SLICES_PER_PHASE) -> dict:
+def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float | None = None,
+                     slices_per_phase: int | None = None, design: Design | None = None, planner: str = "paper",
+                     budget: Budget | None = None) -> dict:
     """One row of the effort table: plan the sample's layout, integrate kinetic energy.
 
-    `approach_height` (m) and `slices_per_phase` are the planner's (lgp.planner.plan).
+    The motion design, `design` or its two values (None: the default), is the
+    planner's (lgp.planner.plan); `planner` "paper" (default) or "search"
+    (lgp.search, with `budget`).
     Raises PlanningError naming the trial, the sample and the failing action.
     """
-    result = plan_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    design = Design.of(design, approach_height, slices_per_phase)
+    if check_planner(planner) == "search":  # lgp.search takes the design's two values
+        options = {"planner": planner, "budget": budget, "approach_height": design.approach_height,
+                   "slices_per_phase": design.slices_per_phase}
+    else:
+        options = {"design": design}
+    result = plan_of_sample(trial, seed, sample, **options)
     effort = kinetic_energy(result)
     if not np.isfinite(effort):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): effort is {effort}")
     komo = result.komo
-    return {
+    searched = getattr(result, "search", None)
+    extra = {} if searched is None else {
+        "bound": searched.bound, "gap": searched.gap, "set_asides": searched.set_asides, "solves": searched.solves,
+        "paper_effort": searched.paper_effort}
+    return extra | {
         "trial": trial.id,
         "sample": sample,
         "effort": effort,
         "n_actions": len(result.actions),
         "solve_time": result.planning_time,  # wall-clock s, assignment to KOMO
         "solver": komo.solver if komo else "none",
-        "status": komo.status if komo else "nothing to move",
+        "status": komo.status if komo else NOTHING_TO_MOVE,
     }
+
+
+def converged(status) -> pd.Series:
+    """Per row of an effort table's column status (text, as the table and its CSV
+    hold it): whether the layout's plan was solved (KOMO's SolutionResult is
+    kSolutionFound) or needed no motion. The in-memory verdict is typed
+    (KomoResult.solution_result, .solver_info); this is the one reader of its text."""
+    text = pd.Series(status).astype(str)
+    return text.str.startswith(SOLUTION_FOUND) | (text == NOTHING_TO_MOVE)
 
 
 class EffortResult(NamedTuple):
@@ -151,13 +188,18 @@ class EffortResult(NamedTuple):
         return f"EffortResult(mean={self.mean:.6g} J*s over {len(self.table)} layouts)"
 
 
-def effort_units(trial, samples: int, seed: int, *, approach_height: float = APPROACH,
-                 slices_per_phase: int = SLICES_PER_PHASE) -> list[tuple]:
+def effort_units(trial, samples: int, seed: int, *, approach_height: float | None = None,
+                 slices_per_phase: int | None = None, design: Design | None = None, planner: str = "paper",
+                 budget: Budget | None = None) -> list[tuple]:
     """The work units of a trial's effort, (trial, seed, sample, design), one per
     layout that needs planning: every sample, or only sample 0 when A is not
-    random. `design` = (approach_height, slices_per_phase), carried in the unit so
-    an executor's workers plan with the same choices."""
-    design = check_design(approach_height, slices_per_phase)
+    random. `design` (an lgp.planner.Design, checked once here), and for
+    planner="search" also "search" and the budget after it, carried in the unit
+    so an executor's workers plan with the same choices."""
+    design = Design.of(design, approach_height, slices_per_phase)
+    if check_planner(planner) == "search":
+        return [(trial, seed, i, design, planner, budget or Budget())
+                for i in (range(samples) if trial.initial.is_random else [0])]
     return [(trial, seed, i, design) for i in (range(samples) if trial.initial.is_random else [0])]
 
 
@@ -165,21 +207,24 @@ def effort_of_unit(unit) -> dict:
     """effort_of_sample for one unit of `effort_units` (what executors map); a
     3-tuple (trial, seed, sample) plans with the default design."""
     trial, seed, sample, *rest = unit
-    approach_height, slices_per_phase = rest[0] if rest else (APPROACH, SLICES_PER_PHASE)
-    return effort_of_sample(trial, seed, sample, approach_height=approach_height, slices_per_phase=slices_per_phase)
+    return effort_of_sample(trial, seed, sample, design=rest[0] if rest else Design(),
+                            **(dict(zip(("planner", "budget"), rest[1:3])) if len(rest) > 1 else {}))
 
 
 def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
     """The tidy (trial, sample) table from the rows of a trial's units (any order);
-    a trial whose A is not random has its one row repeated for every sample."""
+    a trial whose A is not random has its one row repeated for every sample.
+    Columns COLUMNS, or SEARCH_COLUMNS for rows of planner="search"."""
     if not trial.initial.is_random:
         rows = [{**rows[0], "sample": i} for i in range(samples)]
-    return pd.DataFrame(rows, columns=COLUMNS).sort_values("sample").reset_index(drop=True)
+    columns = SEARCH_COLUMNS if rows and "bound" in rows[0] else COLUMNS
+    return pd.DataFrame(rows, columns=columns).sort_values("sample").reset_index(drop=True)
 
 
 def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
                     progress: Callable[[int, int], None] | None = None, executor=None, *,
-                    approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE) -> EffortResult:
+                    approach_height: float | None = None, slices_per_phase: int | None = None,
+                    design: Design | None = None, planner: str = "paper", budget: Budget | None = None) -> EffortResult:
     """Physical effort of `trial` over `samples` random layouts: an `EffortResult`
     with ``.mean`` (J s) and ``.table`` (one row per layout: trial, sample, effort,
     n_actions, solve_time, solver, status).
@@ -190,17 +235,21 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
     warm workers across trials). `progress(done, total)` is called after each
     sample. A trial whose layout is not random (a fixed structure in A) is planned
     once and its row repeated: every sample would draw the same layout.
-    `approach_height` (m; 0.05 default, 0 = clearance constraint instead of the
-    legs) and `slices_per_phase` (20 default) are passed to the planner
-    (lgp.planner.plan; docs/effort.md, "Modelling choices").
+    The motion design, `design` or `approach_height` (m; 0.05 default, 0 =
+    clearance constraint instead of the legs) and `slices_per_phase` (20
+    default), is checked once and passed to the planner (lgp.planner.plan;
+    docs/effort.md, "Modelling choices"). `planner` is "paper"
+    (the paper's pipeline, default) or "search" (lgp.search within `budget`; the
+    table then has SEARCH_COLUMNS: bound, gap, set-asides, solves, paper_effort).
     """
     if isinstance(trial, str):
         import stimuli
 
         trial = stimuli.load_trial(trial)
     if samples < 1:
-        raise ValueError(f"physical_effort needs samples >= 1, got {samples}")
-    units = effort_units(trial, samples, seed, approach_height=approach_height, slices_per_phase=slices_per_phase)
+        raise InputError(f"physical_effort needs samples >= 1, got {samples}")
+    units = effort_units(trial, samples, seed, design=Design.of(design, approach_height, slices_per_phase),
+                         planner=planner, budget=budget)
     done = 0
 
     def record(_, row):

@@ -2,6 +2,7 @@
 
     python -m models.effort --samples 30 --jobs 2 --out effort_samples.csv
     python -m models.effort 2E 2H --approach-height 0 --slices 40
+    python -m models.effort 7H --planner search --budget-solves 5   # the search (lgp.search)
 
 Prints one line per trial (mean effort, its SD over the layouts, actions, planning
 time) and with ``--out`` writes the tidy (trial, sample) table. The command line
@@ -16,7 +17,8 @@ import pandas as pd
 
 from lgp import cli
 from lgp.paper import SAMPLES
-from lgp.planner import APPROACH, SLICES_PER_PHASE
+from lgp.planner import APPROACH, SLICES_PER_PHASE, check_approach_height
+from lgp.search import PLANNERS, Budget
 from models.effort import physical_effort
 
 PROG = "python -m models.effort"
@@ -31,12 +33,24 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=cli.seed, default=0)
     parser.add_argument("--jobs", type=cli.positive_int, default=1)
     parser.add_argument("--out", type=cli.output_file, help="write the per-sample table (CSV) here")
-    parser.add_argument("--approach-height", type=cli.approach_height, default=APPROACH,
+    parser.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=APPROACH,
                         help="vertical approach/retreat leg (m) at every grasp and place; 0 = clearance constraint "
                              "instead (default %(default)s)")
     parser.add_argument("--slices", type=cli.positive_int, default=SLICES_PER_PHASE,
                         help="KOMO slices per 1 s phase (default %(default)s)")
+    parser.add_argument("--planner", type=cli.one_of(PLANNERS, "planner"), default="paper",
+                        help="paper: the paper's pipeline (default); search: best-first over skeletons (lgp.search)")
+    parser.add_argument("--budget-solves", type=cli.positive_int, default=None,
+                        help=f"search: at most this many KOMO solves per layout (default {Budget().solves})")
+    parser.add_argument("--budget-seconds", type=cli.positive_number, default=None,
+                        help=f"search: at most this many seconds per layout (default {Budget().seconds:g})")
     args = parser.parse_args(argv)
+    if args.planner != "search" and (args.budget_solves or args.budget_seconds):
+        parser.error("--budget-solves and --budget-seconds apply to --planner search only")
+    budget = None
+    if args.planner == "search":
+        defaults = Budget()
+        budget = Budget(solves=args.budget_solves or defaults.solves, seconds=args.budget_seconds or defaults.seconds)
 
     import stimuli
 
@@ -44,10 +58,12 @@ def main(argv=None) -> int:
     tables = []
     for trial in trials:
         mean, table = physical_effort(trial, samples=args.samples, seed=args.seed, jobs=args.jobs,
-                                      approach_height=args.approach_height, slices_per_phase=args.slices)
+                                      approach_height=args.approach_height, slices_per_phase=args.slices,
+                                      planner=args.planner, budget=budget)
         tables.append(table)
+        searched = f"  gap {table['gap'].mean():7.4f} J s" if "gap" in table else ""
         print(f"{trial.id:>4}  effort {mean:8.4f} J s  sd {table['effort'].std(ddof=1) if len(table) > 1 else 0.0:7.4f}  "
-              f"actions {table['n_actions'].iloc[0]:3d}  {table['solve_time'].mean():6.3f} s/plan", flush=True)
+              f"actions {table['n_actions'].iloc[0]:3d}  {table['solve_time'].mean():6.3f} s/plan{searched}", flush=True)
     table = pd.concat(tables, ignore_index=True)
     if args.out:
         table.to_csv(args.out, index=False)

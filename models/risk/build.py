@@ -80,6 +80,7 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 import pandas as pd
 
+from lgp.errors import InputError
 from lgp.executor import default_jobs
 from lgp.paper import N_SIMS, SAMPLES
 from lgp.scene import Scene, support_graph, supported_by
@@ -151,16 +152,16 @@ def plan_stages(trial, seed: int = 0, sample: int = 0, approach_height: float | 
     a_index = {name: i for i, name in enumerate(initial.names)}
     weights = _carry_weights(initial, target, plan, approach_height)
     total = sum(weights.values())
-    placed: set[str] = set()
+    placed: dict[str, None] = {}  # in placement order: the shares add up in that order, whatever the hash seed
     grasped: set[str] = set()
     stages = []
     for k, (action, state) in enumerate(zip(plan.actions, plan.states()), start=1):
         grasped.add(action.block)
         if not isinstance(action, Place):
             continue
-        placed.add(action.block)
+        placed[action.block] = None
         scene = state.scene
-        structure = tuple(b for b in target.names if owner.get(b) in placed | stays)
+        structure = tuple(b for b in target.names if owner.get(b) in placed.keys() | stays)
         graph = support_graph(scene)
         above = supported_by(graph)
         blocks = set(scene.names)
@@ -225,14 +226,14 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
         trial = stimuli.load_trial(trial)
     sigmas = [float(s) for s in np.atleast_1d(sigma)]
     if n_sims < 1:
-        raise ValueError(f"trial {trial.id}: need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
+        raise InputError(f"trial {trial.id}: need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
     if samples < 1:
-        raise ValueError(f"trial {trial.id}: need samples >= 1 layouts, got {samples}")
+        raise InputError(f"trial {trial.id}: need samples >= 1 layouts, got {samples}")
     for s in sigmas:
         if not s >= 0:
-            raise ValueError(f"trial {trial.id}: sigma must be >= 0 (a fraction of the block size), got {s}")
+            raise InputError(f"trial {trial.id}: sigma must be >= 0 (a fraction of the block size), got {s}")
     if mode not in MODES:
-        raise ValueError(f"trial {trial.id}: unknown build-risk mode {mode!r}; known modes: {', '.join(MODES)}")
+        raise InputError(f"trial {trial.id}: unknown build-risk mode {mode!r}; known modes: {', '.join(MODES)}")
     noise_rule = check_noise_rule(noise_rule)
     name = _engine_name(engine, profile)
     fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
@@ -399,11 +400,11 @@ def aggregate_plan(risks: Sequence[float], shares: Sequence[float]) -> dict[str,
     r = np.asarray(risks, dtype=float)
     w = np.asarray(shares, dtype=float)
     if r.size == 0:
-        raise ValueError("a plan with no stage has no build risk")
+        raise InputError("a plan with no stage has no build risk")
     if r.shape != w.shape:
-        raise ValueError(f"{r.size} stage risks but {w.size} work shares")
+        raise InputError(f"{r.size} stage risks but {w.size} work shares")
     if np.any((r < 0) | (r > 1)) or not np.all(np.isfinite(r)):
-        raise ValueError(f"stage risks must be probabilities in [0, 1], got {r.tolist()}")
+        raise InputError(f"stage risks must be probabilities in [0, 1], got {r.tolist()}")
     return {"final": float(r[-1]), "max": float(r.max()), "expected": float(r.sum()),
             "any": float(1 - np.prod(1 - r)), "care": float(np.dot(w, r))}
 

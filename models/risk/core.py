@@ -22,6 +22,7 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 import pandas as pd
 
+from lgp.errors import InputError
 from lgp.executor import borrowed, default_jobs
 from lgp.geometry import digest
 from lgp.paper import N_SIMS, SIGMA_GRID
@@ -66,14 +67,49 @@ def _engine_name(engine: str | None, profile: str | None = None) -> str:
 def check_fall_rule(fall_rule: str, fall_threshold: float) -> tuple[str, float]:
     """(rule, threshold) checked: ValueError for an unknown rule or a threshold <= 0."""
     if fall_rule not in FALL_RULES:
-        raise ValueError(f"unknown fall rule {fall_rule!r}; known rules: {', '.join(FALL_RULES)}")
+        raise InputError(f"unknown fall rule {fall_rule!r}; known rules: {', '.join(FALL_RULES)}")
     try:
         threshold = float(fall_threshold)
     except (TypeError, ValueError):
-        raise ValueError(f"fall threshold must be a number (units of the block size d), got {fall_threshold!r}") from None
+        raise InputError(f"fall threshold must be a number (units of the block size d), got {fall_threshold!r}") from None
     if not threshold > 0 or not np.isfinite(threshold):
-        raise ValueError(f"fall threshold must be > 0 (units of the block size d), got {fall_threshold!r}")
+        raise InputError(f"fall threshold must be > 0 (units of the block size d), got {fall_threshold!r}")
     return fall_rule, threshold
+
+
+def check_sigma(sigma) -> float:
+    """A noise SD in units of the block size d: a finite number in [0, 1] (0: the
+    unperturbed scene; the command lines take (0, 1]). Beyond 1 d the noise moves
+    blocks by more than their size and the perturbed positions overflow long
+    before sigma = 1e308; inf and nan are no noise level."""
+    if isinstance(sigma, bool) or not isinstance(sigma, (int, float, np.integer, np.floating)):
+        raise InputError(f"sigma must be a number in [0, 1] (units of the block size d), got {sigma!r}")
+    value = float(sigma)
+    if not (np.isfinite(value) and 0 <= value <= 1):
+        raise InputError(f"sigma must be a finite number in [0, 1] (units of the block size d), got {sigma!r}")
+    return value
+
+
+def check_n_sims(n_sims) -> int:
+    """A count of runs: a whole number >= 1 (not 2.5, not the text '4', not True)."""
+    if isinstance(n_sims, bool) or not isinstance(n_sims, (int, np.integer)):
+        raise InputError(f"n_sims must be a whole number >= 1 (runs per sigma; risk is falls / n_sims), got {n_sims!r}")
+    if n_sims < 1:
+        raise InputError(f"need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
+    return int(n_sims)
+
+
+def check_seed(seed) -> None:
+    """A seed: a whole number >= 0 or a numpy Generator. None is refused: numpy
+    would seed from the operating system, and the same call would give other
+    numbers every time (the project promises same seed, same numbers)."""
+    if isinstance(seed, np.random.Generator):
+        return
+    if seed is None:
+        raise InputError("seed=None would draw irreproducible numbers (numpy seeds from the operating system); "
+                         "give a whole number >= 0 or a numpy.random.Generator")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"seed must be a whole number >= 0 or a numpy.random.Generator, got {seed!r}")
 
 
 def fall_threshold(scene: Scene, fall_threshold: float = FALL_THRESHOLD) -> float:
@@ -105,7 +141,7 @@ def apply_fall_rule(runs: pd.DataFrame, fall_rule: str, fall_threshold: float, d
     equals the new one's, e.g. any two thresholds <= 0.5 d."""
     fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
     if "fall_threshold" in runs and (runs["fall_threshold"].map(fall_certain) != fall_certain(fall_threshold)).any():
-        raise ValueError(f"runs simulated with early stops for another fall threshold cannot be re-judged at {fall_threshold:g} d")
+        raise InputError(f"runs simulated with early stops for another fall threshold cannot be re-judged at {fall_threshold:g} d")
     column = "max_displacement" if fall_rule == "horizontal" else "max_displacement_3d"
     return runs.assign(fell=runs[column] > fall_threshold * d, fall_rule=fall_rule, fall_threshold=fall_threshold)
 
@@ -216,12 +252,9 @@ def run_grid(
     name = _engine_name(engine, profile)
     fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
     noise_rule = check_noise_rule(noise_rule)
-    sigmas = [float(s) for s in sigmas]
-    if n_sims < 1:
-        raise ValueError(f"need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
-    for s in sigmas:
-        if not s >= 0:
-            raise ValueError(f"sigma must be >= 0 (a fraction of the block size), got {s}")
+    sigmas = [check_sigma(s) for s in sigmas]
+    n_sims = check_n_sims(n_sims)
+    check_seed(seed)
     ids = list(trial_ids) if trial_ids is not None else [s.label for s in scenes]
     for scene in scenes:
         check_stable(scene, name, fall_rule=fall_rule, fall_threshold=fall_threshold)
@@ -306,7 +339,11 @@ def physical_risk(
     run, sigma, fell, max_displacement, max_displacement_3d [m], sim_time [s],
     engine, fall_rule, fall_threshold). Raises UnstableSceneError when the
     unperturbed scene falls, ValueError for an unknown engine, profile or rule, a
-    threshold <= 0, or a missing optional engine (saying how to install it).
+    threshold <= 0, or a missing optional engine (saying how to install it);
+    ValueError too for a sigma that is not a finite number in [0, 1], an `n_sims`
+    that is not a whole number >= 1 (2.5, '4' and True are refused), and a
+    `seed` that is not a whole number >= 0 or a Generator (None is refused: it
+    would give other numbers on every call).
     `noise_rule`: "lift" (default, the paper's reading) or "settle" (every block
     set to rest on what lies beneath its new outline; models/risk/noise.py).
     """
@@ -393,7 +430,7 @@ def _as_scenes(items) -> tuple[list[str], list[Scene]]:
                 ids.append(str(it.id))
                 scenes.append(it.target)
     if len(set(ids)) != len(ids):
-        raise ValueError(f"trial ids must be unique, got {ids}")
+        raise InputError(f"trial ids must be unique, got {ids}")
     return ids, scenes
 
 

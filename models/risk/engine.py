@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lgp.errors import InputError
 from lgp.geometry import digest
 from lgp.paper import BLOCK_SIZE, DURATION
 from lgp.scene import Scene
@@ -208,17 +209,17 @@ def engine_name(engine: str, profile: str | None = None) -> str:
     if profile is not None:
         base = engine.split(":")[0]
         if base not in PROFILES and profile != "faithful":
-            raise ValueError(f"engine {engine!r} has one profile, faithful (other profiles are for: {', '.join(PROFILES)})")
+            raise InputError(f"engine {engine!r} has one profile, faithful (other profiles are for: {', '.join(PROFILES)})")
         if base not in PROFILES:
             profile = None
         elif profile not in PROFILES[base]:
-            raise ValueError(f"unknown {base} profile {profile!r}; known profiles: {', '.join(PROFILES[base])}")
+            raise InputError(f"unknown {base} profile {profile!r}; known profiles: {', '.join(PROFILES[base])}")
     if profile is not None:
         name = PROFILES[base][profile]
         if engine != base and engine != name:
-            raise ValueError(f"engine {engine!r} contradicts profile {profile!r}")
+            raise InputError(f"engine {engine!r} contradicts profile {profile!r}")
     if name not in ENGINES:
-        raise ValueError(f"unknown physics engine {engine!r}; known engines: {', '.join(ENGINES)}")
+        raise InputError(f"unknown physics engine {engine!r}; known engines: {', '.join(ENGINES)}")
     spec = ENGINES[name]
     if spec.requires is not None:
         import importlib.util

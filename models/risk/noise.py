@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lgp.errors import InputError
 from lgp.geometry import rectangle_overlap
 from lgp.scene import CONTACT_TOLERANCE, Scene
 
@@ -58,7 +59,7 @@ _MAX_SWEEPS = 500
 def check_noise_rule(noise_rule: str) -> str:
     """The noise rule checked: ValueError naming the known ones."""
     if noise_rule not in NOISE_RULES:
-        raise ValueError(f"unknown noise rule {noise_rule!r}; known rules: {', '.join(NOISE_RULES)}")
+        raise InputError(f"unknown noise rule {noise_rule!r}; known rules: {', '.join(NOISE_RULES)}")
     return noise_rule
 
 
@@ -173,9 +174,9 @@ class NoiseRule:
         scene, n = self.scene, self.n
         z = np.asarray(z, float)
         if z.shape[-2:] != (n, 3) or z.ndim not in (2, 3):
-            raise ValueError(f"{scene.label}: need standard normals of shape ({n}, 3), got {z.shape}")
+            raise InputError(f"{scene.label}: need standard normals of shape ({n}, 3), got {z.shape}")
         if not sigma >= 0:
-            raise ValueError(f"{scene.label}: sigma must be >= 0 (a fraction of the block size), got {sigma}")
+            raise InputError(f"{scene.label}: sigma must be >= 0 (a fraction of the block size), got {sigma}")
         one = z.ndim == 2
         z = z[None] if one else z
         runs = len(z)

@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from lgp.errors import InputError
 from lgp.geometry import quaternion_from_yaw
 from lgp.paper import BLOCK_SIZE
 from lgp.scene import Scene
@@ -140,7 +141,7 @@ class PhysxEngine(Engine):
 
     def __post_init__(self):
         if self.profile not in PROFILES:
-            raise ValueError(f"unknown PhysX profile {self.profile!r}; known profiles: {', '.join(PROFILES)}")
+            raise InputError(f"unknown PhysX profile {self.profile!r}; known profiles: {', '.join(PROFILES)}")
         self.config = PROFILES[self.profile]
         self.name = "physx" if self.profile == "faithful" else f"physx:{self.profile}"
         self._sapien = _import_sapien()

@@ -24,6 +24,8 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from lgp.errors import InputError
+
 #: The risk levels of sigma* (fractions of runs that fall).
 PRECISION_LEVELS: tuple[float, ...] = (0.5, 0.1)
 #: Bootstrap resamples of the runs.
@@ -40,12 +42,12 @@ def check_levels(levels: Sequence[float]) -> tuple[float, ...]:
         try:
             value = float(level)
         except (TypeError, ValueError):
-            raise ValueError(f"a precision level must be a risk in (0, 1), got {level!r}") from None
+            raise InputError(f"a precision level must be a risk in (0, 1), got {level!r}") from None
         if not (0 < value < 1):
-            raise ValueError(f"a precision level must be a risk in (0, 1), got {level!r}")
+            raise InputError(f"a precision level must be a risk in (0, 1), got {level!r}")
         out.append(value)
     if not out:
-        raise ValueError("need at least one precision level in (0, 1)")
+        raise InputError("need at least one precision level in (0, 1)")
     return tuple(out)
 
 
@@ -78,13 +80,13 @@ def required_precision(runs: pd.DataFrame, levels: Sequence[float] = PRECISION_L
     runs at every sigma (a `risk_table(..., runs=True)` table has them)."""
     levels = check_levels(levels)
     if n_boot < 1:
-        raise ValueError(f"need n_boot >= 1 bootstrap resamples, got {n_boot}")
+        raise InputError(f"need n_boot >= 1 bootstrap resamples, got {n_boot}")
     rng = np.random.default_rng(seed)
     rows = []
     for trial, g in runs.groupby("trial", sort=False):
         wide = g.pivot_table(index="run", columns="sigma", values="fell", aggfunc="first")
         if wide.isna().any().any():
-            raise ValueError(f"trial {trial}: required precision needs the same runs at every sigma")
+            raise InputError(f"trial {trial}: required precision needs the same runs at every sigma")
         sigmas = wide.columns.to_numpy(float)
         fell = wide.to_numpy(bool)
         n = len(fell)

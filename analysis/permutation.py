@@ -1,0 +1,128 @@
+"""Permutation tests of the risk term: does risk, attached to the right trials,
+let Eq. 1 predict held-out trials better than effort alone?
+
+Statistic: the full model's cross-validated gain over effort-only, gain = RMSE
+(effort-only) - RMSE(Eq. 1), both leave-one-pair-out (analysis.crossval; sigma
+chosen inside every fold). Positive: risk helps predict unseen pairs.
+
+Null distributions, E fixed, everything refit (sigma included) for each
+permutation:
+
+* ``shuffle``: the trials' risks permuted across all 24 trials (one permutation
+  for every sigma, so each trial's risk curve moves whole). Exact when, under
+  the null, which trial carries which risk curve is exchangeable: risk says
+  nothing about the responses beyond effort.
+* ``within-pair``: each pair's easy and hard trial swap their risks with
+  probability 1/2, independently per pair. It asks whether risk's contribution
+  is the easy/hard contrast within pairs, keeping which pairs are risky.
+
+p = (1 + #{null gain >= observed gain}) / (1 + n_perm), per dataset (datasets
+share the permutations; each p is valid on its own).
+"""
+from __future__ import annotations
+
+import numbers
+from typing import Mapping
+
+import numpy as np
+import pandas as pd
+
+from analysis.crossval import RiskGrid, cross_validate, pairs_of, scores
+from analysis.data import TRIAL_IDS, ordered_datasets
+from analysis.models import effort_per_trial
+from lgp.errors import InputError
+
+KINDS: tuple[str, ...] = ("shuffle", "within-pair")
+#: Default permutations per test.
+N_PERM = 1000
+#: Seed stream of the permutations in run_analysis: ``default_rng([seed, PERMUTATION_STREAM])``.
+PERMUTATION_STREAM = 2302
+#: The cross-validation scheme of the statistic.
+SCHEME = "leave-one-pair-out"
+
+
+def check_count(value, what: str) -> int:
+    """`value` as an int if it is a whole number >= 1, else InputError naming `what`."""
+    if isinstance(value, bool) or not isinstance(value, (numbers.Integral, numbers.Real)) \
+            or not np.isfinite(value) or value != int(value) or value < 1:
+        raise InputError(f"{what} must be a whole number >= 1, got {value!r}")
+    return int(value)
+
+
+def draw_permutations(kind: str, n_perm: int, rng: np.random.Generator, trials=TRIAL_IDS) -> np.ndarray:
+    """(n_perm, T) trial index permutations: ``shuffle`` draws
+    ``rng.permuted`` of every row; ``within-pair`` ``rng.random((n_perm, pairs)) < 0.5``
+    swaps."""
+    n_perm = check_count(n_perm, "the number of permutations")
+    T = len(trials)
+    base = np.tile(np.arange(T), (n_perm, 1))
+    if kind == "shuffle":
+        return rng.permuted(base, axis=1)
+    if kind == "within-pair":
+        pairs = np.array(pairs_of(list(trials)), dtype=int)
+        swap = rng.random((n_perm, len(pairs))) < 0.5
+        out = base.copy()
+        out[:, pairs[:, 0]] = np.where(swap, pairs[:, 1], pairs[:, 0])
+        out[:, pairs[:, 1]] = np.where(swap, pairs[:, 0], pairs[:, 1])
+        return out
+    raise InputError(f"unknown permutation kind {kind!r}; expected one of {', '.join(KINDS)}")
+
+
+def distinct_assignments(kind: str, risk: np.ndarray, trials=TRIAL_IDS) -> float:
+    """Number of distinct risk tables (S, T) a permutation of `kind` can produce:
+    shuffle T! / prod(m!) over groups of trials with identical risk curves (a
+    float; may be huge); within-pair 2^k, k the pairs whose E and H curves differ."""
+    from math import lgamma
+
+    if kind == "within-pair":
+        pairs = pairs_of(list(trials))
+        return float(2 ** sum(not np.array_equal(risk[:, e], risk[:, h]) for e, h in pairs))
+    _, counts = np.unique(np.round(risk.T, 12), axis=0, return_counts=True)
+    n = float(np.exp(lgamma(risk.shape[1] + 1) - sum(lgamma(c + 1) for c in counts)))
+    return float(round(n)) if n < 1e15 else n
+
+
+def cv_gain(Y: np.ndarray, E: np.ndarray, risk: np.ndarray, scheme: str = SCHEME, pool: bool = True) -> np.ndarray:
+    """Cross-validated RMSE of effort-only minus Eq. 1's: Y (B, D, T), risk
+    (S, T) or (B, S, T); returns (B, D)."""
+    preds, _, _ = cross_validate(Y, E, {"R": risk}, ["full", "effort"], scheme, pool=pool)
+    return scores(Y, preds["effort"])["rmse"] - scores(Y, preds["full"])["rmse"]
+
+
+def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_perm: int = N_PERM,
+                     rng: np.random.Generator | None = None, kinds=KINDS, scheme: str = SCHEME
+                     ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Both permutation tests (module docstring) on the full-sample trial means.
+
+    `means` {dataset: (24,)}; `grid` the risk over sigma (crossval.risk_grid).
+    Permutations are drawn from `rng` kind by kind, in the order of `kinds`.
+    Returns (summary, null): summary one row per (kind, dataset): kind, dataset,
+    scheme, observed_gain, null_mean, null_q95, n_at_least, n_perm, p_value;
+    null one row per (kind, dataset, permutation) with its gain.
+    distinct_assignments is how many different risk tables the permutations can
+    make (trials with identical risk curves swap to the same table): the
+    observed table is one of them, so p cannot fall far below its inverse. With
+    our table's few risky pairs the within-pair test has only 2^k of them.
+    """
+    n_perm = check_count(n_perm, "the number of permutations")
+    rng = np.random.default_rng(0) if rng is None else rng
+    E = effort_per_trial(effort).to_numpy()
+    datasets = ordered_datasets(means)
+    Y = np.stack([np.asarray(means[d], float) for d in datasets])[None]     # (1, D, T)
+    observed = cv_gain(Y, E, grid.risk, scheme)[0]                           # (D,)
+    rows, nulls = [], []
+    for kind in kinds:
+        perms = draw_permutations(kind, n_perm, rng)
+        risks = grid.risk[:, perms].transpose(1, 0, 2)                     # (P, S, T)
+        null = cv_gain(np.broadcast_to(Y, (n_perm,) + Y.shape[1:]), E, risks, scheme)   # (P, D)
+        distinct = distinct_assignments(kind, grid.risk)
+        for k, dataset in enumerate(datasets):
+            g = null[:, k]
+            at_least = int(np.sum(g >= observed[k] - 1e-12 * abs(observed[k])))
+            rows.append((kind, dataset, scheme, observed[k], float(np.mean(g)), float(np.quantile(g, 0.95)),
+                         at_least, n_perm, (1 + at_least) / (1 + n_perm), distinct))
+            nulls.append(pd.DataFrame({"kind": kind, "dataset": dataset, "permutation": np.arange(n_perm),
+                                       "gain": g}))
+    summary = pd.DataFrame(rows, columns=["kind", "dataset", "scheme", "observed_gain", "null_mean", "null_q95",
+                                          "n_at_least", "n_perm", "p_value", "distinct_assignments"])
+    return summary, pd.concat(nulls, ignore_index=True)

@@ -1,0 +1,193 @@
+"""The stages of a reproduce run that compute, each cached per trial by a hash of
+its inputs (lgp.app.cache): the check that B stands (`check_targets`), effort
+(`effort_tables`) and risk (`risk_tables`), with their cache keys, written here once:
+`engine_key_inputs` is what every risk-like result (risk, the stand check, the
+build-risk stage, the sensitivity runs) depends on through its physics engine.
+"""
+from __future__ import annotations
+
+import time
+from collections import Counter
+
+import pandas as pd
+
+from lgp.app.cache import LIBRARIES, Cache, files_digest, input_key, library_versions, modules_digest
+from lgp.app.progress import Progress
+from lgp.app.progress import log as _log
+
+
+def effort_key_inputs() -> dict:
+    """What an effort table depends on besides the trial and the parameters: the
+    source of every project module physical_effort can run (stimuli draws the
+    layouts of A), the arm's model files, and the numerical libraries (SNOPT is Drake's)."""
+    return {"code": modules_digest("models.effort", "stimuli"),
+            "data": files_digest("models/*.sdf", "models/*.urdf", "models/*.yaml"),
+            "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
+
+
+def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
+               slices_per_phase: int | None = None, planner: str = "paper", budget=None, design=None) -> str:
+    """The cache key of one trial's effort table: the trial file, M, the seed, the
+    planner's design (approach height, slices per phase: `design` or its two
+    values), for planner="search" the planner and its budget (lgp.search.Budget),
+    and effort_key_inputs()."""
+    from lgp.planner import Design
+    from lgp.search import Budget, check_planner
+
+    design = Design.of(design, approach_height, slices_per_phase)
+    searched = {"planner": planner, "budget": repr(budget or Budget())} if check_planner(planner) == "search" else {}
+    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=design.approach_height,
+                     slices_per_phase=design.slices_per_phase, **searched, **effort_key_inputs())
+
+
+def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
+                  slices_per_phase: int | None = None, log: bool = True, planner: str = "paper",
+                  budget=None) -> pd.DataFrame:
+    """Per (trial, sample) effort, one cached file per trial (and design: the
+    planner's `approach_height` and `slices_per_phase`, defaults when None; the
+    `planner`, "paper" or "search" with its `budget`).
+
+    The layouts of every uncached trial are one stream of work units on the run's
+    one executor (warm workers plan across trial boundaries); a trial's file is
+    written as soon as its last layout arrives, so an interruption loses at most
+    the trials still in flight.
+    """
+    from models.effort import effort_of_unit, effort_table, effort_units
+
+    from lgp.planner import Design
+
+    design = Design.of(None, approach_height, slices_per_phase)  # checked once for the stage
+    searched = {"planner": planner, "budget": budget} if planner != "paper" else {}
+    keys = {t.id: effort_key(t, samples, seed, design=design, **searched) for t in trials}
+    tables: dict[str, pd.DataFrame] = {}
+    for t in trials:
+        cached = cache.get("effort", keys[t.id])
+        if cached is not None:
+            tables[t.id] = cached
+    todo = [t for t in trials if t.id not in tables]
+    units = [u for t in todo for u in effort_units(t, samples, seed, design=design, **searched)]
+    owner = [u[0] for u in units]
+    pending = Counter(t.id for t in owner)
+    rows: dict[str, list[dict]] = {t.id: [] for t in todo}
+    t0 = time.perf_counter()
+    bar = Progress("effort", len(units), "plans")
+
+    def arrived(k, row):
+        bar.advance()
+        trial = owner[k]
+        rows[trial.id].append(row)
+        pending[trial.id] -= 1
+        if pending[trial.id] == 0:
+            tables[trial.id] = cache.put("effort", keys[trial.id], effort_table(trial, samples, rows[trial.id]))
+            df = tables[trial.id]
+            if log:
+                _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
+                     f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
+
+    for t in trials:
+        if log and t.id in tables and t.id not in rows:
+            _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
+                 f" over {len(tables[t.id])} layouts  (cached)")
+    with bar:
+        executor.map(effort_of_unit, units, arrived)
+    return pd.concat([tables[t.id] for t in trials], ignore_index=True)
+
+
+def engine_key_inputs(engine: str | None, model: str) -> dict:
+    """What a result of the risk model's module `model` (models.risk.core,
+    models.risk.build) simulated by `engine` (None: the default) depends on besides
+    the trial and the parameters: the source of every project module it can run
+    (the engine module is loaded by name, so it is named here), the engine's name
+    and settings, and the libraries, the engine's own among them (sapien for PhysX)."""
+    from models.risk import DEFAULT_ENGINE, ENGINES, get_engine
+
+    name = DEFAULT_ENGINE if engine is None else engine
+    spec = ENGINES[name]
+    extra = (spec.requires,) if spec.requires else ()  # e.g. sapien for PhysX
+    return {"code": modules_digest(model, spec.target.split(":")[0], "stimuli"),
+            "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra)}
+
+
+def risk_key_inputs(engine: str | None, fall_rule: str | None = None, fall_threshold: float | None = None,
+                    noise_rule: str | None = None) -> dict:
+    """What a risk table depends on besides the trial and the parameters:
+    engine_key_inputs of models.risk.core, the fall rule and the noise rule (None:
+    the model's defaults)."""
+    from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
+    from models.risk.noise import DEFAULT_NOISE_RULE
+
+    return {**engine_key_inputs(engine, "models.risk.core"), "fall_rule": fall_rule or DEFAULT_FALL_RULE,
+            "fall_threshold": float(FALL_THRESHOLD if fall_threshold is None else fall_threshold),
+            "noise_rule": noise_rule or DEFAULT_NOISE_RULE}
+
+
+#: The per-run columns a run caches (what the risk table and the required
+#: precision's bootstrap over runs are computed from).
+RUN_CACHE_COLUMNS = ["trial", "sigma", "run", "fell", "engine", "fall_rule", "fall_threshold", "noise_rule"]
+
+
+def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6,
+                fall_rule: str | None = None, fall_threshold: float | None = None, noise_rule: str | None = None,
+                runs_out: list | None = None) -> pd.DataFrame:
+    """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
+
+    Each trial's cached file holds its runs' verdicts (RUN_CACHE_COLUMNS); the
+    risk table (with its Wilson intervals) is summarised from them, and
+    `runs_out`, when given, receives the per-run tables (for the required precision).
+    Uncached trials are simulated a few at a time on the run's one executor, so
+    the grid keeps every worker busy and an interruption loses at most one chunk.
+    """
+    from models.risk import risk_table, summarise
+
+    depends = risk_key_inputs(engine, fall_rule, fall_threshold, noise_rule)
+    keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
+    tables = {t.id: cache.get("riskruns", keys[t.id]) for t in trials}
+    todo = [t for t in trials if tables[t.id] is None]
+    bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs")
+    for k in range(0, len(todo), chunk):
+        group = todo[k:k + chunk]
+        t0 = time.perf_counter()
+        base = bar.done
+        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
+                           fall_rule=depends["fall_rule"], fall_threshold=depends["fall_threshold"],
+                           noise_rule=depends["noise_rule"], runs=True,
+                           progress=lambda done, total: bar.advance(base + done - bar.done))[RUN_CACHE_COLUMNS]
+        for t in group:
+            tables[t.id] = cache.put("riskruns", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
+        _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
+    if todo:
+        bar.close()
+    out = []
+    for k, trial in enumerate(trials, 1):
+        if runs_out is not None:
+            runs_out.append(tables[trial.id])
+        df = summarise(tables[trial.id].assign(trial=tables[trial.id]["trial"].astype(str)))
+        curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
+        _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
+        out.append(df)
+    return pd.concat(out, ignore_index=True)
+
+
+def check_targets(trials, engine: str | None, cache: Cache, fall_rule: str | None = None,
+                  fall_threshold: float | None = None) -> None:
+    """Before the long work: B of every trial must stand unperturbed (the risk
+    model's sigma = 0 run), one simulation per trial, cached like the results.
+    Raises UnstableSceneError naming every trial whose B falls and its blocks."""
+    from models.risk import UnstableSceneError, check_stable
+
+    depends = risk_key_inputs(engine, fall_rule, fall_threshold)
+    problems = []
+    for t in trials:
+        key = input_key(trial=t.id, digest=t.digest, check="B stands unperturbed", **depends)
+        df = cache.get("stable", key)
+        if df is None:
+            try:
+                check_stable(t.target, engine, fall_rule=depends["fall_rule"], fall_threshold=depends["fall_threshold"])
+                df = pd.DataFrame([{"trial": t.id, "stable": True, "problem": ""}])
+            except UnstableSceneError as e:
+                df = pd.DataFrame([{"trial": t.id, "stable": False, "problem": str(e)}])
+            cache.put("stable", key, df)
+        if not bool(df["stable"].iloc[0]):
+            problems.append(str(df["problem"].iloc[0]))
+    if problems:
+        raise UnstableSceneError("; ".join(problems))
