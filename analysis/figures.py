@@ -15,6 +15,8 @@ importing this module never changes the caller's pyplot backend.
 """
 from __future__ import annotations
 
+from lgp.atomic import atomic_path
+
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
@@ -277,8 +279,10 @@ def _finish(fig: Figure, title: str, datasets: Iterable[str], out_dir: str | Pat
     # The title is also stored as file metadata, so a reader (or a test) can check
     # the simulated label without looking at pixels.
     flat_title = title.replace("\n", ": ")
-    fig.savefig(paths[0], dpi=150, metadata={"Title": flat_title})
-    fig.savefig(paths[1], metadata={"Title": flat_title})
+    with atomic_path(paths[0]) as tmp:
+        fig.savefig(tmp, dpi=150, metadata={"Title": flat_title})
+    with atomic_path(paths[1]) as tmp:
+        fig.savefig(tmp, metadata={"Title": flat_title})
     return paths
 
 

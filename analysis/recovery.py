@@ -32,6 +32,8 @@ when each is true) and the probability of the right verdict, and how often Eq.
 """
 from __future__ import annotations
 
+from lgp.atomic import write_csv_atomic
+
 import argparse
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -215,8 +217,8 @@ def write_recovery(confusion: pd.DataFrame, summary: pd.DataFrame, out: str | Pa
     check_output_dir(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / f"{SIMULATED_PREFIX}recovery.csv", out / f"{SIMULATED_PREFIX}recovery_summary.csv"]
-    confusion.to_csv(paths[0], index=False)
-    summary.to_csv(paths[1], index=False)
+    write_csv_atomic(confusion, paths[0])
+    write_csv_atomic(summary, paths[1])
     if figures:
         n = int(confusion["n_studies"].max()) if len(confusion) else 0
         ratio = (f"noise {summary.attrs['noise']:g} x SD of the true cost, " if "noise" in summary.attrs else "")

@@ -2,6 +2,8 @@
 tables to fits, sigma profile, bootstrap, tests, pair table and figures."""
 from __future__ import annotations
 
+from lgp.atomic import write_csv_atomic
+
 from pathlib import Path
 
 import numpy as np
@@ -257,11 +259,11 @@ def _write(results: dict[str, pd.DataFrame], out_dir: Path, prefix: str,
     written = []
     for key, table in results.items():
         path = out_dir / f"{prefix}{key}.csv"
-        table.to_csv(path, index=False)
+        write_csv_atomic(table, path)
         written.append(("table", str(path)))
     written += [("figure", str(p)) for p in figure_paths]
     files_path = out_dir / f"{prefix}files.csv"
     written.append(("table", str(files_path)))
     results["files"] = pd.DataFrame(written, columns=["kind", "path"])
-    results["files"].to_csv(files_path, index=False)
+    write_csv_atomic(results["files"], files_path)
     return results

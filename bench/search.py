@@ -35,7 +35,8 @@ sys.path.insert(0, str(ROOT))
 import stimuli  # noqa: E402
 from bench.common import machine, write_section  # noqa: E402
 from lgp.planner import plan, plan_symbolic  # noqa: E402
-from lgp.search import _Problem, candidate_spots, first_sweep, kinetic_energy, search  # noqa: E402
+from lgp.search import candidate_spots, first_sweep, kinetic_energy, search  # noqa: E402
+from lgp.search.problem import _Problem  # noqa: E402
 from lgp.symbolic import Place, PlanState, SymbolicPlan, apply  # noqa: E402
 from models.effort import sample_rng  # noqa: E402
 
@@ -177,8 +178,13 @@ def main(argv=None) -> int:
         "|---|---|---|---|",
         *[f"| {t} | {a:.2f} | {b:.2f} | x{b / a:.2f} |" for t, (a, b) in per_trial.items()],
         "",
+        "Profile of one search (cProfile, layout 0 of seed 0; the project's functions by cumulative time, as a share "
+        "of the search; cProfile inflates the Python-heavy symbolic levels):",
+        "",
+        *[f"- {t}: " + "; ".join(rows) for t, rows in profiles.items()],
+        "",
         f"**Rearrangements on one core** (BLAS threads 1; REV, SWAP and 20 tasks of `stimuli.generate --kind rearrange "
-        f"--seed 0`, 2-6 blocks): the slowest took {max(r[3] for r in rear):.2f} s of CPU and {max(r[4] for r in rear):.2f} s "
+        f"--seed 0`, {min(r[1] for r in rear)}-{max(r[1] for r in rear)} blocks): the slowest took {max(r[3] for r in rear):.2f} s of CPU and {max(r[4] for r in rear):.2f} s "
         f"wall (goal: under 10 s); median {np.median([r[4] for r in rear]):.2f} s wall; set-asides "
         f"{min(r[2] for r in rear)}-{max(r[2] for r in rear)} per task; {100 * sum(r[5] for r in rear) / sum(r[4] for r in rear):.0f} % of the time in "
         "KOMO.",

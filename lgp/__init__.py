@@ -1,7 +1,7 @@
 """Logic-geometric planning of block-building tasks: scene, support graph,
 assignment, symbolic plan (logic layer) and KOMO motion optimisation (geometry).
 
-``lgp.plan`` (lgp/search.py: planner="paper", the paper's pipeline of lgp/planner/,
+``lgp.plan`` (lgp/search/: planner="paper", the paper's pipeline of lgp/planner/,
 or planner="search") and ``lgp.Plan`` (lgp/planner/) are imported on first use,
 and the planner loads Drake only when it plans, so that ``import stimuli`` and the
 logic layer stay light.

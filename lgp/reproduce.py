@@ -4,7 +4,7 @@
     python -m lgp.reproduce --quick                 # a small version, about a minute
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
-    python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule (lgp/app/sensitivity.py)
+    python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule, effort by design (lgp/app/sensitivity/)
     python -m lgp.reproduce --fall-rule 3d --fall-threshold 0.1   # the risk model with another fall rule
     python -m lgp.reproduce --sigma-grid wide       # risk past the paper's grid (0.05..0.30 d): "Pairs over sigma"
     python -m lgp.reproduce --noise-rule settle     # noisy blocks set onto their supports instead of lifted
@@ -18,6 +18,7 @@ half way resumes with nothing lost.
 from __future__ import annotations
 
 import argparse
+import shlex
 import signal
 import sys
 import time
@@ -29,93 +30,98 @@ import pandas as pd
 import stimuli
 from lgp import cli
 from lgp.planner.design import check_approach_height
-from lgp.paper import N_BOOT, N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, SIGMA_GRIDS, TRIAL_IDS
-from lgp.executor import default_jobs, executor_for_scheduler, stop_signals
+from lgp.paper import PAPER_SIGMA, SIGMA_GRIDS, TRIAL_IDS
+from lgp.executor import WorkerDied, executor_for_scheduler, stop_signals
 from lgp.app.progress import log as progress_log
 from lgp.app.cache import library_versions, write_csv_atomic
-from lgp.app.manifest import TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
+from lgp.app.config import RunConfig
+from lgp.app.manifest import OutputLock, TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 from lgp.app.page import write_index
 from lgp.app.progress import Stopwatch
 from lgp.app.replays import write_replays
 from lgp.app.report import append_report, engine_description, pairs_csv_table, write_report
 from lgp.app.stages import check_targets, effort_tables, risk_key_inputs, risk_tables
 from lgp.app import sensitivity
-from lgp.app.sensitivity import planner_choice
 from lgp.errors import InputError
 
 PROG = "python -m lgp.reproduce"
-
-QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200, "n_perm": 200,
-         "recovery_studies": 50}
-
 
 def _log(msg: str) -> None:
     progress_log(msg)  # stderr; above the progress bar on a terminal
 
 
-def parse_args(argv=None) -> argparse.Namespace:
+def parse_args(argv=None) -> RunConfig:
     """The command line, checked: every count, sigma, trial id and path is refused
-    here, in one line, before any work (lgp.cli)."""
+    here, in one line, before any work (lgp.cli); the run's RunConfig."""
     from lgp.app.build_risk import BUILD_SIGMAS
-    from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
+    from lgp.app.config import QUICK
 
+    D = RunConfig.default
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default="results", type=cli.output_dir,
+    p.add_argument("--out", default=D("out"), type=cli.output_dir,
                    help="output directory (default: results/); an earlier run's outputs in it are removed, its cache kept")
     p.add_argument("--stimuli", metavar="DIR", type=cli.input_dir,
                    help="run on the trial files of DIR (default: stimuli/trials, the paper's): all of them unless --trials "
                    "names some; pair table only for pairs whose E and H files are both there")
     p.add_argument("--trials", nargs="+", type=cli.trial_id_or_all,
                    help="trial ids (case-insensitive), or 'all' for every trial file (default: the paper's 24)")
-    p.add_argument("--samples", type=cli.positive_int, help="M, random layouts of A per trial (default 30; --quick 3)")
-    p.add_argument("--n-sims", type=cli.positive_int, help="N, noisy simulations per trial and sigma (default 100; --quick 20)")
+    p.add_argument("--samples", type=cli.positive_int, help=f"M, random layouts of A per trial (default {D('samples')}; --quick {QUICK['samples']})")
+    p.add_argument("--n-sims", type=cli.positive_int, help=f"N, noisy simulations per trial and sigma (default {D('n_sims')}; --quick {QUICK['n_sims']})")
     grid = p.add_mutually_exclusive_group()
     grid.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
     grid.add_argument("--sigma-grid", choices=list(SIGMA_GRIDS),
                       help="a named sigma grid: paper (default) or wide (0.05..0.30 d step 0.01 plus the paper's points)")
-    p.add_argument("--noise-rule", choices=["lift", "settle"], default="lift",
+    p.add_argument("--noise-rule", choices=["lift", "settle"],
                    help="heights of the noisy blocks: lift (default) or settle (every block rests on what lies beneath it; "
                         "docs/risk.md)")
     p.add_argument("--engine", help="physics engine for risk: mujoco, drake, physx (optional extra) (default: mujoco)")
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
-    p.add_argument("--fall-rule", default=DEFAULT_FALL_RULE, help="a run falls by horizontal (default) or 3d displacement")
-    p.add_argument("--fall-threshold", type=float, default=FALL_THRESHOLD, help="fall threshold in units of d (default %(default)s)")
+    p.add_argument("--fall-rule", default=D("fall_rule"), help="a run falls by horizontal or 3d displacement (default %(default)s)")
+    p.add_argument("--fall-threshold", type=float, default=D("fall_threshold"), help="fall threshold in units of d (default %(default)s)")
     p.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=None,
                    help="effort: vertical approach/retreat leg (m) at every grasp and place; 0 = a clearance constraint "
-                        "instead (default 0.05; docs/effort.md)")
+                        f"instead (default {D('approach_height'):g}; docs/effort.md)")
     p.add_argument("--slices", type=cli.positive_int, default=None,
-                   help="effort: KOMO slices per 1 s phase (default 20; docs/effort.md, time discretisation)")
-    p.add_argument("--planner", type=cli.one_of(("paper", "search"), "planner"), default="paper",
+                   help=f"effort: KOMO slices per 1 s phase (default {D('slices')}; docs/effort.md, time discretisation)")
+    p.add_argument("--planner", type=cli.one_of(("paper", "search"), "planner"), default=D("planner"),
                    help="effort: paper (the paper's pipeline, default) or search (best-first over skeletons, lgp.search; "
                         "docs/effort.md)")
     p.add_argument("--budget-solves", type=cli.positive_int, default=None,
                    help="--planner search: at most this many KOMO solves per layout (default 3)")
     p.add_argument("--budget-seconds", type=cli.positive_number, default=None,
                    help="--planner search: at most this many seconds per layout (default 120)")
-    p.add_argument("--jobs", type=cli.positive_int, default=default_jobs(),
+    p.add_argument("--jobs", type=cli.positive_int, default=D("jobs"),
                    help="processes, or LocalCluster workers with --scheduler local-dask, >= 1 (default: all cores, %(default)s here)")
     p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
                    "(a LocalCluster of --jobs workers); default: a local process pool. Needs the [dask] extra (docs/scaling.md)")
-    p.add_argument("--seed", type=cli.seed, default=0)
-    p.add_argument("--n-boot", type=cli.positive_int, help="bootstrap resamples (default 1000; --quick 200)")
+    p.add_argument("--seed", type=cli.seed, default=D("seed"))
+    p.add_argument("--n-boot", type=cli.positive_int, help=f"bootstrap resamples (default {D('n_boot')}; --quick {QUICK['n_boot']})")
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
+    p.add_argument("--max-participants", type=cli.positive_int, default=None,
+                   help=f"with --human-data: most participants the file may hold (default {D('max_participants')}; memory grows with "
+                        "participants x bootstrap resamples, docs/human-data.md)")
     p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
-    p.add_argument("--risk-chunk", type=cli.positive_int, default=6, help="trials simulated per process-pool batch (an interruption loses at most one)")
+    p.add_argument("--risk-chunk", type=cli.positive_int, default=D("risk_chunk"), help="trials simulated per process-pool batch (an interruption loses at most one)")
     p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/app/build_risk.py)")
     p.add_argument("--build-sigmas", type=cli.sigma, nargs="+",
                    help=f"noise levels of --build-risk in (0, 1] (default {' '.join(f'{s:g}' for s in BUILD_SIGMAS)})")
     p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care", "sequential"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
+    p.add_argument("--allow-simulated", action="store_true",
+                   help="with --human-data: accept datasets of SIMULATED participants (simulated-*, tests only); "
+                        "every table and figure made from them says SIMULATED")
     p.add_argument("--n-perm", type=cli.positive_int,
-                   help="with --human-data: permutations per permutation test of the risk term (default 1000; --quick 200)")
+                   help=f"with --human-data: permutations per permutation test of the risk term (default {D('n_perm')}; "
+                        f"--quick {QUICK['n_perm']})")
     p.add_argument("--recovery", action="store_true",
                    help="model recovery on SIMULATED studies from our effort and risk tables (recovery/; analysis.recovery)")
     p.add_argument("--recovery-studies", type=cli.positive_int,
-                   help="with --recovery: simulated studies per cell (default 200; --quick 50)")
-    p.add_argument("--participant-betas", choices=["shared", "participant"], default="shared",
+                   help=f"with --recovery: simulated studies per cell (default {D('recovery_studies')}; "
+                        f"--quick {QUICK['recovery_studies']})")
+    p.add_argument("--participant-betas", choices=["shared", "participant"], default=D("participant_betas"),
                    help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
     sensitivity.add_arguments(p)
     args = p.parse_args(argv)
@@ -130,7 +136,6 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.exit(2, f"{p.prog}: error: {e}\n")
     if args.planner != "search" and (args.budget_solves or args.budget_seconds):
         p.error("--budget-solves and --budget-seconds apply to --planner search only")
-    args.budget = None
     if args.planner == "search":
         from lgp.search import Budget
 
@@ -139,27 +144,12 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.error("--risk-measure needs --build-risk and --human-data")
     if args.per_participant_sigma and not args.human_data:
         p.error("--per-participant-sigma needs --human-data FILE")
-    args.command = "python -m lgp.reproduce " + " ".join(argv if argv is not None else sys.argv[1:])
-    q = QUICK if args.quick else {}
-    args.samples = args.samples if args.samples is not None else q.get("samples", SAMPLES)
-    args.n_sims = args.n_sims if args.n_sims is not None else q.get("n_sims", N_SIMS)
-    args.sigmas = tuple(dict.fromkeys(SIGMA_GRIDS[args.sigma_grid] if args.sigma_grid else
-                                      args.sigmas or q.get("sigmas", SIGMA_GRID)))
-    args.n_boot = args.n_boot if args.n_boot is not None else q.get("n_boot", N_BOOT)
-    from analysis.permutation import N_PERM
-    from analysis.recovery import N_STUDIES
-
-    args.n_perm = args.n_perm if args.n_perm is not None else q.get("n_perm", N_PERM)
-    args.recovery_studies = args.recovery_studies if args.recovery_studies is not None else q.get("recovery_studies", N_STUDIES)
-    from lgp.planner import APPROACH, SLICES_PER_PHASE
-
-    args.approach_height = APPROACH if args.approach_height is None else args.approach_height
-    args.slices = SLICES_PER_PHASE if args.slices is None else args.slices
-    if args.trials:
-        args.trials = list(dict.fromkeys(args.trials))  # 7h and 7H are one trial
-        if "all" in args.trials and len(args.trials) > 1:
-            p.error("--trials all runs every trial file; give it alone")
-    return args
+    if args.allow_simulated and not args.human_data:
+        p.error("--allow-simulated needs --human-data FILE")
+    if args.trials and "all" in args.trials and len(set(args.trials)) > 1:
+        p.error("--trials all runs every trial file; give it alone")
+    args.command = "python -m lgp.reproduce " + shlex.join(str(a) for a in (argv if argv is not None else sys.argv[1:]))
+    return RunConfig.from_args(args)  # every default filled in, once
 
 
 def main(argv=None) -> int:
@@ -167,18 +157,30 @@ def main(argv=None) -> int:
     with stop_signals() as stop:  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
         try:
             return run(args, argv)
+        except WorkerDied as e:  # one line that also says what is kept
+            print(f"{PROG}: error: {e}; {_resume_note(args)}", file=sys.stderr)
+            return cli.EXIT_DATA
         except BaseException as e:
             if stop.received is None and not isinstance(e, KeyboardInterrupt):
                 raise
             sig = stop.received or getattr(e, "signal", signal.SIGINT)
             how = "terminated (SIGTERM)" if sig == signal.SIGTERM else "interrupted"
-            resume = "nothing cached (--no-cache)" if args.no_cache else f"finished trials are cached in {Path(args.out) / 'cache'}, rerun to resume"
-            print(f"{PROG}: {how}; {resume}", file=sys.stderr)
+            print(f"{PROG}: {how}; {_resume_note(args)}", file=sys.stderr)
             return 128 + int(sig)
 
 
-def run(args, argv=None) -> int:
-    """The pipeline for parsed command-line `args` (see `main`)."""
+def _resume_note(args) -> str:
+    """What a stopped run leaves to resume from: the cache, only if there is one."""
+    cache = Path(args.out) / "cache"
+    if args.no_cache:
+        return "nothing cached (--no-cache)"
+    if cache.is_dir() and any(p.name.endswith(".csv") and not p.name.startswith(".") for p in cache.iterdir()):
+        return f"finished trials are cached in {cache}, rerun to resume"
+    return "nothing was cached yet (stopped before the first result)"
+
+
+def run(args: RunConfig, argv=None) -> int:
+    """The pipeline of one run's settings `args` (parse_args; see `main`)."""
     t0 = time.perf_counter()
     clock = Stopwatch()  # wall time per stage, for the results page
     # Validate every input before anything is written or computed.
@@ -190,12 +192,18 @@ def run(args, argv=None) -> int:
     if args.human_data:
         from analysis import load_human_data
 
-        human = load_human_data(args.human_data)
+        human = load_human_data(args.human_data, max_participants=args.max_participants, allow_simulated=args.allow_simulated)
         if not {t.id for t in trials} >= set(TRIAL_IDS):
             raise InputError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    removed = clear_previous(out)  # this folder describes this run only (lgp/app/manifest.py)
+    with OutputLock(out, args.command):  # one run per output folder, for the whole run
+        return _run_in(out, args, argv, trials, human, t0, clock)
+
+
+def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
+    """`run` once the inputs are validated and the output folder is locked."""
+    removed = clear_previous(out, _log)  # this folder describes this run only (lgp/app/manifest.py)
     if removed:
         _log(f"removed the outputs of an earlier run from {out}: {', '.join(removed)} (the cache is kept)")
     cache = TimedCache(out / "cache", enabled=not args.no_cache)
@@ -215,7 +223,7 @@ def run(args, argv=None) -> int:
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache,
                                        approach_height=args.approach_height, slices_per_phase=args.slices,
-                                       **planner_choice(args))
+                                       **args.planner_choice())
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
         risk_runs: list = []
@@ -238,7 +246,7 @@ def run(args, argv=None) -> int:
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,
-            planner_options={"approach_height": args.approach_height, "slices_per_phase": args.slices, **planner_choice(args)})
+            planner_options={"approach_height": args.approach_height, "slices_per_phase": args.slices, **args.planner_choice()})
         clock.lap("replays")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
@@ -250,7 +258,7 @@ def run(args, argv=None) -> int:
     if replays:
         written += [Path(p) for p in replays.values()]
     sections, build, over_html = [], None, None
-    for s in sensitive:  # --sensitivity (lgp/app/sensitivity.py)
+    for s in sensitive:  # --sensitivity (lgp/app/sensitivity/)
         written += s.files
         sections.append("\n".join(s.lines))
     if args.build_risk:
@@ -286,15 +294,13 @@ def run(args, argv=None) -> int:
                                 risk_measure=args.risk_measure, n_perm=args.n_perm)
         written += [Path(path) for path in analysis["files"]["path"]]
         if args.recovery:
-            from lgp.app.recovery import recovery_outputs
+            from lgp.app.recovery import list_files, recovery_outputs
 
             paths, section = recovery_outputs(analysis if human is not None else None, e_samples, r, out,
                                               args.recovery_studies, args.seed, args.jobs)
             written += paths
             sections.append(section)
-            analysis["files"] = pd.concat([analysis["files"], pd.DataFrame(
-                [("figure" if p.suffix in (".png", ".pdf") else "table", str(p)) for p in paths],
-                columns=["kind", "path"])], ignore_index=True)
+            list_files(analysis, paths)
         if args.per_participant_sigma:
             from lgp.app.participant_sigma import participant_sigma_outputs
 
@@ -336,7 +342,7 @@ def run(args, argv=None) -> int:
                   "n_perm": args.n_perm, "recovery": args.recovery, "recovery_studies": args.recovery_studies,
                   "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
                   "sigma_grid": args.sigma_grid, "noise_rule": args.noise_rule, "sensitivity": args.sensitivity, "approach_height": args.approach_height,
-                  "slices_per_phase": args.slices, **{k: repr(v) if k == "budget" else v for k, v in planner_choice(args).items()}}
+                  "slices_per_phase": args.slices, **{k: repr(v) if k == "budget" else v for k, v in args.planner_choice().items()}}
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
     files = list(dict.fromkeys(expand(written)))

@@ -5,7 +5,7 @@ the planner are seeded as `models.effort.physical_effort` seeds them
 (`models.effort.plan_of_sample`), so the effort printed here equals that row's.
 Prints the action list with per-action kinetic energy, and optionally writes the
 3-D replay (HTML, works offline) and a figure of block paths and speeds (PNG).
-From a script, use ``lgp.plan(...)`` (lgp/search.py; planner="paper" or "search") and ``lgp.app.view.write_html`` /
+From a script, use ``lgp.plan(...)`` (lgp/search/; planner="paper" or "search") and ``lgp.app.view.write_html`` /
 ``lgp.app.view.write_png``; this module is the command line only.
 """
 from __future__ import annotations

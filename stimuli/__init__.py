@@ -380,7 +380,7 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     fixed = _fixed(f"{tid} fixed", data.get("fixed"))
     build_site = tuple(_vector(f"{tid} build_site", data.get("build_site", list(BUILD_SITE)), 2))
     if not (np.all(np.isfinite(build_site)) and np.all(np.abs(build_site) <= WORKSPACE_XY)):
-        raise StimulusError(f"{tid} build_site: {build_site} must lie inside the workspace |x|, |y| <= {WORKSPACE_XY:g} m")
+        raise StimulusError(f"{tid} build_site: {[float(v) for v in build_site]} must lie inside the workspace |x|, |y| <= {WORKSPACE_XY:g} m")
 
     target_data = data.get("target") or {}
     _check_keys(f"{tid}-B", target_data, {"blocks"})

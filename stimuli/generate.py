@@ -37,6 +37,8 @@ imports nothing above the ground floor.
 """
 from __future__ import annotations
 
+from lgp.atomic import write_text_atomic
+
 import argparse
 import sys
 from pathlib import Path
@@ -176,10 +178,8 @@ def rearrange_data(index: int, seed: int, kind: str | None = None) -> dict:
 
 def write_trial(data: dict, directory: Path) -> Path:
     path = directory / f"{data['id']}.yaml"
-    tmp = path.with_suffix(".yaml.tmp")
-    tmp.write_text(f"# Generated trial {data['id']}: {data['description']}\n"
-                   + yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
-    tmp.replace(path)
+    write_text_atomic(f"# Generated trial {data['id']}: {data['description']}\n"
+                      + yaml.safe_dump(data, sort_keys=False, default_flow_style=None), path)
     return path
 
 

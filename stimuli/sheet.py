@@ -7,6 +7,8 @@ the structures at a glance against the paper's Figure 1.
 """
 from __future__ import annotations
 
+from lgp.atomic import atomic_path
+
 import numpy as np
 
 import stimuli
@@ -67,7 +69,8 @@ def contact_sheet(trials, seed: int = 0, out: str = "stimuli.png") -> str:
             draw_scene(ax, scene, f"{trial.id}-{state}" + (f": {trial.dimension}" if state == "A" else ""))
     fig.suptitle(f"The {len(trials)} trials (A: start, one random layout, seed {seed}; B: finish; each panel zoomed to its content)", fontsize=12)
     fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.95, wspace=0.02, hspace=0.12)
-    fig.savefig(out, dpi=90)
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, dpi=90)
     return out
 
 

@@ -248,3 +248,36 @@ def test_physical_risk_refuses_bad_arguments_by_name(kwargs, message):
         warnings.simplefilter("error")  # no overflow warnings on the way to the error
         with pytest.raises(ValueError, match=message):
             physical_risk(tower(2), args.pop("sigma"), **args)
+
+
+def test_the_bootstrap_in_blocks_gives_the_same_numbers_as_all_at_once(monkeypatch):
+    """Bounded memory for big files must not change a single resample."""
+    import analysis.data as data
+    from analysis.data import resample_trial_means, validate_human_data, zscore_responses
+
+    z = zscore_responses(validate_human_data(_responses(37)))
+    whole = resample_trial_means(z, 101, np.random.default_rng(4))
+    monkeypatch.setattr(data, "BOOTSTRAP_BLOCK_BYTES", 37 * 24 * 8 * 3)  # three resamples per block
+    blocks = resample_trial_means(z, 101, np.random.default_rng(4))
+    rng = np.random.default_rng(4)
+    Z = data.participant_matrices(z)["difficulty"][1]
+    direct = Z[rng.integers(0, 37, size=(101, 37))].mean(axis=1)
+    assert np.array_equal(blocks["difficulty"], whole["difficulty"]) and np.array_equal(whole["difficulty"], direct)
+
+
+@pytest.mark.parametrize("which", ["initial", "target"])
+def test_plan_of_none_is_a_named_error(which):
+    import lgp
+    from lgp.errors import InputError
+
+    B = stimuli.load_trial("1E").target
+    args = (None, B) if which == "initial" else (B, None)
+    with pytest.raises(InputError, match=rf"lgp.plan: {which} \(state [AB]\) must be an lgp.scene.Scene.*got NoneType"):
+        lgp.plan(*args)
+
+
+def test_the_participant_limit_default_is_one_number():
+    from analysis.data import MAX_PARTICIPANTS
+    from lgp.app.config import RunConfig
+
+    assert RunConfig().max_participants == MAX_PARTICIPANTS

@@ -236,12 +236,11 @@ def test_straight_carry_bound_is_the_effort_of_a_constant_speed_carry():
 def test_effort_sensitivity_section_ratios_and_order_changes(tmp_path):
     # The section's arithmetic on known tables: per design, H/E of every pair and
     # whether its order (tie rule) differs from the run's design.
-    from types import SimpleNamespace
-
     import pandas as pd
 
     from lgp.app import sensitivity
     from lgp.app.cache import Cache
+    from lgp.app.config import RunConfig
     from lgp.executor import SerialExecutor
     from lgp.paper import TRIAL_IDS
 
@@ -265,7 +264,7 @@ def test_effort_sensitivity_section_ratios_and_order_changes(tmp_path):
             rows += [{"trial": t.id, "sample": s, "effort": e, "status": "kSolutionFound"} for s in range(samples)]
         return pd.DataFrame(rows)
 
-    args = SimpleNamespace(seed=0, samples=3, quick=True, approach_height=None, slices=None)
+    args = RunConfig(seed=0, samples=3, quick=True)
     ctx = sensitivity.Context(args, trials, SerialExecutor(), Cache(tmp_path / "c"), tmp_path, None, lambda m: None,
                               effort_tables=effort_tables)
     section = sensitivity.effort_section(ctx)

@@ -27,7 +27,7 @@ APP_WING = ["lgp.app", "lgp.app.*", "lgp.reproduce", "lgp.show"]
 #: (layer, module-name patterns, layers it may import besides its own; None = all lower)
 LAYERS = [
     # lgp.cli (argument checks, one-line errors) is used by CLIs on every floor, so it sits here
-    ("ground", ["lgp.paper", "lgp.scene", "lgp.geometry", "lgp.executor", "lgp.cli", "lgp.inputs", "lgp.errors"], None),
+    ("ground", ["lgp.paper", "lgp.scene", "lgp.geometry", "lgp.executor", "lgp.cli", "lgp.inputs", "lgp.atomic", "lgp.errors"], None),
     ("stimuli and logic", ["stimuli", "lgp.assignment", "lgp.symbolic"], None),
     ("arm", ["lgp.arm"], None),
     ("KOMO", ["lgp.komo", "lgp.komo.*"], None),
@@ -40,7 +40,8 @@ LAYERS = [
     ("analysis", ["analysis", "analysis.*"], ["ground"]),
     # the application: lgp's application wing (lgp/app/ and its two commands), CLIs,
     # caches, report and page writers
-    ("application", [*APP_WING, "stimuli.sheet", "stimuli.generate", "*.__main__"], None),
+    ("application", [*APP_WING, "stimuli.sheet", "stimuli.generate", "stimuli.render", "stimuli.experiment",
+                     "stimuli.experiment.*", "analysis.import_study", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]
 RANK = {name: k for k, (name, _, _) in enumerate(LAYERS)}

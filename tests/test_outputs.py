@@ -130,8 +130,10 @@ def test_a_later_run_removes_every_output_an_earlier_one_may_have_left(tmp_path)
              "participant_sigma.csv", "simulated_participant_sigma.csv", "effort.csv"]
     for name in names:
         (tmp_path / name).write_text("x\n")
+    (tmp_path / "recovery").mkdir()  # --recovery's folder
+    (tmp_path / "recovery" / "simulated_recovery_summary.csv").write_text("x\n")
     (tmp_path / "cache").mkdir()
     (tmp_path / "cache" / "effort-k.csv").write_text("kept\n")
-    assert set(names) <= set(OUTPUT_NAMES)
-    assert clear_previous(tmp_path) == sorted(names)
+    assert set(names) | {"recovery"} <= set(OUTPUT_NAMES)
+    assert clear_previous(tmp_path) == sorted(names + ["recovery"])
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["cache", "effort-k.csv"]

@@ -1,6 +1,7 @@
 """`python -m lgp.reproduce` runs the pipeline, caches what it computed, and a run
 interrupted half way, or one whose cache was damaged, ends with the same numbers as
 an undisturbed one."""
+import dataclasses
 import re
 import shutil
 
@@ -288,3 +289,28 @@ def test_problems_are_found_before_the_effort_stage(tmp_path, monkeypatch, capsy
     header_only.write_text("dataset,participant,trial,response\n")
     _fails_naming(capsys, lambda: reproduce.main(["--human-data", str(header_only), *args]),
                   HumanDataError, "no responses after the header")
+
+
+def test_the_run_config_is_built_once_with_every_default_from_its_one_place():
+    """Issue 21: one RunConfig from the command line instead of getattr(args, name,
+    default) with retyped defaults; --quick's values and the paper's come from
+    lgp.app.config.QUICK and lgp.paper, the fall rule from models.risk, the design
+    from lgp.planner.design."""
+    from lgp.app.config import QUICK, RunConfig
+    from lgp.paper import N_BOOT, N_SIMS, SAMPLES, SIGMA_GRID
+    from lgp.planner.design import APPROACH, SLICES_PER_PHASE, Design
+    from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
+
+    full = reproduce.parse_args([])
+    assert isinstance(full, RunConfig)
+    assert (full.samples, full.n_sims, full.sigmas, full.n_boot) == (SAMPLES, N_SIMS, SIGMA_GRID, N_BOOT)
+    assert (full.fall_rule, full.fall_threshold) == (DEFAULT_FALL_RULE, FALL_THRESHOLD)
+    assert full.design == Design(APPROACH, SLICES_PER_PHASE) and full.planner_choice() == {}
+    quick = reproduce.parse_args(["--quick", "--trials", "7h", "7H", "1E", "--sigmas", "0.05", "0.05", "0.1"])
+    assert (quick.samples, quick.n_sims, quick.n_boot) == (QUICK["samples"], QUICK["n_sims"], QUICK["n_boot"])
+    assert quick.trials == ("7H", "1E") and quick.sigmas == (0.05, 0.1)
+    assert quick.command == "python -m lgp.reproduce --quick --trials 7h 7H 1E --sigmas 0.05 0.05 0.1"
+    assert RunConfig.from_args(quick) == quick  # nothing left to fill in
+    assert reproduce.parse_args(["--samples", "7", "--quick"]).samples == 7  # given beats --quick
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        full.samples = 3

@@ -215,3 +215,67 @@ def test_search_never_returns_more_effort_than_the_paper_planner_on_any_paper_tr
         result = search(trial.sample_initial(rng), trial.target, rng)
         assert result.effort <= paper, trial_id
         assert check_plan(result.plan, trial.target) == [], trial_id
+
+
+# ----------------------------------------------------------------------------- planner= plumbing
+
+
+def test_the_effort_cache_key_holds_the_planner_and_its_budget_only_for_the_search():
+    from lgp.app.stages import effort_key
+
+    trial = stimuli.load_trial("2E")
+    paper = effort_key(trial, 3, 0)
+    assert effort_key(trial, 3, 0, planner="paper") == paper
+    searched = effort_key(trial, 3, 0, planner="search")
+    assert searched != paper and effort_key(trial, 3, 0, planner="search", budget=Budget()) == searched
+    assert effort_key(trial, 3, 0, planner="search", budget=Budget(solves=5)) != searched
+
+
+def test_lgp_plan_dispatches_on_planner_and_a_searched_plan_prints_its_bound_and_gap():
+    import lgp
+    from models.effort import describe
+
+    A, B = _task("SWAP")
+    p = lgp.plan(A, B, planner="search", budget=Budget(solves=1))
+    text = describe(p)
+    assert "Place(r2, table)" in text or "Place(u2, table)" in text
+    assert "bound" in text and "gap" in text and "physical effort" in text
+    assert p.search.solves == 1 and p.search.stopped == "solve budget"
+    with pytest.raises(ValueError, match="planner must be one of paper, search"):
+        lgp.plan(A, B, planner="best")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["2E", "--planner", "search", "--budget-solves", "0"], "--budget-solves: must be a whole number >= 1, got '0'"),
+    (["2E", "--planner", "search", "--budget-seconds", "-2"], "--budget-seconds: must be a finite number > 0, got '-2'"),
+    (["2E", "--planner", "search", "--budget-seconds", "nan"], "--budget-seconds: must be a finite number > 0, got 'nan'"),
+    (["2E", "--budget-solves", "2"], "apply to --planner search only"),
+])
+def test_a_budget_that_is_not_positive_is_refused_in_one_line(argv, message, capsys):
+    from models.effort.__main__ import main
+
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and message in err[-1] and err[-1].startswith("python -m models.effort: error:")
+
+
+@pytest.mark.slow
+def test_reproduce_runs_generated_rearrangements_end_to_end_with_the_search(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    import pandas as pd
+    from stimuli.generate import generate
+
+    generate(tmp_path / "set", 2, seed=0, kind="rearrange")
+    root = Path(__file__).resolve().parent.parent
+    env = {**os.environ, "PYTHONPATH": str(root) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    r = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--stimuli", str(tmp_path / "set"), "--out", str(tmp_path / "out"),
+                        "--samples", "1", "--n-sims", "2", "--sigmas", "0.05", "--jobs", "1", "--planner", "search"],
+                       cwd=root, env=env, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    samples = pd.read_csv(tmp_path / "out" / "effort_samples.csv")
+    assert (samples["set_asides"] > 0).all() and samples["paper_effort"].isna().all()
+    assert (tmp_path / "out" / "replays" / "R0001.html").exists()

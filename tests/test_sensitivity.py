@@ -2,7 +2,6 @@
 tidy row per engine, fall rule, trial and sigma, each equal to the risk the risk
 API gives for that engine and rule; the summary counts what the table holds; a
 second run simulates nothing."""
-from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -13,6 +12,7 @@ from lgp import reproduce
 from lgp.app import sensitivity
 from lgp.app import stages
 from lgp.app.cache import Cache
+from lgp.app.config import RunConfig
 from lgp.executor import SerialExecutor
 from models.risk import available_engines, risk_table
 
@@ -20,7 +20,7 @@ ENGINES = [e for e in ("mujoco", "physx", "physx:game-defaults") if e in availab
 
 
 def context(tmp_path, trials):
-    args = SimpleNamespace(n_sims=6, seed=2, engine=None, sensitivity_engines=ENGINES)
+    args = RunConfig(n_sims=6, seed=2, sensitivity_engines=tuple(ENGINES))
     return sensitivity.Context(args, trials, SerialExecutor(), Cache(tmp_path / "cache"), tmp_path,
                                stages.risk_key_inputs, lambda m: None)
 

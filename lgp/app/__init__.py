@@ -6,6 +6,7 @@ analysis/ and stimuli/ (tests/test_layers.py). Its commands are
 ``python -m lgp.reproduce`` (lgp/reproduce.py: the command line and `run`) and
 ``python -m lgp.show`` (lgp/show.py).
 
+- config: RunConfig, the run's settings built once from the command line
 - stages: the computing stages (target check, effort, risk) and their cache keys
 - cache: results cached by a hash of their inputs, checked on read
 - files: the one atomic writer of every output and cache entry
@@ -13,8 +14,10 @@ analysis/ and stimuli/ (tests/test_layers.py). Its commands are
 - progress: progress lines of long stages, wall time per stage
 - build_risk: the --build-risk stage (risk through the build) and its outputs
 - participant_sigma: --per-participant-sigma's table, figure and report section
-- sensitivity: the --sensitivity sections (risk by engine and fall rule, effort by motion design)
+- recovery: --recovery's SIMULATED studies and report section
+- sensitivity: the --sensitivity sections (sensitivity.risk: by engine and fall rule;
+  sensitivity.effort: by motion design)
 - report: report.md, and the pair tables in words
-- page: the results page index.html (page.css, page.js); pictures: its trial
-  pictures; replays: its 3-D replays; view: replay and figure of one plan
+- page: the results page index.html (page.css, page.js); charts: its inline SVG;
+  pictures: its trial pictures; replays: its 3-D replays; view: replay and figure of one plan
 """

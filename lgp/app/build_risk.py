@@ -5,6 +5,8 @@ stage and a report section.
 """
 from __future__ import annotations
 
+from lgp.app.files import atomic_path
+
 import time
 from pathlib import Path
 
@@ -12,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from lgp.app.cache import Cache, input_key
-from lgp.app.files import write_csv_atomic
+from lgp.app.files import atomic_path, write_csv_atomic
 from lgp.app.progress import log as _log
 from lgp.paper import PAIRS, PAPER_SIGMA
 
@@ -140,7 +142,8 @@ def plot_stage_curves(stages: pd.DataFrame, out_dir: str | Path, stem: str = "bu
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [out_dir / f"{stem}.png", out_dir / f"{stem}.pdf"]
     for p in paths:
-        fig.savefig(p, dpi=130)
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, dpi=130)
     return paths
 
 

@@ -5,7 +5,7 @@ removes what an earlier run left in the folder (the files its manifest lists,
 and the pipeline's own names for a folder written before manifests existed:
 effort_samples.csv, effort.csv, risk.csv, pairs.csv, report.md, index.html,
 build_risk*.csv, [simulated_]participant_sigma.csv, risk_sensitivity*.csv,
-effort_sensitivity*.csv, figures/, analysis/, replays/, page/); the cache
+effort_sensitivity*.csv, figures/, analysis/, replays/, page/, recovery/); the cache
 (``<out>/cache``) is kept, so nothing expensive is lost and a rerun of the earlier command rewrites its outputs in seconds. At the end it
 writes ``manifest.json``: the command's parameters, a hash of its inputs, the
 engine, both times (see below) and every file it wrote (path, bytes, sha256).
@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import shutil
 import time
 from pathlib import Path
@@ -34,7 +35,7 @@ OUTPUT_NAMES = ("effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv", "re
                 "simulated_participant_sigma.csv",
                 "risk_sensitivity.csv", "risk_sensitivity_summary.csv", "effort_sensitivity.csv",
                 "effort_sensitivity_pairs.csv",
-                "figures", "analysis", "replays", "page")
+                "figures", "analysis", "replays", "page", "recovery")
 TIMES = "compute_times.json"
 
 
@@ -51,30 +52,135 @@ def input_hash(**inputs) -> str:
     return hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()
 
 
-def clear_previous(out: Path) -> list[str]:
-    """Remove the outputs of an earlier run from `out` (never the cache); return what went."""
+#: Largest manifest read when clearing a folder (bytes): a full run lists a few hundred files.
+MAX_MANIFEST_BYTES = 16 * 2**20
+
+
+def _under_a_link(out: Path, name: str) -> Path | None:
+    """The first component of `out/name` (below `out`) that is a symbolic link,
+    the file itself excluded; None when there is none."""
+    path = out
+    for part in Path(name).parts[:-1]:
+        path = path / part
+        if path.is_symlink():
+            return path
+    return None
+
+
+def clear_previous(out: Path, log=None) -> list[str]:
+    """Remove the outputs of an earlier run from `out` (never the cache); return what went.
+
+    Nothing outside `out` is ever deleted, and nothing through a symbolic link: a
+    listed file under a linked folder (``out/page`` -> elsewhere) is kept and said
+    so (`log`), a link itself is removed as a link (its target untouched), and
+    every path is resolved and checked to lie inside `out` before anything goes."""
+    from lgp.inputs import InputFileError, read_bounded
+
     out = Path(out)
+    base = out.resolve()
+    cache = (out / "cache").resolve()
     listed: list[str] = []
     manifest = out / MANIFEST
-    if manifest.is_file():
+    if manifest.is_file() or manifest.is_symlink():
         try:
-            listed = [f["path"] for f in json.loads(manifest.read_text()).get("files", [])]
-        except (ValueError, KeyError, TypeError):
+            data = read_bounded(manifest, MAX_MANIFEST_BYTES, "manifest", within=base)
+            listed = [str(f["path"]) for f in json.loads(data).get("files", [])]
+        except (InputFileError, ValueError, KeyError, TypeError, AttributeError):
             listed = []  # a damaged manifest: fall back on the pipeline's names
-    removed = []
+    removed, kept = [], []
     for name in [*listed, *OUTPUT_NAMES, MANIFEST]:
         path = out / name
-        if Path(name).is_absolute() or ".." in Path(name).parts or path.resolve() == (out / "cache").resolve():
+        if Path(name).is_absolute() or ".." in Path(name).parts or not name.strip():
             continue  # a manifest only ever lists files inside the folder
-        if path.is_dir() and name in OUTPUT_NAMES:
-            shutil.rmtree(path)
-        elif path.is_file() or path.is_symlink():
-            path.unlink()
-        else:
+        link = _under_a_link(out, name)
+        if link is not None:
+            if path.exists() or path.is_symlink():
+                kept.append(f"{name} (under the symbolic link {link.relative_to(out)})")
             continue
+        if path.is_symlink():  # the link goes, never what it points to
+            path.unlink()
+            removed.append(name)
+            continue
+        if not path.exists():
+            continue
+        real = path.resolve()
+        if real == cache or cache in real.parents or real == base or base not in real.parents:
+            continue
+        if path.is_dir():
+            if name not in OUTPUT_NAMES:
+                continue
+            shutil.rmtree(path, onerror=_name_the_path)  # rmtree never follows links inside
+        else:
+            path.unlink()
         removed.append(name)
+    if kept and log is not None:
+        log(f"kept {', '.join(kept)}: an earlier output under a symbolic link is never deleted through it")
     dirs = {name for name in removed if name in OUTPUT_NAMES and not name.endswith((".csv", ".md", ".html"))}
     return sorted({name for name in removed if Path(name).parts[0] not in dirs or name in dirs})
+
+
+def _name_the_path(function, path, excinfo):
+    error = excinfo[1]
+    if isinstance(error, OSError) and error.filename is None:
+        raise OSError(error.errno, error.strerror or str(error), path) from error
+    raise error
+
+
+class OutputFolderBusy(RuntimeError):
+    """Another run holds the output folder's lock."""
+
+
+class OutputLock:
+    """An exclusive lock on an output folder for a whole run: ``<out>/.lgp-run.lock``,
+    locked with flock (so the kernel releases it on any exit, ``kill -9``
+    included) and holding the holder's pid and command. A second run in the same
+    folder raises OutputFolderBusy naming that process. The holder removes the
+    file on its way out, while still holding the lock; a run that locks a file
+    checks that it is still the one at that path (else it retries), so two runs
+    never hold two files. A killed run leaves an unlocked file: it is free."""
+
+    NAME = ".lgp-run.lock"
+
+    def __init__(self, out: Path, command: str = ""):
+        self.path = Path(out) / self.NAME
+        self.command = command
+        self._fd = None
+
+    def __enter__(self):
+        import fcntl
+
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0), 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.pread(fd, 4096, 0).decode("utf-8", "replace").strip().splitlines()
+                os.close(fd)
+                pid = holder[0] if holder else "?"
+                what = f": {holder[1]}" if len(holder) > 1 else ""
+                raise OutputFolderBusy(f"{self.path.parent} is in use by another run (process {pid}{what}); "
+                                       "wait for it to end or give another --out") from None
+            try:  # the holder we waited on may have removed the file as we opened it: lock the one on disk
+                same = os.stat(self.path, follow_symlinks=False).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n{self.command}\n".encode(), 0)
+        self._fd = fd
+        return self
+
+    def __exit__(self, *exc):
+        if self._fd is not None:
+            try:
+                os.unlink(self.path)  # while still locked, so no one can lock the old file after us
+            except FileNotFoundError:
+                pass
+            os.close(self._fd)  # closing releases the flock
+            self._fd = None
+        return False
 
 
 def write_manifest(out: Path, files: list[Path], **record) -> Path:
@@ -118,7 +224,10 @@ class TimedCache(Cache):
 
     def load_times(self) -> dict[str, float]:
         try:
-            return {str(k): float(v) for k, v in json.loads(self._times_path.read_text()).items()}
+            from lgp.inputs import read_bounded
+
+            data = read_bounded(self._times_path, MAX_MANIFEST_BYTES, "compute-times file", within=self.root)
+            return {str(k): float(v) for k, v in json.loads(data).items()}
         except (OSError, ValueError, AttributeError):
             return {}
 

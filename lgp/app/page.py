@@ -17,7 +17,6 @@ import datetime
 import html
 import os
 import platform
-import shlex
 import sys
 from pathlib import Path
 
@@ -27,7 +26,8 @@ import pandas as pd
 from lgp.app.cache import Cache, library_versions
 from lgp.app.files import write_text_atomic
 from lgp.app.report import ratio_text
-from lgp.app.pictures import trial_pictures
+from lgp.app.charts import histogram_svg, risk_svg
+from lgp.app.pictures import rendered_trial_pictures
 from lgp.errors import InputError
 
 #: Libraries named on the page (the cache keys name their own).
@@ -82,55 +82,6 @@ def table_html(df: pd.DataFrame, cls: str = "sortable", row_attrs=None, max_rows
         cells = "".join(f'<td data-v="{_e(v)}">{_e(_fmt(v))}</td>' for v in row)
         rows.append(f"<tr{attrs}>{cells}</tr>")
     return f'<table class="{cls}"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
-
-
-# ----------------------------------------------------------------------------- small inline charts
-
-
-def histogram_svg(values, width: int = 150, height: int = 44, bins: int = 10) -> str:
-    """A tiny histogram of `values` as inline SVG (axis: min and max printed below)."""
-    v = np.asarray(values, dtype=float)
-    lo, hi = float(v.min()), float(v.max())
-    if hi - lo < 1e-12 * max(1.0, abs(hi)):
-        counts, edges = np.array([len(v)]), np.array([lo, hi])
-    else:
-        counts, edges = np.histogram(v, bins=bins, range=(lo, hi))
-    plot_h = height - 12
-    bw = width / len(counts)
-    top = counts.max()
-    bars = "".join(
-        f'<rect x="{k * bw + 0.5:.1f}" y="{plot_h - plot_h * c / top:.1f}" width="{bw - 1:.1f}" height="{plot_h * c / top:.1f}"><title>{c} layouts in [{edges[k]:.4g}, {edges[k + 1]:.4g}] J s</title></rect>'
-        for k, c in enumerate(counts))
-    return (f'<svg class="hist" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img" '
-            f'aria-label="histogram of effort over {len(v)} layouts">{bars}'
-            f'<text x="0" y="{height - 1}">{lo:.3g}</text><text x="{width}" y="{height - 1}" text-anchor="end">{hi:.3g}</text></svg>')
-
-
-def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height: int = 70) -> str:
-    """Risk over sigma as inline SVG: y from 0 to 1, x over the run's sigma grid."""
-    s = np.asarray(sigmas, dtype=float)
-    r = np.asarray(risks, dtype=float)
-    left, bottom, top = 22, 14, 4
-    pw, ph = width - left - 4, height - bottom - top
-    s0, s1 = float(s.min()), float(s.max())
-    span = s1 - s0 if s1 > s0 else 1.0
-
-    def X(x):
-        return left + pw * ((x - s0) / span if s1 > s0 else 0.5)
-
-    def Y(y):
-        return top + ph * (1 - y)
-
-    pts = " ".join(f"{X(a):.1f},{Y(b):.1f}" for a, b in zip(s, r))
-    dots = "".join(f'<circle cx="{X(a):.1f}" cy="{Y(b):.1f}" r="2"><title>sigma {a:g} d: risk {b:.2f}</title></circle>' for a, b in zip(s, r))
-    marker = ""
-    if mark is not None and s0 <= mark <= s1:
-        marker = f'<line class="mark" x1="{X(mark):.1f}" x2="{X(mark):.1f}" y1="{top}" y2="{top + ph}"/>'
-    return (f'<svg class="risk" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img" aria-label="risk over sigma">'
-            f'<rect class="frame" x="{left}" y="{top}" width="{pw}" height="{ph}"/>{marker}'
-            f'<polyline points="{pts}"/>{dots}'
-            f'<text x="{left - 2}" y="{top + 7}" text-anchor="end">1</text><text x="{left - 2}" y="{top + ph}" text-anchor="end">0</text>'
-            f'<text x="{left}" y="{height - 2}">{s0:g}</text><text x="{left + pw}" y="{height - 2}" text-anchor="end">{s1:g} d</text></svg>')
 
 
 # ----------------------------------------------------------------------------- sections
@@ -422,15 +373,23 @@ Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over 
 
 
 
+def _parameter(v) -> str:
+    """A setting of the run as the page's chips show it."""
+    if isinstance(v, tuple):
+        return ", ".join(f"{x:g}" if isinstance(x, float) else str(x) for x in v)
+    return "(default)" if v is None else str(v)
+
+
 def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                 pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock,
-                replays: dict | None = None, argv=None, over_sigma_html: str | None = None,
+                replays: dict | None = None, over_sigma_html: str | None = None,
                 precision: pd.DataFrame | None = None) -> Path:
-    """The page of a `lgp.reproduce` run (its parsed `args`): pictures, run record, index.html."""
+    """The page of a `lgp.reproduce` run (its lgp.app.config.RunConfig `args`):
+    pictures, run record, index.html."""
     from models.risk import DEFAULT_ENGINE, get_engine
 
     out = Path(args.out) if out is None else Path(out)
-    pictures = trial_pictures(trials, args.seed, out / "page", cache)
+    pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=args.jobs)
     clock.lap("trial pictures")
     figures = []
     if analysis is not None and "files" in analysis:
@@ -440,16 +399,9 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         settings = get_engine(engine).settings()
     except Exception as e:  # an engine that cannot load here still ran elsewhere: say so
         settings = {"error": str(e)}
-    if argv is None and Path(sys.argv[0]).name == "reproduce.py":
-        argv = sys.argv[1:]
-    if argv is not None:
-        command = "python -m lgp.reproduce " + shlex.join(str(a) for a in argv)
-    else:  # as recorded by the caller (lgp.reproduce sets args.command), or said so
-        command = getattr(args, "command", None) or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below"
     run = {
-        "command": command,
-        "parameters": {k: (", ".join(f"{x:g}" for x in v) if isinstance(v, tuple) else ("(default)" if v is None else str(v)))
-                       for k, v in vars(args).items() if k != "command"},
+        "command": args.command or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below",
+        "parameters": {k: _parameter(v) for k, v in args.parameters().items()},
         "engine": engine,
         "engine_settings": settings,
         "stages": dict(clock.laps),
@@ -463,5 +415,5 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         "load": "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),
     }
     return write_page(out, run=run, trials=trials, effort_samples=effort_samples, risk=risk, sigma=sigma, pairs=pairs,
-                      analysis=analysis if getattr(args, "human_data", None) else None, figures=figures,
+                      analysis=analysis if args.human_data else None, figures=figures,
                       pictures=pictures, replays=replays, over_sigma_html=over_sigma_html, precision=precision)

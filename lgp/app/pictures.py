@@ -1,6 +1,8 @@
 """The trial pictures of the results page: ``<out>/page/<trial>.png``, A (the layout
-of sample 0 of the run's seed, as the replay plays it) and B side by side, drawn
-on matplotlib's own Figure and copied from the run's cache when drawn before.
+of sample 0 of the run's seed, as the replay plays it) and B side by side: rendered
+by stimuli.render (`rendered_trial_pictures`, what the page uses), or drawn on
+matplotlib's own Figure (`trial_pictures`, where the renderer cannot run) and copied
+from the run's cache when drawn before.
 """
 from __future__ import annotations
 
@@ -51,5 +53,48 @@ def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None)
             cached.parent.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(path, cached)
             cache.files["picture", "miss"] += 1
+        paths[trial.id] = path
+    return paths
+
+
+#: Size (pixels) of each half of a rendered trial card picture.
+CARD_PICTURE = (480, 320)
+
+
+def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None, jobs: int = 2) -> dict[str, Path]:
+    """Picture of every trial under `out_dir`: A (sample 0 of `seed`) | B rendered like
+    photographs (stimuli.render: one camera for every trial, so a relocated tower looks
+    relocated; B the finished table), kept in the render cache
+    (stimuli.render.render_cache_dir, shared with stimuli.experiment) between runs.
+    Where the renderer cannot run (no OpenGL), the sketches of `trial_pictures`,
+    saying why on stderr."""
+    import sys
+
+    from PIL import Image, ImageDraw
+
+    from stimuli.render import cache_folder, render_trials
+
+    where = cache_folder(trials, seed, CARD_PICTURE)
+    try:
+        record = render_trials(trials, where, seed, CARD_PICTURE, jobs, log=lambda m: None)
+    except Exception as e:  # noqa: BLE001 - any failure of VTK/OpenGL: the sketch still serves
+        print(f"lgp.reproduce: trial pictures: rendering failed ({type(e).__name__}: {e}); drawing sketches instead",
+              file=sys.stderr, flush=True)
+        return trial_pictures(trials, seed, out_dir, cache)
+    if cache is not None:
+        cache.files["picture", "miss"] += record["rendered"]
+        cache.files["picture", "hit"] += len(record["pictures"]) - record["rendered"]
+    w, h = CARD_PICTURE
+    paths = {}
+    for trial in trials:
+        card = Image.new("RGB", (2 * w + 4, h + 18), "white")
+        draw = ImageDraw.Draw(card)
+        for j, (state, label) in enumerate((("A", "A: start (sample 0)"), ("B", "B: finish"))):
+            card.paste(Image.open(where / f"{trial.id}-{state}.png").convert("RGB"), (j * (w + 4), 18))
+            draw.text((j * (w + 4) + 4, 3), label, fill="black")
+        path = Path(out_dir) / f"{trial.id}.png"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            card.save(tmp, format="PNG")
         paths[trial.id] = path
     return paths

@@ -27,3 +27,11 @@ def recovery_outputs(analysis: dict | None, effort_samples: pd.DataFrame, risk: 
     confusion, summary = recovery(effort_samples, grid, n_studies=n_studies, fitted=fitted, seed=seed, jobs=jobs)
     paths = write_recovery(confusion, summary, out / "recovery")
     return paths, "\n".join(recovery_lines(summary, confusion, _markdown))
+
+
+def list_files(analysis: dict, paths: list[Path]) -> None:
+    """Add the recovery files to the analysis's file list (kind, path), so the page
+    shows the figure with the other figures."""
+    rows = pd.DataFrame([("figure" if p.suffix in (".png", ".pdf") else "table", str(p)) for p in paths],
+                        columns=["kind", "path"])
+    analysis["files"] = pd.concat([analysis["files"], rows], ignore_index=True)

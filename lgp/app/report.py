@@ -102,7 +102,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), "
         f"fall rule {args.fall_rule} > {args.fall_threshold:g} d, noise rule {getattr(args, 'noise_rule', 'lift')}, seed {args.seed}, "
         f"effort planned with {_design_text(args.approach_height, args.slices)}"
-        + (f", planner search ({args.budget})" if getattr(args, "planner", "paper") == "search" else "")
+        + (f", planner search ({args.budget})" if args.planner == "search" else "")
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",
         f"Risk engine: {engine or args.engine or 'default'}.",
         compute_text,

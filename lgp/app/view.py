@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import html
 import json
-from pathlib import Path
 
 import numpy as np
 
+from lgp.app.files import atomic_path, write_text_atomic
 from lgp.paper import BUILD_SITE, DISPLAY_RGB as COLOURS
 
 #: Sequential colormap of placement order (first placed: dark, last: bright).
@@ -199,9 +199,7 @@ def replay_html(plan, title: str = "") -> str:
 
 def write_html(plan, path, title: str = "") -> str:
     """Write a self-contained replay of `plan` (an lgp.planner.Plan) to `path`."""
-    path = Path(path)
-    path.write_text(replay_html(plan, title))
-    return str(path)
+    return str(write_text_atomic(replay_html(plan, title), path))
 
 
 def write_png(plan, path, title: str = "") -> str:
@@ -262,6 +260,6 @@ def write_png(plan, path, title: str = "") -> str:
         bar.ax.set_yticklabels([f"{k + 1}: {name}" for k, name in enumerate(order)], fontsize=7)
         bar.set_label(f"placement order ({ORDER_CMAP}; grey: not moved)")
     fig.suptitle(title or f"{plan.initial.label} -> {plan.target.label}", y=1.06, fontweight="bold")
-    path = Path(path)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, bbox_inches="tight")
     return str(path)

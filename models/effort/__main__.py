@@ -11,6 +11,8 @@ an argument check in lgp.cli) does not change the effort cache key.
 """
 from __future__ import annotations
 
+from lgp.atomic import write_csv_atomic
+
 import sys
 
 import pandas as pd
@@ -66,7 +68,7 @@ def main(argv=None) -> int:
               f"actions {table['n_actions'].iloc[0]:3d}  {table['solve_time'].mean():6.3f} s/plan{searched}", flush=True)
     table = pd.concat(tables, ignore_index=True)
     if args.out:
-        table.to_csv(args.out, index=False)
+        write_csv_atomic(table, args.out)
     return 0
 
 

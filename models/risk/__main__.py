@@ -20,6 +20,8 @@ tidy stage table.
 """
 from __future__ import annotations
 
+from lgp.atomic import write_csv_atomic
+
 import sys
 import time
 
@@ -99,14 +101,14 @@ def main(argv=None) -> int:
     table = summarise(runs)
     order = {t.id: k for k, t in enumerate(trials)}
     table = table.sort_values(["trial", "sigma"], key=lambda c: c.map(order) if c.name == "trial" else c).reset_index(drop=True)
-    table.to_csv(args.table, index=False)
+    write_csv_atomic(table, args.table)
     if args.runs:
-        runs.to_csv(args.runs, index=False)
+        write_csv_atomic(runs, args.runs)
     if args.precision:
         from models.risk.precision import precision_text, required_precision
 
         precision = required_precision(runs, args.precision_levels, seed=args.seed)
-        precision.to_csv(args.precision, index=False)
+        write_csv_atomic(precision, args.precision)
         for level, g in precision.groupby("level", sort=False):
             print(f"sigma* (risk reaches {level:g}): " + ", ".join(f"{r['trial']} {precision_text(r)}" for _, r in g.iterrows()))
     wide = table.pivot(index="trial", columns="sigma", values="risk").reindex([t.id for t in trials])
@@ -146,7 +148,7 @@ def _build_risk(args) -> int:
         print(agg.drop(columns=["engine"]).to_string(index=False, float_format=lambda x: f"{x:.3f}"))
         print(f"  ({time.perf_counter() - t1:.1f} s)", file=sys.stderr, flush=True)
     if args.out:
-        pd.concat(tables, ignore_index=True).to_csv(args.out, index=False)
+        write_csv_atomic(pd.concat(tables, ignore_index=True), args.out)
     print(f"{len(ids)} trial(s) in {time.perf_counter() - t0:.1f} s" + (f" -> {args.out}" if args.out else ""), file=sys.stderr)
     return 0
 

@@ -1,0 +1,162 @@
+"""The comparison as tables: every model's scores under every scheme on the full
+sample (`model_comparison`) and in every bootstrap resample (`bootstrap_comparison`),
+their percentile intervals (`summarize_comparison`) and each model's gain over
+effort-only (`gain_over_effort`)."""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from analysis.crossval.fits import cross_validate, scores
+from analysis.crossval.folds import SCHEMES, pairs_of
+from analysis.crossval.grids import RiskGrid
+from analysis.data import TRIAL_IDS, ordered_datasets
+from analysis.models import MODELS, effort_per_trial, split_model
+
+
+def _sources(models: Sequence[str]) -> list[str]:
+    return list(dict.fromkeys((split_model(m)[1] or "R") for m in models if split_model(m)[0] != "effort"))
+
+
+def model_comparison(means: Mapping[str, np.ndarray], effort, grids: Mapping[str, RiskGrid],
+                     models: Sequence[str] = MODELS, schemes: Sequence[str] = SCHEMES,
+                     in_sample_sigma: Mapping[str, float] | None = None
+                     ) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Scores of every model under every scheme, on the full-sample trial means.
+
+    `means` {dataset: (24,) trial means in TRIAL_IDS order}; `grids` {source:
+    RiskGrid} ("R", and a measure m for full[m]/risk[m]). In-sample, sigma is
+    `in_sample_sigma[source]` (the analysis's chosen sigma; default: chosen by the
+    rule on all 24 trials); cross-validated, it is chosen in each fold.
+
+    Returns (scores, predictions): scores one row per (dataset, scheme, model):
+    dataset, scheme, model, rmse, r, pairs_E_lt_H, n_pairs, sigma_min, sigma_max
+    (over folds); predictions one row per (dataset, scheme, model, trial): fold
+    (the fold that held the trial out), sigma, observed, predicted.
+    """
+    E = effort_per_trial(effort).to_numpy()
+    datasets = ordered_datasets(means)
+    Y = np.stack([np.asarray(means[d], float) for d in datasets])[None]   # (1, D, 24)
+    risks = {s: grids[s].risk for s in _sources(models)}
+    rows, pred_rows = [], []
+    for scheme in schemes:
+        fixed = _fixed_index(grids, risks, in_sample_sigma) if scheme == "in-sample" else None
+        preds, chosen, test = cross_validate(Y, E, risks, models, scheme, fixed)
+        fold_of = np.empty(len(TRIAL_IDS), dtype=int)
+        for f, held in enumerate(test):
+            fold_of[held] = f
+        for model in models:
+            sc = scores(Y, preds[model])
+            source = split_model(model)[1] or "R"
+            for k, dataset in enumerate(datasets):
+                if model == "effort":
+                    sig = np.full(len(TRIAL_IDS), np.nan)
+                else:
+                    sig = grids[source].sigmas[chosen[source][0, :, k]][fold_of]
+                rows.append((dataset, scheme, model, sc["rmse"][0, k], sc["r"][0, k], int(sc["pairs"][0, k]),
+                             len(pairs_of(TRIAL_IDS)), np.nanmin(sig) if model != "effort" else np.nan,
+                             np.nanmax(sig) if model != "effort" else np.nan))
+                for i, trial in enumerate(TRIAL_IDS):
+                    pred_rows.append((dataset, scheme, model, trial, int(fold_of[i]), sig[i], Y[0, k, i],
+                                      preds[model][0, k, i]))
+    table = pd.DataFrame(rows, columns=["dataset", "scheme", "model", "rmse", "r", "pairs_E_lt_H", "n_pairs",
+                                        "sigma_min", "sigma_max"])
+    predictions = pd.DataFrame(pred_rows, columns=["dataset", "scheme", "model", "trial", "fold", "sigma",
+                                                   "observed", "predicted"])
+    return table, predictions
+
+
+def _fixed_index(grids, risks, in_sample_sigma) -> dict[str, int] | None:
+    if in_sample_sigma is None:
+        return None
+    out = {}
+    for s in risks:
+        sig = in_sample_sigma.get(s, in_sample_sigma.get("R"))
+        out[s] = int(np.argmin(np.abs(grids[s].sigmas - sig)))  # nearest, as run_analysis reads build risk
+    return out
+
+
+def bootstrap_comparison(boot_means: Mapping[str, np.ndarray], effort, grids: Mapping[str, RiskGrid],
+                         models: Sequence[str] = MODELS, schemes: Sequence[str] = SCHEMES,
+                         in_sample_sigma: Mapping[str, float] | None = None,
+                         risk_draws: np.ndarray | None = None) -> pd.DataFrame:
+    """Scores of every model under every scheme in every bootstrap resample, the
+    cross-validation (sigma choice included) redone inside each resample.
+
+    `boot_means` {dataset: (n_boot, 24)} (`resample_trial_means`); `risk_draws`
+    (n_boot, S, 24) redrawn risks of source "R" (`redraw_risk`) or None for the
+    table's risks. Returns one row per (dataset, scheme, model, resample):
+    dataset, scheme, model, resample, rmse, r, pairs_E_lt_H.
+    """
+    E = effort_per_trial(effort).to_numpy()
+    datasets = ordered_datasets(boot_means)
+    Y = np.stack([np.asarray(boot_means[d], float) for d in datasets], axis=1)   # (n_boot, D, 24)
+    n_boot = Y.shape[0]
+    risks = {s: grids[s].risk for s in _sources(models)}
+    if risk_draws is not None and "R" in risks:
+        risks["R"] = risk_draws
+    frames = []
+    for scheme in schemes:
+        fixed = _fixed_index(grids, risks, in_sample_sigma) if scheme == "in-sample" else None
+        preds, _, _ = cross_validate(Y, E, risks, models, scheme, fixed)
+        for model in models:
+            sc = scores(Y, preds[model])
+            for k, dataset in enumerate(datasets):
+                frames.append(pd.DataFrame({"dataset": dataset, "scheme": scheme, "model": model,
+                                            "resample": np.arange(n_boot), "rmse": sc["rmse"][:, k],
+                                            "r": sc["r"][:, k], "pairs_E_lt_H": sc["pairs"][:, k]}))
+    return pd.concat(frames, ignore_index=True)
+
+
+def summarize_comparison(point: pd.DataFrame, boot: pd.DataFrame, boot_fixed_risk: pd.DataFrame | None = None,
+                         level: float = 0.95) -> pd.DataFrame:
+    """`point` (model_comparison's scores) with percentile intervals from `boot`
+    (bootstrap_comparison): rmse_low/high, r_low/high, pairs_low/high; with
+    `boot_fixed_risk` (the same resamples, risk not redrawn) also the widths of
+    the fixed-risk intervals and how much redrawing risk widens them
+    (r_widening = width with risk redrawn / width without)."""
+    tail = 100 * (1 - level) / 2
+    keys = ["dataset", "scheme", "model"]
+
+    def bands(b: pd.DataFrame, suffix: str = "") -> pd.DataFrame:
+        g = b.groupby(keys, sort=False)
+        out = pd.DataFrame({
+            f"rmse_low{suffix}": g["rmse"].quantile(tail / 100), f"rmse_high{suffix}": g["rmse"].quantile(1 - tail / 100),
+            f"r_low{suffix}": g["r"].quantile(tail / 100), f"r_high{suffix}": g["r"].quantile(1 - tail / 100),
+            f"pairs_low{suffix}": g["pairs_E_lt_H"].quantile(tail / 100),
+            f"pairs_high{suffix}": g["pairs_E_lt_H"].quantile(1 - tail / 100)})
+        if not suffix:
+            out["n_boot"] = g.size()
+        return out.reset_index()
+
+    table = point.merge(bands(boot), on=keys, how="left")
+    if boot_fixed_risk is not None:
+        fixed = bands(boot_fixed_risk, "_fixed_risk")
+        table = table.merge(fixed[keys + ["rmse_low_fixed_risk", "rmse_high_fixed_risk", "r_low_fixed_risk",
+                                          "r_high_fixed_risk"]], on=keys, how="left")
+        with np.errstate(invalid="ignore", divide="ignore"):
+            table["rmse_widening"] = ((table["rmse_high"] - table["rmse_low"])
+                                      / (table["rmse_high_fixed_risk"] - table["rmse_low_fixed_risk"]))
+            table["r_widening"] = ((table["r_high"] - table["r_low"])
+                                   / (table["r_high_fixed_risk"] - table["r_low_fixed_risk"]))
+    return table
+
+
+def gain_over_effort(point: pd.DataFrame, boot: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
+    """How much lower each model's RMSE is than effort-only's (effort RMSE - model
+    RMSE; positive: the model predicts better), per dataset and scheme, with the
+    percentile interval of the per-resample difference. In sample Eq. 1's gain is
+    >= 0 by construction; out of sample it can be negative."""
+    tail = (1 - level) / 2
+    keys = ["dataset", "scheme"]
+    pt = point.pivot_table(index=keys, columns="model", values="rmse", sort=False)
+    bt = boot.pivot_table(index=keys + ["resample"], columns="model", values="rmse", sort=False)
+    rows = []
+    for model in [m for m in pt.columns if m != "effort"]:
+        g = (bt["effort"] - bt[model]).groupby(level=keys, sort=False)
+        lo, hi = g.quantile(tail), g.quantile(1 - tail)
+        for key in pt.index:
+            rows.append((*key, model, float(pt.loc[key, "effort"] - pt.loc[key, model]), float(lo[key]), float(hi[key])))
+    return pd.DataFrame(rows, columns=keys + ["model", "gain", "gain_low", "gain_high"])

@@ -1,0 +1,205 @@
+"""From the CSVs a study downloads to the human-data format the analysis reads.
+
+    python -m analysis.import_study FILES... --out human.csv [--study DIR]
+
+FILES are the CSVs of `python -m stimuli.experiment` studies (one per participant
+and session, any of the three tasks: difficulty, time, build; docs/experiment.md).
+The output has the columns of docs/human-data.md (dataset, participant, trial,
+response) plus study, position, condition, first_in_pair, rt_ms, collapses and
+source (file:line), one row per response to the 24 trials; the anchor trials are
+left out. Then ``python -m lgp.reproduce --human-data human.csv`` runs the paper's
+analysis on it.
+
+Refused, naming the file and line, before anything is written: a file that is not
+a study's CSV, a file of another study (another stimulus set, layout or order seed
+than the first file's, or than --study DIR's study.json), a participant of a task
+who appears twice (in two files or twice in one), a trial id outside the 24, a
+truncated file (a row cut short, or a participant with fewer trials than the study
+has), a non-numeric response, and SIMULATED rows mixed with real ones. Rows of
+simulated participants (tests only) become datasets ``simulated-<task>``.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+from lgp import cli
+from lgp.paper import TRIAL_IDS
+
+PROG = "python -m analysis.import_study"
+#: Columns every study CSV has (stimuli.experiment.COLUMNS; the others are optional here).
+REQUIRED = ("study", "task", "participant", "simulated", "condition", "phase", "position", "trial", "response",
+            "rt_ms", "n_trials")
+TASKS = ("difficulty", "time", "build")
+#: Columns of the output, after the four of the human-data format.
+EXTRA = ("study", "position", "condition", "first_in_pair", "rt_ms", "collapses", "source")
+
+
+class StudyDataError(ValueError):
+    """A study CSV cannot be imported; the message names the file and line of each problem."""
+
+    def __init__(self, problems: list[str]):
+        super().__init__("\n".join(problems))
+        self.problems = tuple(problems)
+
+
+def _read(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
+    try:
+        raw = path.read_bytes()
+    except OSError as e:
+        raise StudyDataError([f"{path}: cannot read ({e.strerror})"]) from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise StudyDataError([f"{path}: not UTF-8 text (byte {e.start}): not a study CSV"]) from None
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
+        lines = list(reader)
+    except csv.Error as e:
+        raise StudyDataError([f"{path}: line {reader.line_num}: broken CSV ({e}): the file is truncated or damaged"]) from None
+    if not lines:
+        raise StudyDataError([f"{path}: empty file: not a study CSV (a header line and one row per response)"])
+    header, rows = lines[0], []
+    for k, fields in enumerate(lines[1:], start=2):
+        if fields:
+            rows.append((k, fields))
+    return header, rows
+
+
+def import_files(paths, study: str | None = None) -> list[dict]:
+    """Rows of the human-data format from study CSVs `paths`; `study` the id every file
+    must carry (default: the first file's). Raises StudyDataError listing every problem."""
+    problems: list[str] = []
+    out: list[dict] = []
+    seen: dict[tuple[str, str], str] = {}  # (task, participant) -> where first seen
+    first_file = None
+    simulated_kinds: dict[bool, str] = {}
+    for path in map(Path, paths):
+        try:
+            header, rows = _read(path)
+        except StudyDataError as e:
+            problems += e.problems
+            continue
+        missing = [c for c in REQUIRED if c not in header]
+        if missing:
+            problems.append(f"{path}: line 1: not a study CSV of stimuli.experiment (missing column(s) {', '.join(missing)})")
+            continue
+        col = {c: header.index(c) for c in header}
+        by_participant: dict[tuple[str, str], list[tuple[int, dict]]] = {}
+        for line, fields in rows:
+            if len(fields) != len(header):
+                problems.append(f"{path}: line {line}: truncated row ({len(fields)} of {len(header)} fields)")
+                continue
+            r = {c: fields[i].strip() for c, i in col.items()}
+            if study is None:
+                study, first_file = r["study"], f"{path}"
+            if r["study"] != study:
+                problems.append(f"{path}: line {line}: from another study ({r['study']!r}, not {study!r} of "
+                                f"{first_file or 'the --study folder'}): other trials, layouts or order seed")
+                break
+            if r["task"] not in TASKS:
+                problems.append(f"{path}: line {line}: unknown task {r['task']!r}; expected one of {', '.join(TASKS)}")
+                continue
+            by_participant.setdefault((r["task"], r["participant"]), []).append((line, r))
+        for (task, pid), prows in by_participant.items():
+            where = f"{path}: line {prows[0][0]}"
+            if not pid:
+                problems.append(f"{where}: empty participant")
+                continue
+            if (task, pid) in seen:
+                problems.append(f"{where}: participant {pid} of the {task} task again (already in {seen[task, pid]})")
+                continue
+            seen[task, pid] = where
+            sim = {r["simulated"] == "SIMULATED" for _, r in prows}
+            for s in sim:
+                simulated_kinds.setdefault(s, where)
+            main = [(line, r) for line, r in prows if r["phase"] == "main"]
+            trials_seen: dict[str, int] = {}
+            n_expected = prows[0][1]["n_trials"]
+            for line, r in main:
+                tid = r["trial"].upper()
+                if tid not in TRIAL_IDS:
+                    problems.append(f"{path}: line {line}: trial {r['trial']!r} is not one of the 24 trial ids (1E, 1H, ..., 12H)")
+                    continue
+                if tid in trials_seen:
+                    problems.append(f"{path}: line {line}: participant {pid} answered trial {tid} twice (first on line {trials_seen[tid]})")
+                    continue
+                trials_seen[tid] = line
+                try:
+                    value = float(r["response"])
+                except ValueError:
+                    value = math.nan
+                if not math.isfinite(value):
+                    problems.append(f"{path}: line {line}: response {r['response']!r} is not a finite number")
+                    continue
+                dataset = ("simulated-" if r["simulated"] == "SIMULATED" else "") + task
+                out.append({"dataset": dataset, "participant": pid, "trial": tid, "response": r["response"],
+                            "study": r["study"], "position": r["position"], "condition": r["condition"],
+                            "first_in_pair": r.get("first_in_pair", ""), "rt_ms": r["rt_ms"],
+                            "collapses": r.get("collapses", ""), "source": f"{path.name}:{line}"})
+            if n_expected != str(len(TRIAL_IDS)):
+                problems.append(f"{where}: the study has {n_expected} trials, not the paper's 24: the analysis needs the 24 trials")
+            elif len(main) < len(TRIAL_IDS):
+                last = prows[-1][0]
+                problems.append(f"{path}: line {last}: truncated: participant {pid} ({task}) has {len(main)} of "
+                                f"{len(TRIAL_IDS)} trials; the file ends after line {last}")
+    if len(simulated_kinds) == 2:
+        problems.append(f"{simulated_kinds[True]}: SIMULATED participants mixed with real ones (real data from "
+                        f"{simulated_kinds[False]}): import them separately")
+    if not problems and not out:
+        problems.append("no responses to import")
+    if problems:
+        raise StudyDataError(problems)
+    return out
+
+
+def study_of_folder(folder: str | Path) -> str:
+    """The study id in a study folder's study.json."""
+    path = Path(folder) / "study.json"
+    try:
+        return json.loads(path.read_text())["study"]
+    except (OSError, ValueError, KeyError):
+        raise StudyDataError([f"{path}: not a study folder of stimuli.experiment (no readable study.json)"]) from None
+
+
+def write_human_data(rows: list[dict], out: str | Path) -> Path:
+    out = Path(out)
+    tmp = out.with_name(f".{out.name}.tmp")
+    with open(tmp, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=["dataset", "participant", "trial", "response", *EXTRA], lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(tmp, out)
+    return out
+
+
+def main(argv=None) -> int:
+    import argparse
+
+    p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("files", nargs="+", metavar="FILE", type=cli.input_file, help="CSV files downloaded from a study")
+    p.add_argument("--out", required=True, type=cli.output_file, help="human-data CSV to write (docs/human-data.md)")
+    p.add_argument("--study", metavar="DIR", type=cli.input_dir, help="the study folder: every file must come from it")
+    args = p.parse_args(argv)
+    study = study_of_folder(args.study) if args.study else None
+    rows = import_files(args.files, study)
+    # The same checks the analysis makes (docs/human-data.md), before the file is written.
+    import pandas as pd
+
+    from analysis.data import validate_human_data
+
+    validate_human_data(pd.DataFrame(rows).astype({"response": float}), allow_simulated=True)
+    write_human_data(rows, args.out)
+    counts = pd.DataFrame(rows).groupby("dataset")["participant"].nunique()
+    print(f"{args.out}: " + ", ".join(f"{d} {n} participant(s)" for d, n in counts.items())
+          + f" from {len(args.files)} file(s)", file=sys.stdout)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(cli.run_cli(main, prog=PROG))

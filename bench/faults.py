@@ -1,0 +1,379 @@
+"""The bad-input probe of docs/faults.md (issue 27): every bad trial file, human-data
+file, API argument and cache entry tried, and what the project does with it.
+
+    python bench/faults.py [--out docs/faults.md]
+
+Each case runs in this process under a 20 s deadline (SIGALRM) and is judged:
+
+- ``refused``: an error of the project's own (what a command line prints as one
+  line ``prog: error: ...``, lgp.cli.is_known_error), naming the rule, in time;
+- ``recomputed``: a cache entry reported as damaged and computed again;
+- ``accepted (by design)``: input the format allows (a lower-case trial id, a
+  UTF-16 file with its byte-order mark, ...), said so in the table;
+- anything else (a traceback, a hang, bad input accepted) is a ``FAILURE``.
+
+It writes the "## Bad inputs tried" section of docs/faults.md (the rest is kept)
+and prints the figures. The faults of a running pipeline (killed workers,
+concurrent runs, a full disk, ...) are the tests listed in docs/faults.md.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import hashlib
+import os
+import shutil
+import signal
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from common import machine, write_section  # noqa: E402
+
+import stimuli  # noqa: E402
+from analysis.data import TRIAL_IDS, load_human_data  # noqa: E402
+from lgp.cli import is_known_error, one_line  # noqa: E402
+
+BASE = (stimuli.TRIAL_DIR / "1E.yaml").read_text()
+X1 = BASE.replace("id: 1E\npair: 1\nlevel: E\n", "id: X1\n")
+
+
+class Deadline(Exception):
+    pass
+
+
+@contextlib.contextmanager
+def deadline(seconds: float):
+    def ring(signum, frame):
+        raise Deadline(f"still running after {seconds:g} s")
+
+    old = signal.signal(signal.SIGALRM, ring)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def judge(run, accept=False) -> tuple[str, str]:
+    """(verdict, what happened) of one case."""
+    t0 = time.monotonic()
+    try:
+        with deadline(20):
+            result = run()
+    except Deadline as e:
+        return "FAILURE", f"hung: {e}"
+    except MemoryError:
+        return "FAILURE", "MemoryError"
+    except Exception as e:  # noqa: BLE001 - judged here
+        took = time.monotonic() - t0
+        if accept:
+            return "FAILURE", f"refused good input: {one_line(e)}"
+        if is_known_error(e):
+            return "refused", f"{type(e).__name__}: {one_line(e)} ({took:.1f} s)"
+        return "FAILURE", f"traceback: {type(e).__name__}: {e}"
+    if isinstance(result, str) and result.startswith("recomputed"):
+        return "recomputed", result
+    if accept:
+        return "accepted (by design)", result if isinstance(result, str) else "accepted"
+    return "FAILURE", f"accepted: {result!r}"[:200]
+
+
+# ----------------------------------------------------------------------------- trial files
+
+
+def trial_cases(tmp: Path):
+    def text_case(text, name="X1.yaml", load="X1"):
+        def run():
+            folder = Path(tempfile.mkdtemp(dir=tmp))
+            (folder / name).write_bytes(text if isinstance(text, bytes) else text.encode())
+            trial = stimuli.load_trial(load, folder)
+            return f"loaded {trial.id}"
+        return run
+
+    def special(make):
+        def run():
+            folder = Path(tempfile.mkdtemp(dir=tmp))
+            make(folder / "X1.yaml")
+            return stimuli.load_trial("X1", folder)
+        return run
+
+    def sub(old, new):
+        assert old in X1, old
+        return text_case(X1.replace(old, new, 1))
+
+    head = X1[: X1.index("target:")]
+    grid = "target:\n  blocks:\n" + "".join(f"  - name: t{i}_{j}\n    p_WB: [{0.2127 + i * 0.0254:.4f}, {-0.2373 + j * 0.0254:.4f}, 0.0127]\n"
+                                            for i in range(14) for j in range(14))
+    b1 = "  - name: b1\n    p_WB: [0.35, 0.0, 0.0127]\n"
+    yield "not YAML (`a: b: c`)", text_case("id: X1\na: b: c\n")
+    yield "a YAML list, not a mapping", text_case("- 1\n- 2\n")
+    yield "empty file", text_case("")
+    yield "not UTF-8 (Latin-1 bytes)", text_case(X1.encode().replace(b"scattered blocks", b"scattered \xe9blocks"))
+    yield "larger than MAX_TRIAL_BYTES", text_case(X1 + "#" * stimuli.MAX_TRIAL_BYTES)
+    yield "symlink to /dev/zero", special(lambda p: p.symlink_to("/dev/zero"))
+    yield "a FIFO named X1.yaml", special(lambda p: os.mkfifo(p))
+    yield "dangling symlink", special(lambda p: p.symlink_to(p.parent / "gone.yaml"))
+    yield "a directory named X1.yaml", special(lambda p: p.mkdir())
+    yield "lower-case file name x1.yaml", text_case(X1, name="x1.yaml")
+    yield "id field disagrees with the file name", text_case(X1.replace("id: X1", "id: X2"))
+    yield "unknown field", sub("dimension:", "colour_scheme: red\ndimension:")
+    yield "a key given twice", sub("    count: 3\n", "    count: 3\n    count: 30\n")
+    yield "YAML anchor and alias", sub("    min_gap: 0.01\n", "    min_gap: &g 0.01\n    clearance: *g\n")
+    yield "Python object tag", text_case("!!python/object/apply:os.system ['true']\n")
+    yield "alias bomb (billion laughs)", text_case("a: &a [x, x]\nb: &b [*a, *a]\nc: &c [*b, *b]\n")
+    yield "count: 1000000000000", sub("count: 3", "count: 1000000000000")
+    yield "count: -1", sub("count: 3", "count: -1")
+    yield "count: 2.5", sub("count: 3", "count: 2.5")
+    yield "count: three", sub("count: 3", "count: three")
+    yield "region x inverted", sub("x: [0.2, 0.55]", "x: [0.55, 0.2]")
+    yield "region x infinite", sub("x: [0.2, 0.55]", "x: [-.inf, .inf]")
+    yield "region beyond the workspace", sub("x: [0.2, 0.55]", "x: [0.2, 55.0]")
+    yield "region x nan", sub("x: [0.2, 0.55]", "x: [.nan, 0.55]")
+    yield "min_gap negative", sub("min_gap: 0.01", "min_gap: -0.01")
+    yield "clearance 1 km", sub("clearance: 0.02", "clearance: 1000")
+    yield "target floor covers the scatter region (100 blocks beside 196)", text_case(head.replace("count: 3", "count: 100") + grid)
+    yield "crowded region: passes the area bound, jams the sampler", "crowded"
+    yield "target with no blocks", text_case(head + "target:\n  blocks: []\n")
+    yield "p_WB with 2 numbers", sub("p_WB: [0.35, 0.0, 0.0127]", "p_WB: [0.35, 0.0]")
+    yield "p_WB text", sub("p_WB: [0.35, 0.0, 0.0127]", "p_WB: [0.35, zero, 0.0127]")
+    yield "two target blocks in one place", text_case(head + "target:\n  blocks:\n" + b1 + b1.replace("b1", "b2"))
+    yield "target block floating 10 cm up", text_case(head + "target:\n  blocks:\n" + b1.replace("0.0127]", "0.1127]"))
+    yield "target block below the table", text_case(head + "target:\n  blocks:\n" + b1.replace("0.0127]", "-0.05]"))
+    yield "block of size 0", text_case(head + "target:\n  blocks:\n" + b1 + "    size: [0, 0, 0]\n")
+    yield "block of size 10 m", text_case(head + "target:\n  blocks:\n" + b1.replace("0.0127]", "5.0]") + "    size: [10, 10, 10]\n")
+    yield "yaw as text", sub("p_WB: [0.35, 0.0, 0.0127]", "p_WB: [0.35, 0.0, 0.0127]\n    yaw: left")
+    yield "B needs red blocks, A has none", sub("p_WB: [0.35, 0.0, 0.0127]", "p_WB: [0.35, 0.0, 0.0127]\n    colour: red")
+    yield "recolour more blocks than listed", sub("    clearance: 0.02\n", "    clearance: 0.02\n  recolour:\n    count: 5\n    colour: red\n")
+    yield "duplicate target block names", text_case(head + "target:\n  blocks:\n" + b1 + b1.replace("0.0127]", "0.0381]"))
+    yield "pair/level disagree with the id", text_case(BASE.replace("pair: 1", "pair: 2"), name="1E.yaml", load="1E")
+    yield "lower-case id in the file", text_case(X1.replace("id: X1", "id: x1"))
+    yield "id with spaces", text_case(X1.replace("id: X1", "id: 'X 1'"))
+    yield "fixed box without size", sub("initial:", "fixed:\n- name: wall\n  boxes:\n  - p_WO: [0.5, 0.3, 0.05]\ninitial:")
+    yield "build site outside the workspace", sub("build_site: [0.35, 0.0]", "build_site: [35.0, 0.0]")
+    yield "description `</script><script>alert(2)</script>`", ("accept", sub("description: ", "description: '</script><script>alert(2)</script>' #"))
+
+
+def crowded(tmp: Path):
+    old = stimuli.SCATTER_SECONDS
+    stimuli.SCATTER_SECONDS = 1.0
+    try:
+        folder = Path(tempfile.mkdtemp(dir=tmp))
+        (folder / "X1.yaml").write_text(X1.replace("count: 3", "count: 140").replace("x: [0.2, 0.55]", "x: [-0.2, 0.2]")
+                                        .replace("y: [-0.25, 0.25]", "y: [0.1, 0.5]"))
+        return stimuli.load_trial("X1", folder)
+    finally:
+        stimuli.SCATTER_SECONDS = old
+
+
+# ----------------------------------------------------------------------------- human data
+
+
+def _responses(n=3, dataset="difficulty", seed=0):
+    rng = np.random.default_rng(seed)
+    return pd.DataFrame({"dataset": dataset, "participant": np.repeat([f"p{k}" for k in range(n)], 24),
+                         "trial": np.tile(TRIAL_IDS, n), "response": rng.normal(size=24 * n).round(3)})
+
+
+def human_cases(tmp: Path):
+    def csv(df=None, text=None, raw=None, **kw):
+        def run():
+            path = Path(tempfile.mkdtemp(dir=tmp)) / "h.csv"
+            if raw is not None:
+                path.write_bytes(raw)
+            elif text is not None:
+                path.write_text(text)
+            else:
+                df.to_csv(path, index=False)
+            t = load_human_data(path, **kw)
+            return f"loaded {len(t)} rows"
+        return run
+
+    def special(make):
+        def run():
+            path = Path(tempfile.mkdtemp(dir=tmp)) / "h.csv"
+            make(path)
+            return load_human_data(path)
+        return run
+
+    good = _responses()
+    text = good.to_csv(index=False)
+
+    def edit(row, column, value):
+        df = good.copy()
+        df[column] = df[column].astype(object)
+        df.loc[row, column] = value
+        return csv(df)
+
+    yield "empty file", csv(text="")
+    yield "header only", csv(text="dataset,participant,trial,response\n")
+    yield "missing column response", csv(good.drop(columns="response"))
+    yield "unknown dataset", edit(0, "dataset", "effort")
+    yield "a simulated dataset as human data", csv(good.assign(dataset="simulated-time"))
+    yield "unknown trial id 13E", edit(0, "trial", "13E")
+    yield "response text", edit(0, "response", "fast")
+    yield "response inf", edit(0, "response", "inf")
+    yield "response nan", edit(0, "response", "nan")
+    yield "response empty", edit(0, "response", "")
+    yield "response 1e308 (mean overflows)", csv(good.assign(response=np.where(good.index < 24, 1e308, good["response"])))
+    yield "responses near 1e-299 (SD underflows)", csv(good.assign(response=good["response"].abs() * 1e-299))
+    yield "every participant constant", csv(good.assign(response=4.0))
+    yield "duplicate row", csv(pd.concat([good, good.iloc[[0]]]))
+    yield "a participant missing a trial", csv(good.drop(index=5))
+    yield "empty participant id", edit(0, "participant", "")
+    yield "UTF-16 without byte-order mark", csv(raw=text.encode("utf-16-le"))
+    yield "Latin-1 byte", csv(raw=text.replace("difficulty", "difficult\xe9", 1).encode("latin-1"))
+    yield "digit separators 1_000", edit(0, "response", "1_000")
+    yield "short rows", csv(text="dataset,participant,trial,response\ndifficulty,p0\n")
+    yield "NUL bytes", csv(raw=text.encode().replace(b"p0", b"p\x000", 1))
+    yield "a FIFO", special(lambda p: os.mkfifo(p))
+    yield "symlink to /dev/zero", special(lambda p: p.symlink_to("/dev/zero"))
+    yield "dangling symlink", special(lambda p: p.symlink_to(p.parent / "gone.csv"))
+    yield "a directory", special(lambda p: p.mkdir())
+    yield "11 participants, limit 10", csv(_responses(11), max_participants=10)
+    yield "240 kB for 2 participants, limit 48 kB", csv(_responses(2).assign(note="x" * 5000), max_participants=10)
+    yield "lower-case trial ids 1e", ("accept", csv(good.assign(trial=good["trial"].str.lower())))
+    yield "UTF-16 with byte-order mark", ("accept", csv(raw=text.encode("utf-16")))
+    yield "UTF-8 with byte-order mark", ("accept", csv(raw=b"\xef\xbb\xbf" + text.encode()))
+    yield "formula participant ids (=cmd|..., +SUM, @SUM)", ("accept", csv(good.assign(participant=good["participant"].map(
+        {"p0": "=cmd|' /C calc'!A0", "p1": "+SUM(1+1)", "p2": "@SUM(A1)"}))))
+    yield "extra columns", ("accept", csv(good.assign(age=30)))
+    yield "blank lines and CRLF line ends", ("accept", csv(raw=text.replace("\n", "\r\n\r\n").encode()))
+    yield "one constant participant among others", ("accept", csv(pd.concat([good, _responses(1).assign(participant="c", response=2.0)])))
+
+
+# ----------------------------------------------------------------------------- the API
+
+
+def api_cases():
+    from models.risk import physical_risk
+    from models.risk.structures import tower
+
+    def risk(sigma=0.05, **kw):
+        return lambda: physical_risk(tower(2), sigma, **{"n_sims": 3, "seed": 0, **kw})
+
+    for value in (float("inf"), 1e308, float("nan"), 1.5, -0.1, "0.1"):
+        yield f"physical_risk sigma={value!r}", risk(value)
+    for value in (2.5, "4", True, 0):
+        yield f"physical_risk n_sims={value!r}", risk(n_sims=value)
+    for value in (None, -1, 1.5):
+        yield f"physical_risk seed={value!r}", risk(seed=value)
+    yield "physical_risk fall_rule='sideways'", risk(fall_rule="sideways")
+    yield "physical_risk fall_threshold=0", risk(fall_threshold=0)
+    yield "physical_risk engine='bullet'", risk(engine="bullet")
+
+    import lgp
+
+    B = stimuli.load_trial("1E").target
+    yield "lgp.plan(None, B)", lambda: lgp.plan(None, B)
+    yield "lgp.plan(B, None)", lambda: lgp.plan(B, None)
+
+
+# ----------------------------------------------------------------------------- cache entries
+
+
+def table(trial, v):
+    return pd.DataFrame({"trial": [trial] * 2, "sigma": [0.05, 0.1], "risk": [v, v / 2]})
+
+
+def cache_cases(tmp: Path):
+    from lgp.app.cache import entry_bytes
+
+    def rewrite(f):
+        return lambda p, c: p.write_bytes(f(p.read_bytes()))
+
+    def old_format(p, c):
+        body = table("1E", 0.2).to_csv(index=False).encode()
+        p.write_bytes(b"# lgp.cache v1 rows=2 sha256=%s\n" % hashlib.sha256(body).hexdigest().encode() + body)
+
+    def replace_with(make):
+        def damage(p, c):
+            p.unlink()
+            make(p)
+        return damage
+
+    yield "truncated", rewrite(lambda b: b[: len(b) // 2])
+    yield "emptied", rewrite(lambda b: b"")
+    yield "one digit changed", rewrite(lambda b: b.replace(b"0.2", b"0.3"))
+    yield "a line lost", rewrite(lambda b: b"\n".join(b.split(b"\n")[:-2]) + b"\n")
+    yield "not UTF-8", rewrite(lambda b: b + b"\xff\xfe")
+    yield "header stripped", rewrite(lambda b: b.split(b"\n", 1)[1])
+    yield "another trial's entry copied over it (7H over 1E)", lambda p, c: shutil.copy(c.path("risk", "bbbb"), p)
+    yield "written by the old format (no key)", old_format
+    yield "symlink to /dev/zero", replace_with(lambda p: p.symlink_to("/dev/zero"))
+    yield "a FIFO", replace_with(lambda p: os.mkfifo(p))
+    yield "dangling symlink", replace_with(lambda p: p.symlink_to(p.parent / "gone"))
+    def outside(p):
+        (p.parent.parent / "out.csv").write_bytes(entry_bytes(table("1E", 0.2), "risk", "aaaa"))
+        p.symlink_to(p.parent.parent / "out.csv")
+
+    yield "symlink to a sound entry outside the cache", replace_with(outside)
+    yield "a directory", replace_with(lambda p: p.mkdir())
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", type=Path, default=ROOT / "docs" / "faults.md")
+    args = p.parse_args(argv)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        groups = [("trial file", trial_cases(tmp)), ("human data", human_cases(tmp)), ("API", api_cases()),
+                  ("cache entry", ((n, _cache_run(d, tmp)) for n, d in cache_cases(tmp)))]
+        for group, cases in groups:
+            for name, run in cases:
+                accept = False
+                if isinstance(run, tuple):
+                    accept, run = True, run[1]
+                if run == "crowded":
+                    run = lambda: crowded(tmp)  # noqa: E731
+                verdict, what = judge(run, accept)
+                rows.append((group, name, verdict, what.replace("|", "\\|").replace(str(tmp), "TMP")))
+                print(f"{verdict:>22}  {group}: {name}: {what[:150]}", flush=True)
+    bad = [r for r in rows if not r[2].startswith("accepted")]
+    refused = [r for r in bad if r[2] in ("refused", "recomputed")]
+    accepted = [r for r in rows if r[2].startswith("accepted")]
+    lines = ["## Bad inputs tried", "",
+             f"`python bench/faults.py` on {machine()}: **{len(refused)} of {len(bad)} bad inputs refused** in one "
+             "named line (or, for a cache entry, reported and recomputed), none after a hang or a traceback; "
+             f"{len(accepted)} inputs the formats allow were accepted as designed. "
+             f"By kind: " + ", ".join(f"{g} {sum(1 for r in refused if r[0] == g)}/{sum(1 for r in bad if r[0] == g)}"
+                                      for g in ("trial file", "human data", "API", "cache entry")) + ".", "",
+             "| kind | input | verdict | what the project does |", "|---|---|---|---|"]
+    bar = "\\|"
+    lines += [f"| {g} | {n.replace('|', bar)} | {v} | {w[:220]} |" for g, n, v, w in rows]
+    write_section(args.out, "Bad inputs tried", "\n".join(lines) + "\n")
+    print(f"{len(refused)}/{len(bad)} bad inputs refused; {len(accepted)} accepted by design")
+    return 0 if len(refused) == len(bad) else 1
+
+
+def _cache_run(damage, tmp):
+    """A case: two sound entries, `damage` done to the first, then a fresh Cache reads it."""
+    from lgp.app.cache import Cache
+
+    def run():
+        root = Path(tempfile.mkdtemp(dir=tmp)) / "cache"
+        cache = Cache(root)
+        cache.put("risk", "aaaa", table("1E", 0.2))
+        cache.put("risk", "bbbb", table("7H", 0.9))
+        damage(cache.path("risk", "aaaa"), cache)
+        fresh = Cache(root)
+        with open(os.devnull, "w") as null, contextlib.redirect_stderr(null):
+            got = fresh.get("risk", "aaaa")
+        if got is None and fresh.count("recomputed") == 1:
+            return "recomputed (reported in one line on stderr, never used)"
+        return f"used: {got['trial'].tolist() if got is not None else None}"
+    return run
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,349 @@
+"""The search tree and its best-first search: symbolic states (`_Node`), their
+children (legal carries and set-asides), the skeleton of a branch, and `search`
+with what it takes and returns (`Budget`, `SearchResult`, `SearchError`)."""
+from __future__ import annotations
+
+import heapq
+import itertools
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lgp.assignment import assign_blocks
+from lgp.errors import InputError
+from lgp.planner import APPROACH, SLICES_PER_PHASE, Design, Plan, PlanningError, default_arm, plan_symbolic
+from lgp.scene import TABLE, Scene, support_graph, supported_by
+from lgp.search.bound import kinetic_energy, skeleton_bound
+from lgp.search.problem import _Problem
+from lgp.search.spots import SPOTS_PER_SET_ASIDE, candidate_spots
+from lgp.search.sweep import first_sweep
+from lgp.symbolic import (Grasp, Place, PlanState, SymbolicPlan, SymbolicPlanningError, _enters_any, _near,
+                          _support_memo, apply, symbolic_plan)
+
+
+class SearchError(PlanningError):
+    """The search found no plan: `reason` is "unsolvable" (every branch explored or
+    pruned, none reaches B) or "budget" (the budget ran out first); `bound` is the
+    best lower bound on effort (J s) reached, inf when no skeleton exists."""
+
+    def __init__(self, message: str, reason: str, bound: float):
+        super().__init__(message)
+        self.reason, self.bound = reason, bound
+
+
+@dataclass(frozen=True)
+class Budget:
+    """When the search stops if the gap is still open: after `solves` KOMO solves,
+    `seconds` of wall-clock time, or `expansions` symbolic nodes expanded."""
+
+    solves: int = 3
+    seconds: float = 120.0
+    expansions: int = 20000
+
+    def __post_init__(self):
+        for name in ("solves", "seconds", "expansions"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+                raise InputError(f"Budget.{name} must be a positive number, got {value!r}")
+        if not float(self.solves).is_integer() or not float(self.expansions).is_integer():
+            raise InputError(f"Budget.solves and .expansions must be whole numbers, got {self.solves!r}, {self.expansions!r}")
+
+
+@dataclass
+class SearchResult:
+    """The least-effort plan found and how far from optimal it may be.
+
+    `effort` (J s) is the plan's block kinetic energy (`kinetic_energy`, the same
+    integral as models.effort.kinetic_energy); `bound` the lowest lower bound of
+    any branch left unexplored (inf when none is left), capped at `effort`; `gap`
+    = effort - bound >= 0 (0: proved least-effort among the skeletons the search
+    admits). `paper` is the paper planner's skeleton when it exists and was
+    solved, with its effort; `solves`, `expansions`, `seconds` what it cost.
+    """
+
+    plan: Plan
+    effort: float
+    bound: float
+    skeleton_bound: float
+    solves: int
+    expansions: int
+    seconds: float
+    stopped: str
+    paper_effort: float | None = None
+    paper_symbolic: SymbolicPlan | None = None
+    tried: list = field(default_factory=list)  # (skeleton bound, effort or failure) per KOMO solve
+    komo_seconds: float = 0.0  # of `seconds`, the time in lgp.planner.plan_symbolic (IK seeding + KOMO)
+
+    @property
+    def gap(self) -> float:
+        return max(0.0, self.effort - self.bound)
+
+    @property
+    def symbolic(self) -> SymbolicPlan:
+        return self.plan.symbolic
+
+    @property
+    def set_asides(self) -> int:
+        """How many Place actions put a block on a table spot, not in its slot."""
+        return sum(isinstance(a, Place) and _is_spot(self.symbolic, a) for a in self.symbolic.actions)
+
+    def __str__(self) -> str:
+        lines = [f"{k + 1:3d}  {a}" for k, a in enumerate(self.symbolic.actions)]
+        lines.append(f"effort {self.effort:.4f} J s, bound {self.bound:.4f} J s, gap {self.gap:.4f} J s "
+                     f"({100 * self.gap / self.effort if self.effort > 0 else 0.0:.1f} %); this skeleton's bound "
+                     f"{self.skeleton_bound:.4f}; {self.solves} KOMO solves, {self.expansions} expansions, "
+                     f"{self.seconds:.2f} s, stopped: {self.stopped}")
+        return "\n".join(lines)
+
+
+def _is_spot(symbolic: SymbolicPlan, action: Place) -> bool:
+    """Whether a Place puts its block somewhere other than its slot in B (a set-aside)."""
+    slot = symbolic.assignment.get(action.block)
+    return slot is None or not np.allclose(action.p_WB, symbolic.target.block(slot).p_WB, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- symbolic states
+
+
+@dataclass(frozen=True)
+class _Node:
+    """A symbolic state: where every block of A is (0 = where it started, 1 + j =
+    slot j of B, -1 - k = set-aside spot k of `spots`), the carries that led here
+    (block, destination), and the bound g so far."""
+
+    where: tuple[int, ...]
+    carries: tuple[tuple[int, int], ...]
+    g: float
+    settled: bool  # no state below can be stuck (_Problem.settled), so no set-aside is to come
+
+
+# ----------------------------------------------------------------------------- the search
+
+
+def _children(problem: _Problem, node: _Node, spots_per_set_aside: int):
+    """(child node, its g) for every legal carry from `node`: clear blocks into
+    ready slots of their colour; set-asides only when no such carry exists."""
+    where = node.where
+    scene = problem.scene(where)
+    above = supported_by(support_graph(scene))
+    settled = node.settled or problem.settled(where, scene, above)
+    names = [b.name for b in problem.blocks]
+    filled = {w - 1 for w in where if w > 0}
+    clear = [i for i, w in enumerate(where) if w <= 0 and not above[names[i]] and not (w == 0 and problem.pinned[i])]
+    out = []
+    ready = [j for j in range(len(problem.slots)) if j not in filled and all(k in filled for k in problem.slot_below[j])]
+    for j in ready:
+        slot = problem.slots[j]
+        for i in clear:
+            if problem.colour[i] != slot.colour:
+                continue
+            moved = scene.blocks[i].moved_to(slot.p_WB, slot.yaw)
+            if _enters_any(moved, [o for o in _near(moved, (*scene.blocks, *scene.fixed)) if o.name != moved.name]):
+                continue
+            if not problem.reachable(slot.p_WB, slot.yaw):
+                continue
+            out.append((i, 1 + j))
+    if not out:
+        free = [j for j in range(len(problem.slots)) if j not in filled]
+        for i in clear:
+            if where[i] != 0:
+                continue  # set aside at most once
+            taken = 0
+            for _, p in candidate_spots(problem, scene, i, free):
+                if taken == spots_per_set_aside:
+                    break
+                if problem.reachable(p, 0.0):
+                    out.append((i, problem.spot(p, 0.0)))
+                    taken += 1
+    children = []
+    for i, w in out:
+        p_from, _ = problem.pose(i, where[i])
+        p_to, _ = problem.pose(i, w)
+        new = list(where)
+        new[i] = w
+        g = node.g + float(problem.bound(p_from, p_to))
+        children.append(_Node(tuple(new), node.carries + ((i, w),), g, settled))
+    return children
+
+
+def _symbolic(problem: _Problem, carries) -> SymbolicPlan:
+    """The skeleton (Grasp, Place) of a sequence of carries, checked by lgp.symbolic.apply."""
+    where = list(problem.final_from_start())
+    names = [b.name for b in problem.blocks]
+    slot_of = {i: w - 1 for i, w in enumerate(where) if w > 0}
+    actions = []
+    for i, w in carries:
+        p, yaw = problem.pose(i, w)
+        if w > 0:
+            j = w - 1
+            slot_of[i] = j
+            block_in = {s: names[k] for k, s in slot_of.items()}
+            onto = tuple(problem.slot_ground[j]) + tuple(block_in[k] for k in problem.slot_below[j])
+        else:
+            onto = (TABLE,)
+        actions += [Grasp(names[i]), Place(names[i], onto, np.array(p, float), float(yaw))]
+        where[i] = w
+    assignment = {names[i]: problem.slots[j].name for i, j in slot_of.items()}
+    plan = SymbolicPlan(problem.initial, problem.target, assignment, tuple(actions))
+    state, support = PlanState(problem.initial), _support_memo()
+    for action in plan.actions:  # every action legal (lgp.symbolic.apply), or IllegalActionError
+        state = apply(action, state, support=support)
+    return plan
+
+
+def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | None = None,
+           approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE, formulation: str = "reduced",
+           solver: str = "snopt", arm=None, spots_per_set_aside: int = SPOTS_PER_SET_ASIDE,
+           paper_first: bool = True) -> SearchResult:
+    """The least-effort plan the search finds for building `target` from `initial`.
+
+    Best-first (A*) over symbolic states, ordered by the lower bound g + h (ties:
+    deeper first). A complete skeleton popped with a bound below the incumbent's
+    effort is solved by KOMO (lgp.planner.plan_symbolic; all solves draw from one
+    Generator). With `paper_first`, the paper's skeleton (assign_blocks +
+    symbolic_plan) is solved before the search starts, with the Generator in the
+    state lgp.planner.plan would use: the result's effort is then never above
+    the paper planner's. Stops when no open branch's bound is below the
+    incumbent (gap closed) or the budget runs out; raises SearchError (a
+    PlanningError) when no plan is found, saying whether the task has none or
+    the budget ran out, with the best bound reached.
+    """
+    start = time.perf_counter()
+    budget = budget or Budget()
+    design = Design.of(None, approach_height, slices_per_phase)
+    approach_height, slices_per_phase = design.approach_height, design.slices_per_phase
+    arm = arm or default_arm()
+    rng = rng_or_seed if isinstance(rng_or_seed, np.random.Generator) else np.random.default_rng(rng_or_seed)
+    label = f"{initial.label} -> {target.label}"
+    problem = _Problem(initial, target, approach_height, slices_per_phase, arm)
+    options = dict(formulation=formulation, solver=solver, slices_per_phase=slices_per_phase,
+                   approach_height=approach_height, arm=arm)
+    best: tuple[float, Plan, float] | None = None  # (effort, plan, skeleton bound)
+    tried: list = []
+    solves = 0
+    paper_effort, paper_symbolic = None, None
+
+    komo_seconds = 0.0
+
+    def solve(symbolic: SymbolicPlan, bound: float) -> None:
+        nonlocal best, solves, komo_seconds
+        solves += 1
+        t0 = time.perf_counter()
+        try:
+            result = plan_symbolic(symbolic, rng, **options)
+        except PlanningError as e:
+            tried.append((bound, f"failed: {e}"))
+            return
+        finally:
+            komo_seconds += time.perf_counter() - t0
+        sweep = first_sweep(result)
+        if sweep is not None:
+            tried.append((bound, f"rejected: {sweep}"))
+            return
+        effort = kinetic_energy(result)
+        tried.append((bound, effort))
+        if best is None or effort < best[0]:
+            best = (effort, result, bound)
+
+    if paper_first:
+        try:
+            paper_symbolic = symbolic_plan(initial, target, assign_blocks(initial, target))
+        except SymbolicPlanningError:
+            paper_symbolic = None
+        if paper_symbolic is not None:
+            solve(paper_symbolic, skeleton_bound(paper_symbolic, approach_height=approach_height,
+                                                 slices_per_phase=slices_per_phase))
+            if best is not None:
+                paper_effort = best[0]
+
+    root = _Node(problem.final_from_start(), (), 0.0, False)
+    h0, guide0 = problem.remaining_bound(root.where, False)
+    paper_key = None
+    if paper_symbolic is not None:
+        index = {b.name: i for i, b in enumerate(problem.blocks)}
+        slot = {s.name: j for j, s in enumerate(problem.slots)}
+        paper_key = frozenset((index[a.block], 1 + slot[paper_symbolic.assignment[a.block]])
+                              for a in paper_symbolic.actions if isinstance(a, Place))
+    counter = itertools.count()
+    # Entries (guide g + h_direct rounded, -depth, count, lower bound g + h, node): popped
+    # in the guide's order (it dives along the bound's best assignment; the lower
+    # bound alone also counts relays no move takes and goes wide); pruned, and
+    # reported, by the lower bound.
+    queue = [] if not np.isfinite(h0) else [(round(guide0, 12), 0, next(counter), h0, root)]
+    # Branches that make the same carries in another order are one branch (the
+    # bound cannot tell orders apart): the first order found is kept.
+    seen: set = {frozenset()}
+    expansions = 0
+    stopped = "gap closed"
+
+    def out_of_budget():
+        if solves >= budget.solves:
+            return "solve budget"
+        if time.perf_counter() - start >= budget.seconds:
+            return "time budget"
+        if expansions >= budget.expansions:
+            return "expansion budget"
+        return None
+
+    def entries(node):
+        """Queue entries of the children of `node` (one expansion), best guide first."""
+        nonlocal expansions
+        expansions += 1
+        out = []
+        for child in _children(problem, node, spots_per_set_aside):
+            key = frozenset(child.carries)
+            if key in seen:
+                continue
+            h, guide = problem.remaining_bound(child.where, child.settled)
+            f_child = child.g + h
+            if not np.isfinite(h) or (best is not None and f_child >= best[0]):
+                continue
+            seen.add(key)
+            out.append((round(child.g + guide, 12), -len(child.carries), next(counter), f_child, child))
+        return sorted(out)
+
+    complete = lambda node: all((1 + j) in node.where for j in range(len(problem.slots)))  # noqa: E731
+    while queue:
+        reason = out_of_budget()
+        if reason:
+            stopped = reason
+            break
+        entry = heapq.heappop(queue)
+        # A dive (anytime best-first): from the best open branch down its best child
+        # to a complete skeleton, the other children queued. Every pop ends in a
+        # skeleton within a plan's depth of expansions.
+        while entry is not None:
+            f, node = entry[3], entry[4]
+            if best is not None and f >= best[0]:
+                break  # pruned
+            if complete(node):
+                if frozenset(node.carries) != paper_key:
+                    solve(_symbolic(problem, node.carries), node.g)
+                break
+            if out_of_budget():
+                heapq.heappush(queue, entry)  # still open
+                break
+            children = entries(node)
+            for other in children[1:]:
+                heapq.heappush(queue, other)
+            entry = children[0] if children else None
+    else:
+        stopped = "gap closed" if best is not None else "exhausted"
+    # The bound of the best unexplored branch: the lowest lower bound left in the queue.
+    open_bounds = [entry[3] for entry in queue if best is None or entry[3] < best[0]]
+    lowest_open = min(open_bounds, default=np.inf)
+
+    seconds = time.perf_counter() - start
+    if best is None:
+        if stopped in ("exhausted", "gap closed"):
+            why = "; ".join(str(t[1]) for t in tried) or "no sequence of carries reaches B"
+            raise SearchError(f"{label}: no plan: every branch of the search explored ({expansions} expansions), "
+                              f"{why}", "unsolvable", float(lowest_open))
+        raise SearchError(f"{label}: {stopped} ran out before any plan was found ({solves} KOMO solves, "
+                          f"{expansions} expansions, {seconds:.1f} s); best lower bound {lowest_open:.4f} J s",
+                          "budget", float(lowest_open))
+    effort, result, bound = best
+    result.planning_time = seconds
+    return SearchResult(result, effort, min(float(lowest_open), effort), bound, solves, expansions, seconds, stopped,
+                        paper_effort, paper_symbolic, tried, komo_seconds)

@@ -1,0 +1,171 @@
+"""One run per output folder, and clearing an earlier run's outputs never reaches
+outside the folder (issue 27, items 3 and 10)."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from lgp.app.manifest import OutputFolderBusy, OutputLock, clear_previous
+from lgp.atomic import write_bytes_atomic
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+# ----------------------------------------------------------------------------- item 3: the lock
+
+
+def test_a_second_lock_on_a_folder_names_the_holder(tmp_path):
+    with OutputLock(tmp_path, "python -m lgp.reproduce --out x"):
+        with pytest.raises(OutputFolderBusy, match=rf"in use by another run \(process {os.getpid()}: python -m lgp.reproduce --out x\)"):
+            # flock locks are per open file: a second open in this process conflicts too
+            with OutputLock(tmp_path):
+                pass
+    with OutputLock(tmp_path):  # released on exit
+        pass
+
+
+def test_the_lock_is_released_when_its_holder_is_killed(tmp_path):
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from lgp.app.manifest import OutputLock\n"
+                               f"with OutputLock({str(tmp_path)!r}, 'holder'):\n    print('held', flush=True); time.sleep(60)"],
+                              env=ENV, stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline().strip() == "held"
+    with pytest.raises(OutputFolderBusy, match=f"process {holder.pid}: holder"):
+        with OutputLock(tmp_path):
+            pass
+    holder.send_signal(signal.SIGKILL)
+    holder.wait(10)
+    with OutputLock(tmp_path):
+        pass
+
+
+def test_a_run_in_a_held_folder_says_who_holds_it_and_touches_nothing(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "effort.csv").write_text("the other run's\n")
+    with OutputLock(out, "python -m lgp.reproduce --out out (the other run)"):
+        t0 = time.monotonic()
+        r = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--trials", "1E", "--samples", "1", "--n-sims", "2",
+                            "--out", str(out)], cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1, r.stderr[-2000:]
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("python -m lgp.reproduce: error: ") and \
+        f"in use by another run (process {os.getpid()}: python -m lgp.reproduce --out out (the other run))" in lines[0], r.stderr
+    assert (out / "effort.csv").read_text() == "the other run's\n"
+    assert time.monotonic() - t0 < 60
+
+
+def test_concurrent_writers_of_one_file_use_unique_temporary_names(tmp_path):
+    path, errors = tmp_path / "page" / "10E.png", []
+
+    def write(k):
+        try:
+            for _ in range(50):
+                write_bytes_atomic(bytes([k]) * 10000, path)
+        except Exception as e:  # a shared temporary name fails here (renamed away by the other)
+            errors.append(e)
+
+    threads = [threading.Thread(target=write, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+    data = path.read_bytes()
+    assert len(data) == 10000 and len(set(data)) == 1  # whole, one writer's
+    assert [p.name for p in path.parent.iterdir()] == ["10E.png"]
+
+
+@pytest.mark.slow
+def test_two_real_runs_in_one_folder_one_runs_the_other_is_refused(tmp_path):
+    out = tmp_path / "out"
+    first = subprocess.Popen([sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "3", "--n-sims", "20",
+                              "--sigmas", "0.05", "--jobs", "1", "--no-replays", "--out", str(out)],
+                             cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not (out / OutputLock.NAME).exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    second = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--trials", "1E", "--samples", "2", "--n-sims", "8",
+                             "--seed", "1", "--no-replays", "--out", str(out)], cwd=ROOT, env=ENV, capture_output=True,
+                            text=True, timeout=120)
+    _, err = first.communicate(timeout=300)
+    assert first.returncode == 0, err[-2000:]
+    assert second.returncode == 1 and f"process {first.pid}" in second.stderr, second.stderr
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["parameters"]["trials"] == ["7H", "4H"]
+    import hashlib
+
+    for f in manifest["files"]:  # the manifest describes the files in the folder
+        assert hashlib.sha256((out / f["path"]).read_bytes()).hexdigest() == f["sha256"], f["path"]
+
+
+# ----------------------------------------------------------------------------- item 10: clearing
+
+
+def _folder(tmp_path, listed):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "manifest.json").write_text(json.dumps({"files": [{"path": p} for p in listed]}))
+    return out
+
+
+def test_clearing_never_deletes_through_a_symlinked_subfolder(tmp_path):
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "important.txt").write_text("keep me")
+    out = _folder(tmp_path, ["page/important.txt", "effort.csv"])
+    (out / "page").symlink_to(elsewhere)
+    (out / "effort.csv").write_text("old")
+    said = []
+    removed = clear_previous(out, said.append)
+    assert (elsewhere / "important.txt").read_text() == "keep me"
+    assert not (out / "page").exists() and not (out / "page").is_symlink()  # the link went, as a link
+    assert "effort.csv" in removed and not (out / "effort.csv").exists()
+    assert said and "page/important.txt (under the symbolic link page)" in said[0]
+
+
+def test_clearing_removes_a_symlinked_file_as_a_link_and_ignores_paths_outside(tmp_path):
+    outside = tmp_path / "outside.csv"
+    outside.write_text("keep")
+    out = _folder(tmp_path, ["risk.csv", "../outside.csv", str(outside), "cache/risk-x.csv"])
+    (out / "risk.csv").symlink_to(outside)
+    (out / "cache").mkdir()
+    (out / "cache" / "risk-x.csv").write_text("entry")
+    clear_previous(out)
+    assert outside.read_text() == "keep" and not (out / "risk.csv").is_symlink()
+    assert (out / "cache" / "risk-x.csv").exists()
+
+
+def test_a_manifest_linked_to_dev_zero_is_not_read(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "manifest.json").symlink_to("/dev/zero")
+    (out / "report.md").write_text("old")
+    assert clear_previous(out) == ["manifest.json", "report.md"]
+
+
+def test_a_stop_before_any_result_does_not_claim_a_cache(tmp_path):
+    from lgp.reproduce import _resume_note, parse_args
+
+    args = parse_args(["--out", str(tmp_path / "out")])
+    assert _resume_note(args) == "nothing was cached yet (stopped before the first result)"
+    (tmp_path / "out" / "cache").mkdir(parents=True)
+    (tmp_path / "out" / "cache" / "effort-abc.csv").write_text("x")
+    assert _resume_note(args).startswith("finished trials are cached in")
+
+
+def test_a_compute_times_file_linked_to_dev_zero_is_not_read(tmp_path):
+    from lgp.app.manifest import TIMES, TimedCache
+
+    (tmp_path / "cache").mkdir()
+    (tmp_path / "cache" / TIMES).symlink_to("/dev/zero")
+    t0 = time.monotonic()
+    assert TimedCache(tmp_path / "cache").load_times() == {}
+    assert time.monotonic() - t0 < 5
