@@ -120,3 +120,20 @@ def test_bad_sigma_or_n_is_refused():
     for n in (-1, 0):  # risk is falls / n: no runs, no risk (never a NaN)
         with pytest.raises(ValueError, match="n_sims >= 1"):
             physical_risk(tower(2), 0.1, n_sims=n)
+
+
+def test_identical_scenes_are_simulated_once_with_the_same_numbers(monkeypatch):
+    import stimuli
+    from models.risk import core
+
+    trials = [stimuli.load_trial(t) for t in ("1H", "9E", "4H")]  # 1H and 9E: the same 6-tower
+    assert core.geometry_key(trials[0].target) == core.geometry_key(trials[1].target) != core.geometry_key(trials[2].target)
+    calls = []
+    real = core._simulate_runs
+    monkeypatch.setattr(core, "_simulate_runs", lambda scene, *a, **k: calls.append(scene.label) or real(scene, *a, **k))
+    table = risk_table(trials, [0.1, 0.2], n_sims=12, seed=1, jobs=1, runs=True)
+    assert trials[1].target.label not in calls and trials[0].target.label in calls
+    a, b = (table[table["trial"] == t].drop(columns="trial").reset_index(drop=True) for t in ("1H", "9E"))
+    pd.testing.assert_frame_equal(a, b)
+    alone = risk_table([trials[1]], [0.1, 0.2], n_sims=12, seed=1, jobs=1, runs=True)
+    pd.testing.assert_frame_equal(alone.drop(columns="trial"), b)  # what 9E gives simulated on its own

@@ -143,9 +143,17 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
     tables = {t.id: cache.get("riskruns", keys[t.id]) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
-    bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs")
-    for k in range(0, len(todo), chunk):
-        group = todo[k:k + chunk]
+    # a trial whose B is identical to another's has the same runs (models.risk.core.geometry_key):
+    # simulate one of each, give the others its runs under their own id
+    from models.risk.core import geometry_key
+
+    twins: dict[str, list] = {}
+    for t in todo:
+        twins.setdefault(geometry_key(t.target), []).append(t)
+    simulate = [group[0] for group in twins.values()]
+    bar = Progress("risk", len(simulate) * len(sigmas) * n_sims, "runs")
+    for k in range(0, len(simulate), chunk):
+        group = simulate[k:k + chunk]
         t0 = time.perf_counter()
         base = bar.done
         table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
@@ -153,7 +161,9 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
                            noise_rule=depends["noise_rule"], runs=True,
                            progress=lambda done, total: bar.advance(base + done - bar.done))[RUN_CACHE_COLUMNS]
         for t in group:
-            tables[t.id] = cache.put("riskruns", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
+            runs = table[table["trial"] == t.id].reset_index(drop=True)
+            for same in twins[geometry_key(t.target)]:
+                tables[same.id] = cache.put("riskruns", keys[same.id], runs.assign(trial=same.id))
         _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     if todo:
         bar.close()

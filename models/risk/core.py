@@ -155,6 +155,16 @@ def _scene_key(scene: Scene) -> str:
                   *(part for f in scene.fixed for part in (f.p_WO, f.size)))
 
 
+def geometry_key(scene: Scene) -> str:
+    """What a scene's noisy runs depend on besides sigma, n, seed, engine and rules:
+    every block's pose and size in order and the fixed boxes -- not the label or
+    the block names. Two trials with the same key (the identical 6-towers of 1H,
+    9E, 9H, 11E, 11H, for example) have the same runs to the bit, so a grid
+    simulates one of them (run_grid, lgp.app.stages.risk_tables)."""
+    return digest(*(part for b in scene.blocks for part in (b.p_WB, b.size, np.float64(b.yaw))),
+                  *(part for f in scene.fixed for part in (f.p_WO, f.size)))
+
+
 def check_stable(scene: Scene, engine: str | None = None, *, profile: str | None = None,
                  fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD) -> Rollout:
     """Simulate the unperturbed scene once (cached per scene, engine and early-stop
@@ -258,22 +268,28 @@ def run_grid(
     ids = list(trial_ids) if trial_ids is not None else [s.label for s in scenes]
     for scene in scenes:
         check_stable(scene, name, fall_rule=fall_rule, fall_threshold=fall_threshold)
-    normals = [draw_normals(n_sims, len(scene), seed) for scene in scenes]
+    # a scene identical to an earlier one (geometry_key) has the same runs: simulated once
+    first: dict[str, int] = {}
+    twin = [first.setdefault(geometry_key(scene), i) for i, scene in enumerate(scenes)]
+    unique = [i for i in range(len(scenes)) if twin[i] == i]
+    normals = {i: draw_normals(n_sims, len(scenes[i]), seed) for i in unique}
     jobs = (executor.jobs if executor is not None else default_jobs()) if jobs is None else max(1, int(jobs))
-    total = len(scenes) * len(sigmas) * n_sims
+    total = len(unique) * len(sigmas) * n_sims
     # chunks small enough to balance the load, large enough to amortise the model build
     chunk = max(1, min(n_sims, -(-total // (8 * jobs)))) if total else 1
     tasks = [
-        _Task(i, s, a, min(a + chunk, n_sims)) for i in range(len(scenes)) for s in sigmas for a in range(0, n_sims, chunk)
+        _Task(i, s, a, min(a + chunk, n_sims)) for i in unique for s in sigmas for a in range(0, n_sims, chunk)
     ]
     args = [(scenes[t.scene_index], t.sigma, normals[t.scene_index][t.start : t.stop], t.start, name, fall_rule, fall_threshold,
              noise_rule) for t in tasks]
     results = map_runs(args, total, executor, jobs, progress)
-    rows = []
+    by_scene: dict[int, list[dict]] = {}
     for t, res in zip(tasks, results):
-        for row in res:
-            rows.append({"trial": ids[t.scene_index], **row})
-    return pd.DataFrame(rows, columns=RUN_COLUMNS)  # tasks are in (scene, sigma, run) order
+        by_scene.setdefault(t.scene_index, []).extend(res)
+    rows = []
+    for i in range(len(scenes)):  # in (scene, sigma, run) order
+        rows += [{"trial": ids[i], **row} for row in by_scene.get(twin[i], [])]
+    return pd.DataFrame(rows, columns=RUN_COLUMNS)
 
 
 def wilson_interval(falls, n, z: float = WILSON_Z):
