@@ -133,6 +133,10 @@ def grids(args) -> int:
     ]
     for name, r in rows:
         lines.append(f"| {name} | {r['wall']:.1f} | {r['cpu']:.0f} | {r['risk']:.1f} |")
+    lines += ["", "The wide grid has 31/11 = 2.8x the runs, and a run past the paper's grid costs more: a falling run "
+              "simulates until a block has moved 1 d, a standing one stops at rest (mean simulated time per run 0.22 s "
+              "on the wide grid against 0.12 s on the paper's, MuJoCo, lift, N = 100). Trials whose B is identical "
+              "(1H = 9E = 9H = 11E = 11H, 2E = 2H) are simulated once in both runs."]
     lines += ["", f"Wide / default cold wall time: {sum(wide) / sum(base):.2f} (risk stage: "
               f"{sum(r['risk'] for n, r in rows if n.startswith('--')) / max(sum(r['risk'] for n, r in rows if not n.startswith('--')), 1e-9):.2f})."]
     write_section(args.out, "reproduce: wide sigma grid" + (" (--quick)" if args.quick else ""), "\n".join(lines))
