@@ -154,6 +154,15 @@ def plot_risk_over_sigma(table: pd.DataFrame, path: Path, dimensions: dict | Non
     return path
 
 
+def _krange(b) -> str:
+    """'>= 1.07' (every ratio of the sweep from there up), '0.5-3.2', or 'none'."""
+    if b["best"] == 0:
+        return "none"
+    if b["k_max"] >= _KAPPAS[-1]:
+        return "any" if b["k_min"] <= 0 else f">= {b['k_min']:.3g}"
+    return f"{b['k_min']:.3g}-{b['k_max']:.3g}"
+
+
 def _cell(r) -> str:
     return f"{r['risk_E']:.2f}/{r['risk_H']:.2f}" + ("*" if r["holds"] else "")
 
@@ -181,7 +190,7 @@ def report_lines(table: pd.DataFrame, precision: pd.DataFrame | None, figure: st
               "|---|" + "---|" * (len(pairs) + 2)]
     for sigma, g in _sigma_rows(table):
         b = best.loc[sigma]
-        krange = f"{b['k_min']:.3g}-{b['k_max']:.3g}" + ("+" if b["k_max"] >= _KAPPAS[-1] else "")
+        krange = _krange(b)
         lines.append(f"| {sigma:g} | " + " | ".join(_cell(g.loc[p]) if p in g.index else "" for p in pairs)
                      + f" | {int(b['best'])} of {int(b['of'])} | {krange} |")
     first = first_holding(table)
@@ -233,7 +242,7 @@ def page_section(table: pd.DataFrame, figure: Path | None, out: Path) -> str:
             cells.append(f'<td class="{"holds" if r["holds"] else ""}" title="{e(title)}">{e(_cell(r))}</td>')
         b = best.loc[sigma]
         body.append(f'<tr class="{paper}"><th>{sigma:g}</th>{"".join(cells)}<td>{int(b["best"])} of {int(b["of"])}</td>'
-                    f'<td>{b["k_min"]:.3g}-{b["k_max"]:.3g}</td></tr>')
+                    f'<td>{e(_krange(b))}</td></tr>')
     img = ""
     if figure is not None:
         rel = os.path.relpath(figure, out)
