@@ -28,7 +28,7 @@ from matplotlib.lines import Line2D
 
 from analysis.data import PAIRS, TRIAL_IDS, is_simulated_dataset, ordered_datasets
 from analysis.models import MODEL_LABELS, MODELS, effort_per_trial, full_model_cost, risk_at_sigma
-from analysis.pairs import TIE_REL, pair_table
+from analysis.pairs import PAPER_NO_DIFFERENCE, TIE_REL, pair_table
 
 EASY_COLOUR = "tab:red"
 HARD_COLOUR = "tab:blue"
@@ -159,7 +159,7 @@ def plot_sigma_profile(profile: pd.DataFrame, out_dir: str | Path,
 def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
                      out_dir: str | Path,
                      betas: Sequence[float] | Mapping[str, Sequence[float]] | None = None,
-                     stem: str = "effort_risk_pairs") -> list[Path]:
+                     stem: str = "effort_risk_pairs", names: Mapping[int, str] | None = None) -> list[Path]:
     """Per-pair effort, risk and full-model cost, easy (red) against hard (blue).
 
     Works without human data. `effort_by_trial` is anything `effort_per_trial`
@@ -167,8 +167,11 @@ def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
     `risk_table` has columns trial, sigma, risk and is read at `sigma`.
     `betas`, one (b0, b1, b2) or {name: (b0, b1, b2)} (e.g. fitted per dataset),
     adds one panel of Eq. 1 cost per entry. Each panel's title counts the pairs
-    whose easy trial is strictly lower; reversed pairs are shaded grey.
-    Returns the PNG and PDF paths.
+    whose easy trial is strictly lower. A pair the paper's participants judged alike
+    (PAPER_NO_DIFFERENCE: pair 11) is hatched blue, an expected tie; any other pair whose
+    easy trial is not lower is shaded red: there the quantity disagrees with the paper's
+    participants, who found H harder. `names` (pair ->
+    its dimension, e.g. "line vs. tower") label the x axis. Returns the PNG and PDF paths.
     """
     E = effort_per_trial(effort_by_trial)
     R = risk_at_sigma(risk_table, sigma)
@@ -188,8 +191,11 @@ def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
     for ax, (label, ylabel, values) in zip(axes, panels):
         table = pair_table(values)
         for k, row in table.iterrows():
-            if not row["E_lt_H"]:  # reversed or tied (analysis.pairs.TIE_REL)
-                ax.axvspan(row["pair"] - 0.45, row["pair"] + 0.45, color="0.88", zorder=0)
+            if int(row["pair"]) in PAPER_NO_DIFFERENCE:  # humans saw no difference: a tie is expected
+                ax.axvspan(row["pair"] - 0.45, row["pair"] + 0.45, facecolor="#e3eefa", edgecolor="#7fa7d6",
+                           hatch="///", lw=0, zorder=0)
+            elif not row["E_lt_H"]:  # reversed or tied (analysis.pairs.TIE_REL): disagrees with the paper
+                ax.axvspan(row["pair"] - 0.45, row["pair"] + 0.45, color="#f7d4d0", zorder=0)
             ax.plot([row["pair"] - 0.15, row["pair"] + 0.15], [row["cost_E"], row["cost_H"]],
                     "-", color="0.5", lw=1, zorder=1)
         ax.plot(pairs - 0.15, table["cost_E"], "o", color=EASY_COLOUR, label="easy (E)", zorder=2)
@@ -203,9 +209,19 @@ def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
         rest = f"; {'; '.join(notes)}" if notes else ""
         ax.set_title(f"{label}: E < H in {n_ok}/{len(PAIRS)} pairs{rest}", fontsize=9)
         ax.set_ylabel(ylabel, fontsize=9)
-    axes[0].legend(fontsize=8, frameon=False, loc="upper left")
-    axes[-1].set_xticks(pairs, [str(p) for p in PAIRS])
-    axes[-1].set_xlabel(f"pair (grey: easy trial not lower than hard; tie: |H - E| <= {TIE_REL:g} x max(E, H))")
+    from matplotlib.patches import Patch
+
+    handles, _ = axes[0].get_legend_handles_labels()
+    handles += [Patch(facecolor="#f7d4d0", label="E not lower than H here, though the paper's participants found H harder"),
+                Patch(facecolor="#e3eefa", edgecolor="#7fa7d6", hatch="///",
+                      label=f"pair {', '.join(map(str, sorted(PAPER_NO_DIFFERENCE)))}: the paper's participants saw no "
+                            "difference (a tie is expected)")]
+    fig.legend(handles=handles, fontsize=7.5, frameon=False, loc="outside lower center", ncols=2)
+    import textwrap
+
+    labels = [f"{p}\n" + "\n".join(textwrap.wrap(str(names[p]), 11)) if names and p in names else str(p) for p in PAIRS]
+    axes[-1].set_xticks(pairs, labels, fontsize=6.5 if names else None)
+    axes[-1].set_xlabel(f"pair (tie: |H - E| <= {TIE_REL:g} x max(E, H))")
     from_fits = list(betas) if isinstance(betas, Mapping) else []
     return _finish(fig, "Model quantities per easy/hard pair", from_fits, out_dir, stem)
 

@@ -22,6 +22,11 @@ from analysis.models import SIGMA_ATOL, ModelInputError, risk_at_sigma
 #: tied by the same rule only when (all but) equal.
 TIE_REL = 1e-4
 
+#: Pairs whose easy and hard trial the paper's participants judged alike ("The only
+#: exception is the pair 11E and 11H, where humans did not show any difference"):
+#: a tie there is expected, not a disagreement with the paper.
+PAPER_NO_DIFFERENCE = frozenset({11})
+
 
 #: The codes of `pair_order_codes`: 1 the easy trial is lower (E<H), 0 a tie, -1 reversed.
 ORDER_NAMES = {1: "E<H", 0: "tie", -1: "H<E"}

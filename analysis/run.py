@@ -30,7 +30,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
                  n_boot: int = 1000, jobs: int = 2, sigma: float | None = None,
                  sigmas=None, figures: bool = True, build_risk: pd.DataFrame | None = None,
                  risk_measure: str | None = None, compare: bool = True, n_perm: int = N_PERM,
-                 risk_draw: str = "binomial") -> dict[str, pd.DataFrame]:
+                 risk_draw: str = "binomial", pair_names: dict | None = None) -> dict[str, pd.DataFrame]:
     """Run the paper's analysis and write tidy CSVs and figures into `out_dir`.
 
     Parameters
@@ -113,7 +113,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
             "human_data": False, "simulated": False, "seed": seed, "n_boot": 0, "jobs": jobs,
             "sigma": sigma, "sigma_rule": rule}])
         if figures:
-            figure_paths += plot_effort_risk(E, risk_table, sigma, out_dir)
+            figure_paths += plot_effort_risk(E, risk_table, sigma, out_dir, names=pair_names)
         return _write(results, out_dir, "", figure_paths)
 
     if isinstance(human_df, (str, Path)):
@@ -211,7 +211,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         figure_paths += plot_effort_risk(
             E, risk_table, sigma, out_dir,
             betas={d: tuple(full.loc[d]) for d in ordered_datasets(full.index)},  # the paper's order, as every figure
-            stem=f"{prefix}effort_risk_pairs")
+            stem=f"{prefix}effort_risk_pairs", names=pair_names)
     return _write(results, out_dir, prefix, figure_paths)
 
 

@@ -8,11 +8,22 @@ import re
 from pathlib import Path
 
 
+def cpu_model() -> str:
+    """The CPU's model name from /proc/cpuinfo (the architecture where there is none)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def machine() -> str:
-    """Cores, architecture and load averages now (1, 5, 15 min)."""
+    """Cores, CPU model, architecture and load averages now (1, 5, 15 min)."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
-    return f"{os.cpu_count()} cores ({cores} usable), {platform.machine()}, load average {load} (1/5/15 min)"
+    return f"{os.cpu_count()} cores ({cores} usable), {cpu_model()}, {platform.machine()}, load average {load} (1/5/15 min)"
 
 
 def write_section(out: Path, name: str, text: str) -> None:

@@ -164,15 +164,15 @@ def trial_cases(tmp: Path):
 
 
 def crowded(tmp: Path):
-    old = stimuli.SCATTER_SECONDS
-    stimuli.SCATTER_SECONDS = 1.0
+    old = stimuli.start.SCATTER_SECONDS
+    stimuli.start.SCATTER_SECONDS = 1.0
     try:
         folder = Path(tempfile.mkdtemp(dir=tmp))
         (folder / "X1.yaml").write_text(X1.replace("count: 3", "count: 140").replace("x: [0.2, 0.55]", "x: [-0.2, 0.2]")
                                         .replace("y: [-0.25, 0.25]", "y: [0.1, 0.5]"))
         return stimuli.load_trial("X1", folder)
     finally:
-        stimuli.SCATTER_SECONDS = old
+        stimuli.start.SCATTER_SECONDS = old
 
 
 # ----------------------------------------------------------------------------- human data

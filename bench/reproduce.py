@@ -33,7 +33,7 @@ def run(args: list[str], out: Path) -> dict:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     before = os.times()
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--out", str(out), *args],
+    proc = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--out", str(out), "--verbose", *args],
                           cwd=ROOT, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     after = os.times()

@@ -154,31 +154,58 @@ def _nearest_existing(path: Path) -> Path:
     return path
 
 
+def _writable(directory: Path) -> bool:
+    """Whether a file can be made in `directory`: permissions, and one nameless
+    temporary file (O_TMPFILE: nothing appears in the folder), because root passes
+    every permission check yet cannot write in /proc or on a read-only mount."""
+    if not os.access(directory, os.W_OK | os.X_OK):
+        return False
+    import tempfile
+
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError:
+        return False
+    return True
+
+
 def output_dir(text: str) -> str:
     """A directory that exists and is writable, or can be created (its nearest
-    existing ancestor is a writable directory)."""
+    existing ancestor is a writable directory). The command creates it when it
+    writes (every CLI's rule: a missing output folder is created)."""
     path = Path(text)
     if path.exists() and not path.is_dir():
         raise argparse.ArgumentTypeError(f"{text!r} exists and is not a directory")
     base = _nearest_existing(path)
     if not base.is_dir():
         raise argparse.ArgumentTypeError(f"cannot create directory {text!r}: {base} is not a directory")
-    if not os.access(base, os.W_OK | os.X_OK):
+    if not _writable(base):
         raise argparse.ArgumentTypeError(f"cannot write to {text!r}: {base} is not writable")
     return text
 
 
 def output_file(text: str) -> str:
-    """A file to write whose directory already exists and is writable."""
+    """A file to write: not a directory; its folder exists and is writable, or can
+    be created (its nearest existing ancestor is a writable directory). Checked
+    before any work; the command creates the folder when it writes (`make_parent`)."""
     path = Path(text)
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{text!r} is a directory, expected a file name")
     parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise argparse.ArgumentTypeError(f"cannot write {text!r}: directory {str(parent)!r} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        raise argparse.ArgumentTypeError(f"cannot write {text!r}: not writable")
+    base = _nearest_existing(parent)
+    if not base.is_dir():
+        raise argparse.ArgumentTypeError(f"cannot write {text!r}: {str(base)!r} is not a directory")
+    if not _writable(base) or (path.exists() and not os.access(path, os.W_OK)):
+        raise argparse.ArgumentTypeError(f"cannot write {text!r}: {str(base)!r} is not writable")
     return text
+
+
+def make_parent(path: str | Path) -> Path:
+    """Create the folder of an output file (checked by `output_file`) and return the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
 
 
 def input_file(text: str) -> str:
@@ -324,3 +351,52 @@ def _interrupted(prog: str, message: str, debug: bool) -> int:
         traceback.print_exc()
     print(f"{prog}: {message}", file=sys.stderr, flush=True)
     return EXIT_INTERRUPTED
+
+
+# ----------------------------------------------------------------------------- measured times
+
+#: How long the README's commands took: rows written by ``python bench/commands.py``.
+COMMAND_TIMES = Path(__file__).resolve().parent.parent / "docs" / "command_times.csv"
+
+
+def _seconds(s: float) -> str:
+    if s < 10:
+        return f"{s:.1f} s"
+    if s < 120:
+        return f"{s:.0f} s"
+    return f"{int(s // 60)} min {s % 60:02.0f} s"
+
+
+def measured_time(command: str, path: Path | str | None = None) -> str | None:
+    """How long `command` (as the README writes it) took in the last ``bench/commands.py``
+    run, with the machine, as the one phrase README, ``--help`` and docs/results.md quote,
+    e.g. ``16 s cold (20 CPU-s), 2.1 s cached (--jobs 2); 25 s cold with --jobs 1 [2 cores,
+    AMD EPYC, load average 3.1-4.0; bench/commands.py]``. None when it was not measured (an
+    installed copy without docs/)."""
+    import csv
+
+    path = COMMAND_TIMES if path is None else Path(path)
+    try:
+        with open(path, newline="") as f:
+            rows = [r for r in csv.DictReader(f) if r["command"] == command]
+    except OSError:
+        return None
+    if not rows:
+        return None
+    at = {(int(r["jobs"]), r["cache"]): float(r["wall_s"]) for r in rows}
+    cpu = {(int(r["jobs"]), r["cache"]): float(r["cpu_s"]) for r in rows}
+    most = max(j for j, _ in at)
+    parts = []
+    if (most, "cold") in at:
+        # CPU seconds beside the wall time: they hardly change with the machine's load
+        parts.append(_seconds(at[most, "cold"]) + (" cold" if (most, "warm") in at else "")
+                     + (f" ({cpu[most, 'cold']:.0f} CPU-s)" if cpu[most, "cold"] >= 10 else ""))
+    if (most, "warm") in at:
+        parts.append(_seconds(at[most, "warm"]) + " cached")
+    text = ", ".join(parts) + (f" (--jobs {most})" if any(j != most for j, _ in at) else "")
+    others = sorted({j for j, _ in at if j != most}, reverse=True)
+    for j in others:
+        text += f"; {_seconds(at[j, 'cold'])} cold with --jobs {j}" if (j, "cold") in at else ""
+    loads = [float(r[k].split()[0]) for r in rows for k in ("load_before", "load_after")]
+    load = f"{min(loads):.1f}" if max(loads) - min(loads) < 0.05 else f"{min(loads):.1f}-{max(loads):.1f}"
+    return f"{text} [{rows[0]['cores']} cores, {rows[0]['cpu_model']}, load average {load}; bench/commands.py]"

@@ -1,7 +1,7 @@
 """The paper's pipeline end to end: stimuli -> physical effort -> physical risk ->
 (analysis, when human data are given) -> tidy CSVs, figures, report.md and the results page index.html (lgp/app/page.py).
 
-    python -m lgp.reproduce --quick                 # a small version, about a minute
+    python -m lgp.reproduce --quick                 # a low-precision preview (time: README, docs/benchmarks.md)
     python -m lgp.reproduce                         # M = 30 layouts, N = 100 runs, 11 sigmas
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
     python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule, effort by design (lgp/app/sensitivity/)
@@ -50,11 +50,18 @@ def _log(msg: str) -> None:
     progress_log(msg)  # stderr; above the progress bar on a terminal
 
 
+def _took(command: str) -> str:
+    """'; took 16 s cold, ... [machine]' from bench/commands.py's last run (lgp.cli.measured_time), or ''."""
+    text = cli.measured_time(command)
+    return f"; took {text}".replace("%", "%%") if text else ""
+
+
 def parse_args(argv=None) -> RunConfig:
     """The command line, checked: every count, sigma, trial id and path is refused
     here, in one line, before any work (lgp.cli); the run's RunConfig."""
     from lgp.app.build_risk import BUILD_SIGMAS
     from lgp.app.config import QUICK
+    from models.risk.engine import FALL_RULES
 
     D = RunConfig.default
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -76,7 +83,8 @@ def parse_args(argv=None) -> RunConfig:
                         "docs/risk.md)")
     p.add_argument("--engine", help="physics engine for risk: mujoco, drake, physx (optional extra) (default: mujoco)")
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
-    p.add_argument("--fall-rule", default=D("fall_rule"), help="a run falls by horizontal or 3d displacement (default %(default)s)")
+    p.add_argument("--fall-rule", default=D("fall_rule"), type=cli.one_of(FALL_RULES, "fall rule"),
+                   help="a run falls by horizontal or 3d displacement, case-insensitive (default %(default)s)")
     p.add_argument("--fall-threshold", type=float, default=D("fall_threshold"), help="fall threshold in units of d (default %(default)s)")
     p.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=None,
                    help="effort: vertical approach/retreat leg (m) at every grasp and place; 0 = a clearance constraint "
@@ -100,7 +108,9 @@ def parse_args(argv=None) -> RunConfig:
     p.add_argument("--max-participants", type=cli.positive_int, default=None,
                    help=f"with --human-data: most participants the file may hold (default {D('max_participants')}; memory grows with "
                         "participants x bootstrap resamples, docs/human-data.md)")
-    p.add_argument("--quick", action="store_true", help="small M, N and sigma grid: about a minute")
+    p.add_argument("--quick", action="store_true",
+                   help=f"a low-precision preview: M = {QUICK['samples']}, N = {QUICK['n_sims']}, {len(QUICK['sigmas'])} sigmas"
+                        + _took("python -m lgp.reproduce --quick"))
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=cli.positive_int, default=D("risk_chunk"), help="trials simulated per process-pool batch (an interruption loses at most one)")
@@ -123,6 +133,8 @@ def parse_args(argv=None) -> RunConfig:
                         f"--quick {QUICK['recovery_studies']})")
     p.add_argument("--participant-betas", choices=["shared", "participant"], default=D("participant_betas"),
                    help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
+    p.add_argument("--verbose", action="store_true",
+                   help="print a line per trial and stage as it finishes, and every file written at the end")
     sensitivity.add_arguments(p)
     args = p.parse_args(argv)
     try:  # bad engine, profile, rule or threshold: one line, before any work
@@ -221,7 +233,7 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
             import models.risk  # noqa: F401
         from models.effort import summarise_effort
         check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
-        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache,
+        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache, verbose=args.verbose,
                                        approach_height=args.approach_height, slices_per_phase=args.slices,
                                        **args.planner_choice())
         clock.lap("effort")
@@ -229,7 +241,7 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
         risk_runs: list = []
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
                            fall_rule=args.fall_rule, fall_threshold=args.fall_threshold, noise_rule=args.noise_rule,
-                           runs_out=risk_runs)
+                           runs_out=risk_runs, verbose=args.verbose)
         clock.lap("risk")
         sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log,
                                                                      effort_tables=effort_tables)) \
@@ -291,7 +303,8 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
                                 build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
-                                risk_measure=args.risk_measure, n_perm=args.n_perm)
+                                risk_measure=args.risk_measure, n_perm=args.n_perm,
+                                pair_names={t.pair: t.dimension for t in paper})
         written += [Path(path) for path in analysis["files"]["path"]]
         if args.recovery:
             from lgp.app.recovery import list_files, recovery_outputs
@@ -333,7 +346,8 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
                                over_sigma_html=over_html, precision=precision))
     if (out / "page").is_dir():
         written.append(out / "page")
-    _log(f"cache: {cache.summary()}")
+    if args.verbose:
+        _log(f"cache: {cache.summary()}")
     parameters = {"trials": [t.id for t in trials], "samples": args.samples, "n_sims": args.n_sims,
                   "sigmas": list(args.sigmas), "sigma_of_pairs": sigma if pairs is not None else None,
                   "engine": args.engine, "seed": args.seed, "n_boot": args.n_boot, "quick": args.quick,
@@ -351,10 +365,26 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
                               engine=engine_description(args.engine, software["engine"]), software=software,
                               run_time_s=round(time.perf_counter() - t0, 1),
                               compute_time_s=round(compute[0], 1), compute_time_unknown_results=compute[1])
-    print(f"Outputs of this run in {out.resolve()} (listed in {manifest.name}):")
-    for path in files + [manifest]:
-        print(f"  {path}")
+    if args.verbose:
+        print(f"Outputs of this run in {out.resolve()} (listed in {manifest.name}):")
+        for path in files + [manifest]:
+            print(f"  {path}")
+    print(end_of_run(time.perf_counter() - t0, cache, out, len(files)))
     return 0
+
+
+def end_of_run(seconds: float, cache, out: Path, n_files: int) -> str:
+    """The two lines a run ends with: how long, what was computed or reused, and
+    where to look ("done in 16 s (120 results computed, 0 reused from the cache);
+    open results/index.html")."""
+    extra = getattr(cache, "files", {})  # the page's pictures and replays, beside the result tables
+    computed = cache.misses + sum(n for (_, o), n in extra.items() if o == "miss")
+    reused = cache.hits + sum(n for (_, o), n in extra.items() if o == "hit")
+    took = f"{seconds:.0f} s" if seconds >= 10 else f"{seconds:.1f} s"
+    if seconds >= 120:
+        took = f"{int(seconds // 60)} min {seconds % 60:02.0f} s"
+    return (f"done in {took} ({computed} results computed, {reused} reused from the cache); open {out / 'index.html'}\n"
+            f"the {n_files} files written are listed in {out / 'manifest.json'} (--verbose prints them)")
 
 
 if __name__ == "__main__":

@@ -24,8 +24,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=cli.seed, default=0, help="seed of the run, as `lgp.reproduce --seed` (default 0)")
     parser.add_argument("--sample", type=cli.seed, default=0,
                         help="layout index K >= 0: replays row (trial, K) of effort_samples.csv (default 0)")
-    parser.add_argument("--html", type=cli.output_file, help="write a self-contained 3-D replay here (its folder must exist)")
-    parser.add_argument("--png", type=cli.output_file, help="write a figure of block paths and speeds here (its folder must exist)")
+    parser.add_argument("--html", type=cli.output_file, help="write a self-contained 3-D replay here (a missing folder is created)")
+    parser.add_argument("--png", type=cli.output_file, help="write a figure of block paths and speeds here (a missing folder is created)")
     parser.add_argument("--formulation", default="reduced", choices=("reduced", "full"))
     parser.add_argument("--solver", default="snopt", choices=("snopt", "ipopt"))
     parser.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=None,
@@ -65,9 +65,9 @@ def main(argv=None) -> int:
         from lgp.app.view import write_html, write_png
 
         if args.html:
-            print("replay:", write_html(result, args.html, title))
+            print("replay:", write_html(result, cli.make_parent(args.html), title))
         if args.png:
-            print("figure:", write_png(result, args.png, title))
+            print("figure:", write_png(result, cli.make_parent(args.png), title))
     return 0
 
 

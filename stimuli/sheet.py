@@ -13,8 +13,10 @@ import numpy as np
 
 import stimuli
 from lgp import cli
-from lgp.paper import COLOURS, display_hex
-from lgp.scene import Scene
+from dataclasses import replace
+
+from lgp.paper import BLOCK_SIZE, COLOURS, display_hex
+from lgp.scene import Block, Scene
 
 FACE_COLOURS = {c: display_hex(c) for c in COLOURS}
 
@@ -53,6 +55,60 @@ def draw_scene(ax, scene: Scene, title: str = "", limits=None) -> None:
     ax.set_title(title, fontsize=8)
 
 
+def finished_scene(A: Scene, B: Scene) -> Scene:
+    """What the table holds when B is built from A: B's blocks, and every block of A
+    that B does not need where A left it (pair 12's bucket keeps its 15 other blocks;
+    lgp.assignment: unassigned blocks stay where they are)."""
+    from lgp.assignment import assign_blocks
+
+    used = set(assign_blocks(A, B))
+    left = [b for b in A.blocks if b.name not in used]
+    taken = {b.name for b in B.blocks}
+    left = [replace(b, name=b.name if b.name not in taken else f"{b.name} (left)") for b in left]
+    return Scene(tuple(B.blocks) + tuple(left), B.fixed, B.label)
+
+
+def world_limits(*scenes: Scene, build_site=None, margin: float = 0.03):
+    """One view cube holding every scene (and the build site): A and B drawn in it share
+    their world axes, so a structure that moves (10E, 10H) is seen to move."""
+    P = np.vstack([s.positions for s in scenes] + [f.p_WO[None] for s in scenes for f in s.fixed]
+                  + ([np.array([[build_site[0], build_site[1], 0.0]])] if build_site is not None else []))
+    merged = Scene(tuple(Block(f"p{k}", p) for k, p in enumerate(P)))
+    return _fit_limits(merged, margin)
+
+
+def draw_table(ax, limits, build_site=None) -> None:
+    """The table top (z = 0) over the view, and the build site S marked on it."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    (x0, x1), (y0, y1), _ = limits
+    top = [np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])]
+    ax.add_collection3d(Poly3DCollection(top, facecolor=(0.80, 0.72, 0.60, 0.35), edgecolor=(0.5, 0.45, 0.4, 0.6), linewidths=0.4))
+    if build_site is not None:
+        r = 0.6 * BLOCK_SIZE
+        t = np.linspace(0, 2 * np.pi, 40)
+        ax.plot(build_site[0] + r * np.cos(t), build_site[1] + r * np.sin(t), np.zeros_like(t), color="k", lw=0.6, ls="--")
+        ax.plot([build_site[0] - r, build_site[0] + r], [build_site[1]] * 2, [0, 0], color="k", lw=0.5)
+        ax.plot([build_site[0]] * 2, [build_site[1] - r, build_site[1] + r], [0, 0], color="k", lw=0.5)
+
+
+def draw_trial(fig, trial, A: Scene, titles=("A: start", "B: finish"), position=(1, 2, 1)) -> list:
+    """A and B of `trial` on two 3-D axes of `fig` with the same world axes, the table
+    and the build site (dashed ring) drawn in both; B shows the blocks A leaves behind.
+    `position` = (rows, columns, index of A); B goes in the next cell. Returns the axes."""
+    B = finished_scene(A, trial.target)
+    site = trial.initial.build_site
+    limits = world_limits(A, B, build_site=site)
+    rows, cols, k = position
+    axes = []
+    for j, (scene, title) in enumerate(((A, titles[0]), (B, titles[1]))):
+        ax = fig.add_subplot(rows, cols, k + j, projection="3d")
+        draw_table(ax, limits, site)
+        draw_scene(ax, scene, title, limits)
+        axes.append(ax)
+    return axes
+
+
 def contact_sheet(trials, seed: int = 0, out: str = "stimuli.png") -> str:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -81,12 +137,12 @@ def main(argv=None) -> int:
     import argparse
 
     parser = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", default="stimuli.png", type=cli.output_file, help="PNG to write (its folder must exist)")
+    parser.add_argument("--out", default="stimuli.png", type=cli.output_file, help="PNG to write (a missing folder is created)")
     parser.add_argument("--seed", type=cli.seed, default=0)
     parser.add_argument("--trials", nargs="+", type=cli.trial_id, help="trial ids (default: all; case-insensitive)")
     args = parser.parse_args(argv)
     trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
-    print(contact_sheet(trials, args.seed, args.out))
+    print(contact_sheet(trials, args.seed, cli.make_parent(args.out)))
     return 0
 
 

@@ -165,11 +165,11 @@ def test_the_target_footprint_counts_against_the_scatter_region(tmp_path):
 def test_the_scatter_sampler_gives_up_in_bounded_time_with_one_line(tmp_path, monkeypatch):
     """A region that passes the area bound but jams random placement: the sampler
     stops after SCATTER_SECONDS and says so."""
-    monkeypatch.setattr(stimuli, "SCATTER_SECONDS", 0.5)
+    monkeypatch.setattr(stimuli.start, "SCATTER_SECONDS", 0.5)  # where the sampler reads it
     text = X1.replace("count: 3", "count: 140").replace("x: [0.2, 0.55]", "x: [-0.2, 0.2]").replace(
         "y: [-0.25, 0.25]", "y: [0.1, 0.5]")
     t0 = time.monotonic()
-    with deadline(20), pytest.raises(StimulusError, match=r"no layout found in 0.5 s .*too crowded \(stimuli.SCATTER_SECONDS"):
+    with deadline(20), pytest.raises(StimulusError, match=r"no layout found in 0.5 s .*too crowded \(stimuli.start.SCATTER_SECONDS"):
         stimuli.load_trial("X1", _trial_dir(tmp_path, text=text))
     assert time.monotonic() - t0 < 5
 
@@ -252,7 +252,7 @@ def test_physical_risk_refuses_bad_arguments_by_name(kwargs, message):
 
 def test_the_bootstrap_in_blocks_gives_the_same_numbers_as_all_at_once(monkeypatch):
     """Bounded memory for big files must not change a single resample."""
-    import analysis.data as data
+    import analysis.data.means as data  # where resample_trial_means reads BOOTSTRAP_BLOCK_BYTES
     from analysis.data import resample_trial_means, validate_human_data, zscore_responses
 
     z = zscore_responses(validate_human_data(_responses(37)))

@@ -110,7 +110,7 @@ def test_human_data_run_with_build_risk_models_and_participant_sigmas(tmp_path, 
     path = tmp_path / "sim.csv"
     simulate_participants(effort, grid, (0, 1, 3), 0.065, 5, 1.0, rng).to_csv(path, index=False)
     real = analysis.load_human_data
-    monkeypatch.setattr(analysis, "load_human_data", lambda p: real(p, allow_simulated=True))
+    monkeypatch.setattr(analysis, "load_human_data", lambda p, **k: real(p, **{**k, "allow_simulated": True}))
     out = tmp_path / "r"
     args = ["--samples", "1", "--n-sims", "2", "--sigmas", "0.065", "0.1", "--jobs", "2", "--n-boot", "20",
             "--no-replays", "--build-risk", "--risk-measure", "max", "--per-participant-sigma",
@@ -122,3 +122,21 @@ def test_human_data_run_with_build_risk_models_and_participant_sigmas(tmp_path, 
     assert len(sig) == 15 and sig["dataset"].str.startswith("simulated-").all()
     report = (out / "report.md").read_text()
     assert "Each participant's sigma" in report and "SIMULATED" in report and "sigma = 0.065 d (cells E / H" in report
+
+
+def test_build_risk_pairs_tie_by_the_one_rule():
+    """Issue 21: aggregate_pairs compared E < H raw, so two equal aggregates a
+    rounding apart (pair 11's care, 0.05 and 0.05 + 3e-17) came out ordered in one
+    run and not in another; analysis.pairs.pair_order ties them."""
+    from analysis.pairs import TIE_REL
+    from models.risk.build import MEASURES
+
+    rows = []
+    for pair in range(1, 13):
+        for level in "EH":
+            value = 0.05 + (2.8e-17 if (pair, level) == (11, "H") else 0.0) + (0.1 if (pair, level) == (4, "H") else 0.0)
+            value += 0.5 * TIE_REL * 0.05 if (pair, level) == (6, "H") else 0.0
+            rows.append({"trial": f"{pair}{level}", "sigma": 0.065, **{m: value for m in MEASURES}})
+    table = build_risk.aggregate_pairs(pd.DataFrame(rows)).set_index(["pair", "measure"])
+    assert not table.loc[(11, "care"), "E_lt_H"] and not table.loc[(6, "care"), "E_lt_H"]
+    assert table.loc[(4, "care"), "E_lt_H"] and table["E_lt_H"].sum() == len(MEASURES)

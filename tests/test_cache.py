@@ -220,8 +220,9 @@ def test_editing_a_module_the_computation_imports_changes_the_key(tmp_path):
     assert before == modules_digest("models.effort")  # same bytes, same key
 
     # symbolic is reached through lgp.planner, komo.linear through the lgp.komo
-    # package, stimuli through an import inside physical_effort.
-    for module in ("lgp/symbolic.py", "lgp/komo/linear.py", "lgp/executor.py", "stimuli/__init__.py", "models/effort/__init__.py"):
+    # package, executor.processes through the lgp.executor package, stimuli through
+    # an import inside physical_effort.
+    for module in ("lgp/symbolic.py", "lgp/komo/linear.py", "lgp/executor/processes.py", "stimuli/__init__.py", "models/effort/__init__.py"):
         path = root / module
         text = path.read_text()
         path.write_text(text + "\n# edited\n")

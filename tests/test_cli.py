@@ -60,8 +60,8 @@ BAD = [
     ("lgp.show", ["13E"], 1, "no trial '13E'"),
     ("lgp.show", ["7H", "--sample", "-1"], 2, "--sample"),
     ("lgp.show", ["7H", "--seed", "x"], 2, "--seed"),
-    ("lgp.show", ["7H", "--png", "/nonexistent/dir/x.png"], 2, "does not exist"),
-    ("lgp.show", ["7H", "--html", "/nonexistent/dir/x.html"], 2, "does not exist"),
+    ("lgp.show", ["7H", "--png", "/proc/x.png"], 2, "is not writable"),
+    ("lgp.show", ["7H", "--html", "{tmp}/a_file/x.html"], 2, "is not a directory"),
     ("lgp.reproduce", ["--out", "{out}", "--trials", "99X"], 2, "unknown trial id"),
     ("lgp.reproduce", ["--out", "{out}", "--trials"], 2, "--trials"),
     ("lgp.reproduce", ["--out", "{out}", "--trials", "13h"], 1, "no trial '13H'"),
@@ -97,14 +97,16 @@ BAD = [
      "--precision-levels: a precision level must be a risk in (0, 1)"),
     ("models.risk", ["--table", "{tmp}/t.csv", "--precision-levels", "0"], 2, "--precision-levels"),
     ("models.risk", ["--build-risk", "7H", "--mode", "parallel"], 2, "--mode: invalid choice: 'parallel' (choose from 'stages', 'sequential')"),
+    ("models.risk", ["--table", "{tmp}/a_file/dir/t.csv"], 2, "is not a directory"),
+    ("models.risk", ["--table", "/proc/t.csv"], 2, "is not writable"),
     ("models.effort", ["99X", "--out", "{tmp}/e.csv"], 2, "unknown trial id"),
     ("models.effort", ["7H", "--samples", "0", "--out", "{tmp}/e.csv"], 2, "--samples"),
-    ("models.effort", ["7H", "--out", "/nonexistent/dir/e.csv"], 2, "does not exist"),
+    ("models.effort", ["7H", "--out", "{tmp}/a_file/e.csv"], 2, "is not a directory"),
     ("analysis.demo", ["--results", "/nonexistent", "--out", "{out}"], 2, "does not exist"),
     ("analysis.demo", ["--results", "{tmp}/empty", "--out", "{out}"], 1, "effort_samples.csv does not exist"),
     ("analysis.demo", ["--results", "{tmp}/empty", "--out", "{out}", "--n-boot", "0"], 2, "--n-boot"),
     ("analysis.demo", ["--results", "{tmp}/garbage", "--out", "{out}"], 1, "not a readable CSV"),
-    ("stimuli.sheet", ["--out", "/nodir/s.png"], 2, "does not exist"),
+    ("stimuli.sheet", ["--out", "/proc/nodir/s.png"], 2, "is not writable"),
     ("stimuli.sheet", ["--out", "{tmp}/s.png", "--trials", "99X"], 2, "unknown trial id"),
     ("stimuli.sheet", ["--out", "{tmp}/s.png", "--trials"], 2, "--trials"),
 ]
@@ -132,6 +134,28 @@ def test_bad_input_fails_in_one_line_before_any_work_and_writes_nothing(module, 
     assert set(files_in(tmp_path)) == before  # nothing written anywhere
     assert not files_in(out)
     assert time.perf_counter() - t0 < 20  # refused before the expensive stages
+
+
+# (module, arguments) of a cheap run of each CLI that writes files; {new} is a folder that does not exist yet
+WRITERS = [
+    ("stimuli.sheet", ["--out", "{new}/sheet/s.png", "--trials", "1E"]),
+    ("models.risk", ["--table", "{new}/risk/t.csv", "--runs", "{new}/runs/r.csv", "--trials", "1E", "--n-sims", "2",
+                     "--sigmas", "0.05", "--jobs", "1"]),
+    ("models.effort", ["1E", "--samples", "1", "--jobs", "1", "--out", "{new}/effort/e.csv"]),
+]
+
+
+@pytest.mark.parametrize("module, argv", WRITERS, ids=[m for m, _ in WRITERS])
+def test_a_missing_output_folder_is_created(module, argv, tmp_path, capsys):
+    """The output-folder rule (README): a folder that does not exist is created,
+    by every CLI, as `lgp.reproduce --out a/missing/sub` does."""
+    new = tmp_path / "a" / "missing"
+    argv = [a.format(new=new) for a in argv]
+    got, err = run(module, argv, capsys)
+    assert got == 0, err
+    for k, a in enumerate(argv[:-1]):
+        if a in ("--out", "--table", "--runs"):
+            assert Path(argv[k + 1]).is_file() and Path(argv[k + 1]).stat().st_size > 0, argv[k + 1]
 
 
 def test_trial_ids_are_case_insensitive_on_the_command_line_and_in_the_loaders(tmp_path):
@@ -278,7 +302,7 @@ def _env():
     return {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 
 
-@pytest.mark.parametrize("argv, code", [(["-m", "lgp.show", "99X"], 2), (["-m", "stimuli.sheet", "--out", "/nodir/s.png"], 2),
+@pytest.mark.parametrize("argv, code", [(["-m", "lgp.show", "99X"], 2), (["-m", "stimuli.sheet", "--out", "/proc/nodir/s.png"], 2),
                                         (["-m", "lgp.reproduce", "--sigmas", "-0.05", "--out", "{tmp}/r"], 2)])
 def test_python_dash_m_commands_exit_with_one_line(argv, code, tmp_path):
     argv = [a.format(tmp=tmp_path) for a in argv]
@@ -304,3 +328,14 @@ def test_ctrl_c_during_a_run_prints_one_line_and_exits_130(tmp_path, after):
     assert "Traceback" not in rest
     last = rest.strip().splitlines()[-1]
     assert last == "python -m lgp.reproduce: interrupted; nothing cached (--no-cache)"
+
+
+def test_show_creates_missing_folders_and_prints_no_meshcat_server_line(tmp_path):
+    """The replay is a static HTML file: Drake's "Meshcat listening for connections"
+    log line would send a user to a server that is not needed (and gone at exit)."""
+    html, png = tmp_path / "new" / "a" / "9E.html", tmp_path / "new" / "b" / "9E.png"
+    proc = subprocess.run([sys.executable, "-m", "lgp.show", "9E", "--html", str(html), "--png", str(png)],
+                          capture_output=True, text=True, env=_env(), cwd=tmp_path, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert html.stat().st_size > 0 and png.stat().st_size > 0
+    assert "listening" not in proc.stdout + proc.stderr and "localhost" not in proc.stdout + proc.stderr, proc.stderr

@@ -25,7 +25,9 @@ def _on_disk(out: Path) -> set[str]:
 
 
 def _printed(stdout: str, out: Path) -> set[str]:
-    return {Path(line.strip()).resolve().relative_to(out.resolve()).as_posix() for line in stdout.splitlines()[1:]}
+    """The files `--verbose` prints at the end (indented lines), relative to `out`."""
+    return {Path(line.strip()).resolve().relative_to(out.resolve()).as_posix() for line in stdout.splitlines()
+            if line.startswith("  ")}
 
 
 def _participants(path: Path) -> str:
@@ -40,7 +42,7 @@ def _participants(path: Path) -> str:
 @pytest.mark.slow
 def test_each_run_lists_and_leaves_only_its_own_outputs_and_reports_true_times(tmp_path, capsys):
     out = tmp_path / "r"
-    assert reproduce.main([*TINY, "--out", str(out)]) == 0
+    assert reproduce.main([*TINY, "--out", str(out), "--verbose"]) == 0
     full = capsys.readouterr()
     assert _listed(out) == _on_disk(out)
     assert {"pairs.csv", "figures/orderings.csv", "figures/effort_risk_pairs.png", "report.md"} <= _listed(out)
@@ -63,7 +65,7 @@ def test_each_run_lists_and_leaves_only_its_own_outputs_and_reports_true_times(t
     assert "Without human data there are no fitted betas" in report
 
     # A subset run into the same folder: only its files are there and listed.
-    assert reproduce.main([*TINY, "--trials", "1e", "--out", str(out)]) == 0
+    assert reproduce.main([*TINY, "--trials", "1e", "--out", str(out), "--verbose"]) == 0
     subset = capsys.readouterr()
     assert "removed the outputs of an earlier run" in subset.err
     assert _listed(out) == _on_disk(out) == {"effort_samples.csv", "effort.csv", "risk.csv", "report.md", "index.html", "page/1E.png"}

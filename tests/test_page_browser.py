@@ -191,3 +191,98 @@ def test_replay_renders_the_blocks_in_their_placement_colours(browser, results):
     found = [name for name in order if _hue_pixels(centre, colours[name]) >= 10]
     assert len(found) >= 0.7 * len(order), f"block colours seen in the centre: {found} of {order}"
     assert _hue_pixels(centre, (0.9, 0.1, 0.9)) < 10  # magenta is in no block: the check can fail
+
+
+#: A number as a reader sees it on the page: not part of a word, a version or a date
+#: (3.11.7, 2026-12-01 and trial ids like 10E are not numbers here).
+_NUMBER = r"(?<![\w.\-/:])[-+]?(?:\d+\.\d+|\d+|\.\d+)(?:e[-+]?\d+)?(?![\w.\-/:]|\.\d)"
+
+
+def significant_digits(text: str) -> int:
+    """Significant digits of a number as written: 0.1159 -> 4, 2124 -> 4, 20000 -> 1, 4.2e-17 -> 2."""
+    mantissa = text.lower().lstrip("+-").split("e")[0]
+    if "." in mantissa:
+        return len(mantissa.replace(".", "").lstrip("0")) or 1
+    return len(mantissa.lstrip("0").rstrip("0")) or 1
+
+
+def test_significant_digits_counts_as_a_reader_would():
+    import re
+
+    assert [significant_digits(t) for t in ("0.1159", "2124", "20000", "4.2e-17", "0.116", "0", "12.50")] == [4, 4, 1, 2, 3, 1, 4]
+    found = re.findall(_NUMBER, "10E: 0.1159 J s, python 3.11.7, 2026-12-01 20:23 UTC, +126 %, 1.1e-16, sigma 0.065 d")
+    assert found == ["0.1159", "+126", "1.1e-16", "0.065"]
+
+
+def test_no_number_on_the_page_prints_more_than_four_significant_digits(browser, results):
+    import re
+
+    page, errors, _ = _open(browser, results / "index.html")
+    # what a reader sees: the visible text, less the command line and file paths (code)
+    text = page.evaluate("""(() => { const b = document.body.cloneNode(true);
+        b.querySelectorAll('code, script, style, details:not([open]) > :not(summary)').forEach(e => e.remove());
+        return b.innerText; })()""")
+    long = sorted({n for n in re.findall(_NUMBER, text) if significant_digits(n) > 4})
+    assert long == [], f"numbers with more than 4 significant digits: {long[:20]}"
+    assert not re.search(r"\bnan\b", text, flags=re.I), "a raw nan on the page"
+    assert "e-1" not in text, "round-off such as 4.2e-17 printed"
+    assert errors == []
+    page.close()
+
+
+def test_every_navigation_link_resolves(browser, results):
+    page, errors, _ = _open(browser, results / "index.html")
+    hrefs = page.evaluate("Array.from(document.querySelectorAll('nav a, .trialnav a, .card h3 a')).map(a => a.getAttribute('href'))")
+    assert len(hrefs) >= 24 + 5
+    ids = set(page.evaluate("Array.from(document.querySelectorAll('[id]')).map(e => e.id)"))
+    dead = [h for h in hrefs if (h[1:] not in ids if h.startswith("#") else not (results / h.split("#")[0]).exists())]
+    assert dead == [], f"links that lead nowhere: {dead}"
+    assert errors == []
+    page.close()
+
+
+def test_a_and_b_of_a_moved_tower_differ_on_the_page(browser, results):
+    """10E moves a 4-block tower 10 cm: on one world frame its A and B pictures differ."""
+    from PIL import Image
+
+    page, errors, _ = _open(browser, results / "index.html")
+    img = page.locator("#trial-10E img")
+    assert img.evaluate("i => i.complete && i.naturalWidth") > 0
+    shot = np.asarray(Image.open(io.BytesIO(img.screenshot())).convert("RGB"), dtype=float) / 255.0
+    w = shot.shape[1] // 2
+    differ = np.abs(shot[:, :w] - shot[:, w:2 * w]).max(axis=-1) > 0.1
+    assert differ.mean() > 0.01, f"A and B of 10E look the same ({differ.mean():.2%} of pixels differ)"
+    assert errors == []
+    page.close()
+
+
+def test_a_replay_links_back_to_its_card_and_has_a_visible_play_pause(browser, results):
+    page, errors, refused = _open(browser, results / "replays" / "7H.html")
+    page.wait_for_function("typeof viewer !== 'undefined' && viewer.animator.duration > 0", timeout=20000)
+    back = page.locator("#lgp-back")
+    assert back.is_visible() and back.get_attribute("href") == "../index.html#trial-7H"
+    button = page.locator("#lgp-play")
+    assert button.is_visible()
+    playing = page.evaluate("viewer.animator.playing")
+    button.click()
+    assert page.evaluate("viewer.animator.playing") == (not playing)
+    assert ("play" in button.inner_text()) == playing  # the label says what a click does next
+    back.click()
+    page.wait_for_load_state("load")
+    assert page.url.endswith("index.html#trial-7H")
+    assert page.evaluate("document.querySelector(':target').id") == "trial-7H"
+    assert errors == [] and refused == []
+    page.close()
+
+
+@pytest.mark.parametrize("width, name", [(1280, "results_page.png"), (390, "results_page_phone.png")])
+def test_the_page_fits_a_laptop_and_a_phone(browser, results, width, name):
+    page = browser.new_page(viewport={"width": width, "height": 800 if width > 600 else 844})
+    page.goto((results / "index.html").resolve().as_uri())
+    page.wait_for_load_state("load")
+    # nothing but wide tables (which scroll in their own box) pushes the page sideways
+    overflow = page.evaluate("document.documentElement.scrollWidth - document.documentElement.clientWidth")
+    assert overflow <= 2, f"the page is {overflow} px wider than a {width} px screen"
+    assert page.locator("#quick").is_visible()  # a --quick page says it is a preview
+    _keep(page, name)
+    page.close()

@@ -29,6 +29,8 @@ def test_plan_repr_is_one_short_line():
     text = repr(p)
     assert "\n" not in text and len(text) < 300, text
     assert f"{len(p.actions)} actions" in text and trial.target.label.split("-")[0] in text
+    # no optimiser cost that a reader takes for the effort (that is models.effort.kinetic_energy(plan))
+    assert "cost" not in text and "effort" not in text, text
 
 
 # ----------------------------------------------------------------------------- the README's commands
@@ -52,6 +54,10 @@ ROOT = README.parent
 PLACEHOLDERS = {"DIR": "generated", "N": "3", "S": "0", "FILE.csv": "human.csv", "H": "0.02"}
 #: Commands whose run is the paper's pipeline (minutes): parsed, not run.
 PARSED_ONLY = ("lgp.reproduce",)
+#: Commands that read the results of an `lgp.reproduce` run: their --help runs here,
+#: their work in the test named (which makes the results first).
+NEEDS_A_RUN = {"analysis.demo": "tests/test_analysis_simulated.py::test_demo_labels_every_output_as_simulated",
+               "analysis.recovery": "tests/test_analysis_compare.py::test_recovery_confusion_matrix_and_its_seeds"}
 
 
 def readme_commands(text: str | None = None) -> list[str]:
@@ -106,7 +112,17 @@ def _runnable(commands: list[str]) -> list[str]:
     """The commands to run: not the pipeline's or pytest's, and not a bare module name
     (the layout table's `python -m lgp.show`) when the README shows that module's use."""
     used = {_argv(c)[0] for c in commands if _argv(c)[1]}
-    return [c for c in commands if _argv(c)[0] not in PARSED_ONLY + ("pytest",) and (_argv(c)[1] or _argv(c)[0] not in used)]
+    return [c for c in commands if _argv(c)[0] not in PARSED_ONLY + ("pytest", *NEEDS_A_RUN)
+            and (_argv(c)[1] or _argv(c)[0] not in used)]
+
+
+@pytest.mark.parametrize("command", [c for c in readme_commands() if _argv(c)[0] in NEEDS_A_RUN])
+def test_the_readmes_commands_on_a_runs_results_have_their_cli(command):
+    module, _ = _argv(command)
+    assert (ROOT / NEEDS_A_RUN[module].split("::")[0]).exists()
+    run = subprocess.run([sys.executable, "-m", module, "--help"], cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and "usage:" in run.stdout, run.stderr
 
 
 @pytest.mark.slow
@@ -121,3 +137,41 @@ def test_the_readmes_commands_run_as_written(command, tmp_path):
         if flag in argv:
             target = tmp_path / argv[argv.index(flag) + 1]
             assert target.exists() and (target.is_dir() or target.stat().st_size > 0), (command, target)
+
+
+# ----------------------------------------------------------------------------- the README's times
+
+
+def _measured() -> dict[str, str]:
+    import csv
+
+    from lgp.cli import COMMAND_TIMES, measured_time
+
+    with open(COMMAND_TIMES, newline="") as f:
+        commands = list(dict.fromkeys(r["command"] for r in csv.DictReader(f)))
+    return {c: measured_time(c) for c in commands}
+
+
+def test_every_time_in_the_readme_is_one_bench_run_quoted_with_its_machine():
+    """README, `lgp.reproduce --help` and docs/results.md quote the same figures,
+    those of the last `python bench/commands.py` run (docs/command_times.csv), each with
+    the machine (cores, CPU model, load average); no hand-kept test counts."""
+    measured = _measured()
+    assert {"python -m lgp.reproduce --quick", "python -m lgp.reproduce"} <= set(measured), measured
+    readme = " ".join(README.read_text().split())
+    for command, phrase in measured.items():
+        assert "cores" in phrase and "load average" in phrase, phrase
+        assert phrase in readme, f"README does not quote {command!r} as measured: {phrase!r}"
+    results = " ".join((ROOT / "docs" / "results.md").read_text().split())
+    assert measured["python -m lgp.reproduce"] in results, "docs/results.md does not quote the full run's time"
+    assert not re.search(r"\b\d{3,} (?:tests|passed)\b", readme), "a hand-kept test count in the README"
+    assert "@@" not in readme
+
+
+def test_help_of_quick_quotes_the_same_time(capsys):
+    from lgp import reproduce
+
+    with pytest.raises(SystemExit):
+        reproduce.parse_args(["--help"])
+    text = "".join(capsys.readouterr().out.split())  # argparse wraps lines (also after hyphens)
+    assert "".join(_measured()["python -m lgp.reproduce --quick"].split()) in text

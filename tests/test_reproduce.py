@@ -14,7 +14,8 @@ import models.effort
 import models.risk
 from lgp import reproduce
 
-ARGS = ["--trials", "9E", "10E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.05", "0.1", "--jobs", "1", "--seed", "3"]
+ARGS = ["--trials", "9E", "10E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.05", "0.1", "--jobs", "1", "--seed", "3",
+        "--verbose"]  # --verbose: the per-trial lines and the cache summary line these tests read
 
 
 def _cache_counts(err: str, kinds=("effort", "risk")) -> dict:

@@ -78,7 +78,10 @@ def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, engi
 
 
 def aggregate_pairs(aggregates: pd.DataFrame) -> pd.DataFrame:
-    """Per (sigma, pair, measure): the aggregate of E and of H and whether E < H."""
+    """Per (sigma, pair, measure): the aggregate of E and of H and whether E < H
+    under the one tie rule (analysis.pairs.pair_order: a difference within TIE_REL
+    is a tie, not an order, so two equal aggregates a rounding apart stay tied)."""
+    from analysis.pairs import pair_order
     from models.risk.build import MEASURES
 
     rows = []
@@ -89,7 +92,7 @@ def aggregate_pairs(aggregates: pd.DataFrame) -> pd.DataFrame:
             if e not in by.index or h not in by.index:
                 continue
             for m in MEASURES:
-                rows.append((sigma, pair, m, by.at[e, m], by.at[h, m], bool(by.at[e, m] < by.at[h, m])))
+                rows.append((sigma, pair, m, by.at[e, m], by.at[h, m], pair_order(by.at[e, m], by.at[h, m]) == "E<H"))
     return pd.DataFrame(rows, columns=["sigma", "pair", "measure", "E", "H", "E_lt_H"])
 
 

@@ -6,6 +6,26 @@ from __future__ import annotations
 import numpy as np
 
 
+#: No number on the page prints more than this many significant digits.
+DIGITS = 4
+
+
+def num(v, digits: int = DIGITS) -> str:
+    """A number for a reader: at most `digits` significant digits ("0.1159", "2124",
+    "1.5e-05"); nan/None -> "n/a"."""
+    if v is None:
+        return "n/a"
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return str(v)
+    if not np.isfinite(x):
+        return "n/a" if np.isnan(x) else ("inf" if x > 0 else "-inf")
+    if x == int(x) and abs(x) < 1e6 and len(str(abs(int(x))).rstrip("0")) <= digits:
+        return str(int(x))  # 2124, 20000, 26400: whole numbers as written
+    return f"{x:.{digits}g}"
+
+
 def histogram_svg(values, width: int = 150, height: int = 44, bins: int = 10) -> str:
     """A tiny histogram of `values` as inline SVG (axis: min and max printed below)."""
     v = np.asarray(values, dtype=float)
@@ -25,10 +45,23 @@ def histogram_svg(values, width: int = 150, height: int = 44, bins: int = 10) ->
             f'<text x="0" y="{height - 1}">{lo:.3g}</text><text x="{width}" y="{height - 1}" text-anchor="end">{hi:.3g}</text></svg>')
 
 
+#: Tops of the risk mini-plot's y axis: the smallest that holds the curve.
+RISK_TOPS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
+
+
+def risk_top(risks) -> float:
+    """The y-axis top of a risk curve: the smallest of RISK_TOPS at or above its
+    maximum (a curve of 0.02 is not drawn flat on 0..1); 1 for an all-zero curve."""
+    peak = float(np.nanmax(np.asarray(risks, dtype=float))) if len(risks) else 0.0
+    return 1.0 if peak <= 0 else next(t for t in RISK_TOPS if t >= peak - 1e-12)
+
+
 def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height: int = 70) -> str:
-    """Risk over sigma as inline SVG: y from 0 to 1, x over the run's sigma grid."""
+    """Risk over sigma as inline SVG: y from 0 to the curve's `risk_top` (written on
+    the axis), x over the run's sigma grid."""
     s = np.asarray(sigmas, dtype=float)
     r = np.asarray(risks, dtype=float)
+    y_top = risk_top(r)
     left, bottom, top = 22, 14, 4
     pw, ph = width - left - 4, height - bottom - top
     s0, s1 = float(s.min()), float(s.max())
@@ -38,7 +71,7 @@ def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height:
         return left + pw * ((x - s0) / span if s1 > s0 else 0.5)
 
     def Y(y):
-        return top + ph * (1 - y)
+        return top + ph * (1 - y / y_top)
 
     pts = " ".join(f"{X(a):.1f},{Y(b):.1f}" for a, b in zip(s, r))
     dots = "".join(f'<circle cx="{X(a):.1f}" cy="{Y(b):.1f}" r="2"><title>sigma {a:g} d: risk {b:.2f}</title></circle>' for a, b in zip(s, r))
@@ -48,5 +81,5 @@ def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height:
     return (f'<svg class="risk" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img" aria-label="risk over sigma">'
             f'<rect class="frame" x="{left}" y="{top}" width="{pw}" height="{ph}"/>{marker}'
             f'<polyline points="{pts}"/>{dots}'
-            f'<text x="{left - 2}" y="{top + 7}" text-anchor="end">1</text><text x="{left - 2}" y="{top + ph}" text-anchor="end">0</text>'
+            f'<text x="{left - 2}" y="{top + 7}" text-anchor="end">{num(y_top)}</text><text x="{left - 2}" y="{top + ph}" text-anchor="end">0</text>'
             f'<text x="{left}" y="{height - 2}">{s0:g}</text><text x="{left + pw}" y="{height - 2}" text-anchor="end">{s1:g} d</text></svg>')

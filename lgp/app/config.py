@@ -65,6 +65,8 @@ class RunConfig:
     quick: bool = False
     no_cache: bool = False
     no_replays: bool = False
+    #: --verbose: a line per trial and stage as it finishes, and every file written at the end
+    verbose: bool = False
     risk_chunk: int = 6
     build_risk: bool = False
     build_sigmas: tuple[float, ...] | None = None

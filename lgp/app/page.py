@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import datetime
 import html
+from collections import Counter
 import os
 import platform
 import sys
@@ -25,20 +26,26 @@ import pandas as pd
 
 from lgp.app.cache import Cache, library_versions
 from lgp.app.files import write_text_atomic
-from lgp.app.report import ratio_text
-from lgp.app.charts import histogram_svg, risk_svg
+from lgp.app.report import ratio_text, sigma_edge_warnings
+from lgp.app.charts import histogram_svg, num, risk_svg, risk_top
 from lgp.app.pictures import rendered_trial_pictures
 from lgp.errors import InputError
+
+#: A spread of effort over layouts below this fraction of the mean is round-off of
+#: one and the same plan (a fixed layout of A: 10E's 4.2e-17 on 0.1159 J s), not variation.
+PLAN_NOISE = 1e-9
 
 #: Libraries named on the page (the cache keys name their own).
 LIBRARIES = ("drake", "mujoco", "numpy", "scipy", "pandas", "matplotlib", "pyyaml")
 
 CAPTIONS = {
     "effort_risk_pairs": "Physical effort (J s, mean over layouts) and physical risk (fraction of noisy runs "
-                         "that fall) of every trial, easy and hard of each pair joined.",
-    "fig3_trial_means": "Figure 3 of the paper: mean z-scored judgments per trial (large points, 95% bootstrap "
+                         "that fall) of every trial, easy and hard of each pair joined, pairs named by what they vary. "
+                         "Red: E not lower than H, though the paper's participants found H harder; blue hatched: "
+                         "pair 11, where they saw no difference (a tie is expected).",
+    "fig3_trial_means": "Analogue of the paper's Figure 3, from the data given: mean z-scored judgments per trial (large points, 95% bootstrap "
                         "intervals) and the fitted full model (small points), per dataset.",
-    "fig4_model_correlations": "Figure 4 of the paper: correlation of the full model, effort alone and risk alone "
+    "fig4_model_correlations": "Analogue of the paper's Figure 4, from the data given: correlation of the full model, effort alone and risk alone "
                                "with each dataset, 95% intervals from the bootstrap over participants.",
     "sigma_profile": "RMSE of the fitted full model (Eq. 1) over the noise level sigma, per dataset; "
                      "the chosen sigma marked.",
@@ -65,10 +72,33 @@ def _fmt(v) -> str:
     if isinstance(v, (bool, np.bool_)):
         return "yes" if v else "no"
     if isinstance(v, (float, np.floating)):
-        if not np.isfinite(v):
-            return str(v)
-        return f"{v:.4g}"
+        return num(v)
+    if v is None or (isinstance(v, str) and v.strip().lower() == "nan"):
+        return "n/a"
     return str(v)
+
+
+def plus_minus(mean: float, sd: float, unit: str, n: int) -> str:
+    """"0.1159 &plusmn; 0.0021 J s", the sd rounded to 2 digits and the mean to the
+    sd's last digit; a spread below the plan noise (all layouts give the same plan up
+    to round-off, e.g. 4.2e-17) reads "fixed layout" or "same for every layout"."""
+    if n <= 1 or not np.isfinite(sd) or sd <= PLAN_NOISE * max(abs(mean), 1e-12):
+        return f"{num(mean)} {unit} <small>(same for every layout)</small>" if n > 1 else f"{num(mean)} {unit}"
+    decimals = max(0, 1 - int(np.floor(np.log10(sd))))
+    return f"{num(round(mean, decimals))} &plusmn; {num(float(f'{sd:.2g}'))} {unit}"
+
+
+def p_value(p, n_resamples: int | None) -> str:
+    """A bootstrap p value: "< 1/200" when no resample of 200 crossed, else at most 2 digits."""
+    try:
+        p = float(p)
+    except (TypeError, ValueError):
+        return "n/a"
+    if not np.isfinite(p):
+        return "n/a"
+    if p == 0 and n_resamples:
+        return f"< 1/{int(n_resamples)}"
+    return num(p, 2)
 
 
 def table_html(df: pd.DataFrame, cls: str = "sortable", row_attrs=None, max_rows: int | None = None) -> str:
@@ -87,25 +117,122 @@ def table_html(df: pd.DataFrame, cls: str = "sortable", row_attrs=None, max_rows
 # ----------------------------------------------------------------------------- sections
 
 
+#: What a cache entry of each kind is, in words (the page's run section).
+CACHE_WORDS = {"effort": "effort tables (one per trial)", "risk": "risk curves (one per trial)",
+               "stable": "checks that B stands", "picture": "trial pictures", "replay": "3-D replays"}
+
+
+def cache_words(counts: dict) -> str:
+    """{(kind, outcome): n} as "reused from the cache: 24 effort tables ...; computed: ..."."""
+    parts = []
+    for outcome, word in (("hit", "reused from the cache"), ("miss", "computed")):
+        items = [f"{n} {CACHE_WORDS.get(kind, kind.replace('_', ' '))}" for (kind, o), n in sorted(counts.items()) if o == outcome and n]
+        if items:
+            parts.append(f"{word}: {', '.join(items)}")
+    return "; ".join(parts) or "nothing looked up"
+
+
+def _seconds(s) -> str:
+    s = float(s)
+    return f"{num(s, 2)} s" if s < 10 else (f"{s:.0f} s" if s < 120 else f"{int(s // 60)} min {s % 60:02.0f} s")
+
+
 def _run_section(run: dict) -> str:
+    key = run.get("key", {})
+    rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in key.items())
     chips = " ".join(f"<code>{_e(k)}={_e(v)}</code>" for k, v in run.get("parameters", {}).items())
     versions = pd.DataFrame(list(library_versions(LIBRARIES).items()), columns=["library", "version"])
-    stages = pd.DataFrame(list(run.get("stages", {}).items()), columns=["stage", "wall time (s)"])
+    stages = pd.DataFrame([(k, num(v, 3)) for k, v in run.get("stages", {}).items()], columns=["stage", "wall time (s)"])
     settings = pd.DataFrame(list(run.get("engine_settings", {}).items()), columns=["setting", "value"])
     cache = run.get("cache", {})
     total = sum(run.get("stages", {}).values())
+    compute = run.get("compute_s")
+    times = f"this run took {_seconds(total)} of wall time"
+    if compute is not None:
+        times += (f"; computing its effort and risk results took {_seconds(compute)} (the time each part took "
+                  "when it was computed, cached parts included)")
     return f"""
 <section id="run"><h2>The run</h2>
 <p class="cmd"><code>{_e(run.get("command", ""))}</code></p>
-<p>Finished {_e(run.get("finished", ""))}; wall time {total:.1f} s in all on {_e(run.get("machine", platform.node()))}
-({_e(run.get("load", ""))}). Cache: {cache.get("hits", 0)} results reused, {cache.get("misses", 0)} computed
-(<code>{_e(cache.get("root", ""))}</code>: {_e(cache.get("summary", ""))}).</p>
-<p class="params"><b>Parameters</b> {chips}</p>
+<table class="plain key"><caption>The settings that define these results</caption>{rows}</table>
+<p>Finished {_e(run.get("finished", ""))}: {_e(times)}, on {_e(run.get("machine", platform.node()))}
+({_e(run.get("load", ""))}). {cache.get("hits", 0)} results reused from the cache, {cache.get("misses", 0)} computed
+({_e(cache.get("words", ""))}).</p>
+<details><summary>Every parameter, wall time per stage, the risk engine's settings, library versions</summary>
+<p class="params">{chips}</p>
+<p>Cache folder <code>{_e(cache.get("root", ""))}</code>.</p>
 <div class="grid4">
 <div><h3>Wall time per stage</h3>{table_html(stages)}</div>
 <div><h3>Risk engine: {_e(run.get("engine", ""))}</h3>{table_html(settings, "plain")}</div>
 <div><h3>Libraries</h3>{table_html(versions, "plain")}</div>
-</div></section>"""
+</div></details></section>"""
+
+
+def _quick_banner(run: dict) -> str:
+    if not run.get("quick"):
+        return ""
+    key = run.get("key", {})
+    return (f'<p class="banner" id="quick">Low-precision preview (<code>--quick</code>: M = {_e(key.get("M, layouts of A per trial", 3))} '
+            f'layouts, N = {_e(key.get("N, noisy runs per trial and sigma", 20))} runs, sigmas {_e(key.get("sigmas (units of d)", ""))}): '
+            "numbers are noisier than the paper's; run without <code>--quick</code> for the full reproduction.</p>")
+
+
+def _docs_link(name: str, out: Path, text: str) -> str:
+    """A link to docs/<name> of this checkout, relative to the page (text only when
+    the page lives where the docs cannot be reached, e.g. an installed copy)."""
+    from lgp.app.cache import ROOT
+
+    target = ROOT / "docs" / name
+    if not target.exists():
+        return f"{_e(text)} (docs/{_e(name)})"
+    return f'<a href="{_e(os.path.relpath(target, out))}">{_e(text)}</a>'
+
+
+def risk_explanation(risk: pd.DataFrame, sigma: float, trials, out: Path) -> str:
+    """One sentence on what a reader sees in the risk numbers: how many trials never
+    fall at the pairs' sigma, and which trials have the very same curve (equal
+    structures perturbed with the same random numbers), with the link to docs/risk.md."""
+    at = risk[np.isclose(risk["sigma"].astype(float), sigma)]
+    zero = sorted(at.loc[at["risk"] == 0, "trial"].astype(str), key=[t.id for t in trials].index)
+    curves: dict[tuple, list[str]] = {}
+    for tid, g in risk.groupby("trial", sort=False):
+        c = tuple(np.round(g.sort_values("sigma")["risk"].to_numpy(dtype=float), 12))
+        if any(c):
+            curves.setdefault(c, []).append(str(tid))
+    same = [ids for ids in curves.values() if len(ids) > 1]
+    text = (f"At sigma = {num(sigma)} d, B of {len(zero)} of the {at['trial'].nunique()} trials stood in every noisy run "
+            f"(risk 0): noise of sd {num(sigma)} d per block seldom shifts a block the ~0.5 d past its support's edge that tipping needs. ")
+    if same:
+        text += ("Trials with the same structure have identical risk curves ("
+                 + "; ".join(" = ".join(ids) for ids in same)
+                 + ") because every trial is perturbed with the same random numbers (common random numbers: equal "
+                   "structures get equal risks, and a difference between trials is not blurred by independent noise). ")
+    else:
+        text += "Every trial is perturbed with the same random numbers (common random numbers): equal structures get equal curves. "
+    return _e(text) + "Why: " + _docs_link("risk.md", out, "docs/risk.md") + "."
+
+
+def key_settings(args, trials) -> dict:
+    """The few settings that define a run's results (the rest are folded on the page)."""
+    from lgp.paper import TRIAL_IDS
+
+    ids = [t.id for t in trials]
+    shown = "the paper's 24" if sorted(ids) == sorted(TRIAL_IDS) else (", ".join(ids) if len(ids) <= 12 else f"{', '.join(ids[:10])} ...")
+    sigmas = getattr(args, "sigmas", ()) or ()
+    engine = getattr(args, "engine", None) or "mujoco"
+    design = getattr(args, "approach_height", None)
+    return {
+        "trials": f"{len(ids)} ({shown})",
+        "M, layouts of A per trial": getattr(args, "samples", ""),
+        "N, noisy runs per trial and sigma": getattr(args, "n_sims", ""),
+        "sigmas (units of d)": ", ".join(num(x) for x in sigmas) if len(sigmas) <= 6 else
+                               f"{len(sigmas)} from {num(min(sigmas))} to {num(max(sigmas))}",
+        "risk engine": engine + (f" ({args.profile} profile)" if getattr(args, "profile", None) else ""),
+        "fall rule": f"{getattr(args, 'fall_rule', 'horizontal')} displacement > {num(getattr(args, 'fall_threshold', 0.25))} d",
+        "effort design": (f"approach leg {num(design)} m" if design else "no approach leg (clearance constraint)")
+                         + f", {getattr(args, 'slices', '')} slices per phase",
+        "seed": getattr(args, "seed", ""),
+    }
 
 
 def pair_verdicts(pairs: pd.DataFrame) -> pd.DataFrame:
@@ -127,7 +254,23 @@ def pair_verdicts(pairs: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
-def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None) -> str:
+def percent(x) -> str:
+    """A relative difference as a percentage of at most 4 significant digits; below
+    the effort tie rule's 1e-4 it is round-off, written 0 %."""
+    from analysis.pairs import TIE_REL
+
+    x = float(x)
+    if not np.isfinite(x):
+        return "n/a"
+    if abs(x) < TIE_REL / 100:
+        return "0 %"
+    sign = "+" if x > 0 else ""
+    if abs(x) < TIE_REL:  # the tie rule's plan noise: one digit says all there is
+        return f"{sign}{num(100 * x, 1)} % (tie)"
+    return f"{sign}{num(100 * x, 3)} %"
+
+
+def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None, figure_sigma=None) -> str:
     from analysis.pairs import TIE_REL
 
     if pairs is None:
@@ -136,6 +279,7 @@ def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None) -> str:
     sigma = df["sigma"].iloc[0]
     show = df[["pair", "dimension", "effort_E", "effort_H", "effort_rel_diff", "risk_E", "risk_H",
                "paper (full model)", "ours (Eq. 1)", "differs"]].rename(columns={"effort_rel_diff": "(H-E)/E"})
+    show["(H-E)/E"] = [percent(x) for x in show["(H-E)/E"]]
     extra = ""
     if analysis is not None and "pairs" in analysis:
         fitted = analysis["pairs"]
@@ -149,9 +293,14 @@ def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None) -> str:
         return f' class="pair-row{" differs" if row["differs"] else ""}" id="pair-{int(row["pair"])}"'
 
     n_diff = int(df["differs"].sum())
+    note = ""
+    if figure_sigma is not None and not np.isclose(figure_sigma[0], sigma):
+        note = (f" (this table's one sigma; the figures of the fits use the fitted sigma = {num(figure_sigma[0])} d, "
+                "so their pair orderings can differ from this table's)")
+    warn = "".join(f'<p class="warn">Warning: {_e(w)}.</p>' for w in sigma_edge_warnings(analysis))
     return f"""
 <section id="pairs"><h2>Easy/hard pairs</h2>
-<p>Effort in J s (mean over layouts), risk at sigma = {sigma:g} d. The paper's fitted full model ordered 11 of 12 pairs
+{warn}<p>Effort in J s (mean over layouts), risk at sigma = {num(sigma)} d{note}. The paper's fitted full model ordered 11 of 12 pairs
 E &lt; H, pair 11 the exception. Without fitted betas ours says for which ratios b2/b1 (b1 &gt; 0) Eq. 1 would order
 the pair E &lt; H; a pair tied in effort and in risk (|H - E| &le; {TIE_REL:g} max(E, H), the tie rule of
 every table) is a tie.
@@ -160,13 +309,19 @@ every table) is a tie.
 </section>"""
 
 
-def _figures_section(figures: list[Path], out: Path) -> str:
+def _figures_section(figures: list[Path], out: Path, sigma: float | None = None, rule: str | None = None) -> str:
+    """Every figure with its caption; a figure of risk names the one sigma it shows
+    (`sigma`, chosen by `rule`)."""
     if not figures:
         return ""
     items = []
     for f in figures:
         stem = f.stem.removeprefix("simulated_")
         caption = CAPTIONS.get(stem, stem.replace("_", " "))
+        if stem == "effort_risk_pairs" and sigma is not None:
+            if rule == "given by caller":
+                rule = "the pair table's sigma"
+            caption += f" Risk at sigma = {num(sigma)} d" + (f" ({rule})." if rule else ".")
         if f.stem.startswith("simulated_"):
             caption = "SIMULATED participants, not human data. " + caption
         rel = os.path.relpath(f, out)
@@ -195,6 +350,13 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
     e = samples["effort"].to_numpy(dtype=float)
     sd = float(np.std(e, ddof=1)) if len(e) > 1 else 0.0
     curve = risk.sort_values("sigma")
+    at = curve.loc[np.isclose(curve["sigma"], sigma), "risk"]
+    if not trial.initial.is_random:
+        effort_text = f"{num(e.mean())} J s"
+        effort_note = "fixed layout: A has no random blocks, so it is planned once"
+    else:
+        effort_text = plus_minus(e.mean(), sd, "J s", len(e))
+        effort_note = f"mean &plusmn; sd over {len(e)} layouts"
     if "n_actions" not in samples:
         plan_len = "length not recorded"
     else:
@@ -222,8 +384,8 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
 <p class="desc">{_e(trial.description)}</p>
 {pic}
 <div class="stats">
-<div><b>effort</b> {e.mean():.4g} &plusmn; {sd:.2g} J s<br><small>mean &plusmn; sd over {len(e)} layouts</small><br>{histogram_svg(e)}</div>
-<div><b>risk</b> {_risk_at(curve, sigma)} at sigma {sigma:g} d<br><small>over sigma (line: {sigma:g})</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma)}</div>
+<div><b>effort</b> {effort_text}<br><small>{effort_note}</small><br>{histogram_svg(e)}</div>
+<div><b>risk</b> {_risk_at(curve, sigma)} at sigma {num(sigma)} d<br><small>over sigma (line: {num(sigma)}; top of the axis: {num(risk_top(curve["risk"]))})</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma)}</div>
 </div>
 <p><b>plan</b> {plan_len} &middot; {link}</p>
 {more}
@@ -251,6 +413,7 @@ def _human_section(analysis: dict | None, out: Path) -> str:
     parts = ['<section id="human"><h2>Human data: fits, sigma profile, bootstrap</h2>']
     if simulated:
         parts.append('<p class="warn">SIMULATED participants, not human data.</p>')
+    parts += [f'<p class="warn">Warning: {_e(w)}.</p>' for w in sigma_edge_warnings(analysis)]
     if settings is not None:
         parts.append(table_html(settings.T.reset_index().set_axis(["setting", "value"], axis=1), "plain"))
     for key, title in (("fits", "Fits of Eq. 1 and its lesions (in-sample)"), ("sigma_choice", "Sigma chosen by RMSE"),
@@ -259,6 +422,9 @@ def _human_section(analysis: dict | None, out: Path) -> str:
                        ("bootstrap_tests", "Direct bootstrap tests (in-sample; full vs effort cannot fail there)"),
                        ("excluded_participants", "Excluded participants")):
         df = analysis.get(key)
+        if isinstance(df, pd.DataFrame) and len(df) and "p_value" in df:
+            n = df["n_boot"] if "n_boot" in df else pd.Series([None] * len(df), index=df.index)
+            df = df.assign(p_value=[p_value(p, k) for p, k in zip(df["p_value"], n)])
         if isinstance(df, pd.DataFrame) and len(df):
             parts.append(f"<h3>{_e(title)}</h3>{table_html(df, max_rows=400)}")
     z = analysis.get("zscored")
@@ -322,7 +488,8 @@ def participant_table(zscored: pd.DataFrame, predictions: pd.DataFrame | None) -
 
 def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                pairs: pd.DataFrame | None = None, analysis: dict | None = None, figures=(),
-               pictures: dict | None = None, replays: dict | None = None, over_sigma_html: str | None = None,
+               pictures: dict | None = None, replays: dict | None = None,
+               figure_sigma: tuple[float, str] | None = None, over_sigma_html: str | None = None,
                precision: pd.DataFrame | None = None) -> Path:
     """Write ``<out>/index.html`` (atomically) and return its path.
 
@@ -344,26 +511,30 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
         prec = None if precision is None else precision[precision["trial"] == trial.id]
         cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out, prec))
     nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
+    comparison = _comparison_section(analysis, out)  # "" when there is nothing to compare: no link to it
     title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"
     body = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
 <title>{_e(title)}</title><style>{_asset('page.css')}</style></head>
 <body>
 <header><h1>{_e(title)}</h1>
-<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#over-sigma">pairs over sigma</a>' if over_sigma_html else ''} <a href="#figures">figures</a> <a href="#trials">trials</a> <a href="#human">human data</a> <a href="#comparison">model comparison</a>
+<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#over-sigma">pairs over sigma</a>' if over_sigma_html else ''}{' <a href="#figures">figures</a>' if figures else ''} <a href="#trials">trials</a> <a href="#human">human data</a>{' <a href="#comparison">model comparison</a>' if comparison else ''}
 &middot; files: <a href="report.md">report.md</a> <a href="effort.csv">effort.csv</a> <a href="effort_samples.csv">effort_samples.csv</a> <a href="risk.csv">risk.csv</a>{' <a href="pairs.csv">pairs.csv</a>' if pairs is not None else ''}</nav>
 </header>
 <main>
+{_quick_banner(run)}
 {_run_section(run)}
-{_pairs_section(pairs, analysis)}
+{_pairs_section(pairs, analysis, figure_sigma)}
 {over_sigma_html or ""}
-{_figures_section([Path(f) for f in figures], out)}
+{_figures_section([Path(f) for f in figures], out, *(figure_sigma or (None, None)))}
 <section id="trials"><h2>Trials</h2><p class="trialnav">{nav}</p>
 <p>A is the layout of sample 0 (the one the replay plays); effort is over all {effort_samples.groupby("trial").size().max()} layouts.
-Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over the run's sigma grid.</p>
+Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over the run's sigma grid
+(each mini-plot's axis is scaled to its curve, its top written on it).</p>
+<p class="explain">{risk_explanation(risk, sigma, trials, out)}</p>
 <div class="cards">{"".join(cards)}</div></section>
 {_human_section(analysis, out)}
-{_comparison_section(analysis, out)}
+{comparison}
 </main>
 <footer>Written by <code>python -m lgp.reproduce</code>; every file it links is beside this page.</footer>
 <script>{_asset('page.js')}</script>
@@ -399,21 +570,32 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         settings = get_engine(engine).settings()
     except Exception as e:  # an engine that cannot load here still ran elsewhere: say so
         settings = {"error": str(e)}
+    counts = Counter()
+    for (kind, outcome), n in getattr(cache, "counts", {}).items():
+        counts[kind, "hit" if outcome == "hit" else "miss"] += n
+    counts.update(cache.files)
+    compute = cache.compute_time()[0] if hasattr(cache, "compute_time") else None
     run = {
         "command": args.command or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below",
+        "key": key_settings(args, trials),
+        "quick": bool(getattr(args, "quick", False)),
+        "compute_s": compute,
         "parameters": {k: _parameter(v) for k, v in args.parameters().items()},
         "engine": engine,
         "engine_settings": settings,
         "stages": dict(clock.laps),
         "cache": {"hits": cache.hits + sum(n for (_, o), n in cache.files.items() if o == "hit"),
                   "misses": cache.misses + sum(n for (_, o), n in cache.files.items() if o == "miss"),
-                  "root": str(cache.root),
-                  "summary": "; ".join([cache.summary()] + [f"{k} {cache.files[k, 'hit']} hit, {cache.files[k, 'miss']} miss"
-                                                            for k in sorted({k for k, _ in cache.files})])},
+                  "root": str(cache.root), "words": cache_words(counts)},
         "finished": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": f"{platform.node()}, {os.cpu_count()} cores",
         "load": "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),
     }
+    figure_sigma = None
+    settings_table = analysis.get("settings") if isinstance(analysis, dict) else None
+    if isinstance(settings_table, pd.DataFrame) and len(settings_table) and "sigma" in settings_table:
+        figure_sigma = (float(settings_table["sigma"].iloc[0]), str(settings_table.get("sigma_rule", pd.Series([""])).iloc[0]))
     return write_page(out, run=run, trials=trials, effort_samples=effort_samples, risk=risk, sigma=sigma, pairs=pairs,
+                      figure_sigma=figure_sigma,
                       analysis=analysis if args.human_data else None, figures=figures,
                       pictures=pictures, replays=replays, over_sigma_html=over_sigma_html, precision=precision)

@@ -1,8 +1,8 @@
 """The trial pictures of the results page: ``<out>/page/<trial>.png``, A (the layout
 of sample 0 of the run's seed, as the replay plays it) and B side by side: rendered
 by stimuli.render (`rendered_trial_pictures`, what the page uses), or drawn on
-matplotlib's own Figure (`trial_pictures`, where the renderer cannot run) and copied
-from the run's cache when drawn before.
+matplotlib's own Figure on one world frame (`trial_pictures`, stimuli.sheet.draw_trial,
+where the renderer cannot run) and copied from the run's cache when drawn before.
 """
 from __future__ import annotations
 
@@ -19,14 +19,14 @@ def trial_picture(trial, seed: int, path: Path) -> Path:
     from matplotlib.figure import Figure
 
     from models.effort import sample_rng
-    from stimuli.sheet import draw_scene
+    from stimuli.sheet import draw_trial
 
     A = trial.sample_initial(sample_rng(seed, 0))
     fig = Figure(figsize=(4.4, 2.2))
     FigureCanvasAgg(fig)
-    for j, (scene, state) in enumerate(((A, "A: start (sample 0)"), (trial.target, "B: finish"))):
-        ax = fig.add_subplot(1, 2, j + 1, projection="3d")
-        draw_scene(ax, scene, state)
+    # one world frame for A and B (the table, the build site as a dashed ring): a moved structure is seen to
+    # move; B shows the blocks A leaves (stimuli.sheet.finished_scene)
+    draw_trial(fig, trial, A, ("A: start (sample 0)", "B: finish"))
     fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.92, wspace=0.0)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=100)
@@ -35,7 +35,7 @@ def trial_picture(trial, seed: int, path: Path) -> Path:
 
 def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None) -> dict[str, Path]:
     """Picture of every trial under `out_dir`, copied from `cache` when drawn before."""
-    version = modules_digest("stimuli.sheet", "stimuli", "models.effort")
+    version = modules_digest("stimuli.sheet", "stimuli", "models.effort", "lgp.app.pictures")
     paths = {}
     for trial in trials:
         path = Path(out_dir) / f"{trial.id}.png"

@@ -43,7 +43,7 @@ def _replay_job(item) -> float:
     t0 = time.perf_counter()
     plan = plan_of_sample(trial, seed, 0, **(options[0] if options else {}))
     title = f"{trial.id}: {trial.description} (sample 0 of seed {seed})"
-    page, library = split_library(replay_html(plan, title))
+    page, library = split_library(replay_html(plan, title, back=f"../index.html#trial-{trial.id}"))  # replays/<id>.html -> its card
     path = Path(path)
     if library is not None and not (path.parent / REPLAY_LIBRARY).exists():
         write_text_atomic(library, path.parent / REPLAY_LIBRARY)

@@ -18,6 +18,28 @@ import pandas as pd
 from lgp.app.files import write_text_atomic
 
 
+def _num(x) -> str:
+    return f"{float(x):.4g}"
+
+
+def sigma_edge_warnings(analysis: dict | None) -> list[str]:
+    """A warning for every chosen sigma (per dataset, pooled) at the edge of the
+    grid it was chosen from: the best fit may lie outside the grid (widen --sigmas)."""
+    if not isinstance(analysis, dict):
+        return []
+    choice, profile = analysis.get("sigma_choice"), analysis.get("sigma_profile")
+    if not isinstance(choice, pd.DataFrame) or not isinstance(profile, pd.DataFrame) or not len(profile):
+        return []
+    lo, hi = float(profile["sigma"].min()), float(profile["sigma"].max())
+    out = []
+    for _, row in choice.iterrows():
+        s = float(row["sigma"])
+        if lo < hi and (np.isclose(s, lo) or np.isclose(s, hi)):
+            out.append(f"the sigma chosen for {row['dataset']} ({_num(s)} d) is at the {'lower' if np.isclose(s, lo) else 'upper'} "
+                       f"edge of the grid ({_num(lo)} to {_num(hi)} d): the best fit may lie outside it; widen --sigmas to find it")
+    return out
+
+
 def ratio_text(r) -> str:
     """An analysis.pairs.RatioRange in words: 'any', 'none', 'none (tie)', '> 1.09' or '< 0.5'."""
     if r.tie:
@@ -140,6 +162,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         lines += ["No human data given (`--human-data FILE`, format in docs/human-data.md): the fits of Eq. 1, "
                   "the sigma profile and the bootstrap need the responses, which are not public.", ""]
     else:
+        lines += [f"**Warning**: {w}." for w in sigma_edge_warnings(analysis)] + ([""] if sigma_edge_warnings(analysis) else [])
         from analysis.compare_report import comparison_lines
 
         for key in ("sigma_choice", "fits", "bootstrap_summary", "bootstrap_tests"):

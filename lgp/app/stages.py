@@ -42,7 +42,7 @@ def effort_key(trial, samples: int, seed: int, approach_height: float | None = N
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
                   slices_per_phase: int | None = None, log: bool = True, planner: str = "paper",
-                  budget=None) -> pd.DataFrame:
+                  budget=None, verbose: bool = True) -> pd.DataFrame:
     """Per (trial, sample) effort, one cached file per trial (and design: the
     planner's `approach_height` and `slices_per_phase`, defaults when None; the
     `planner`, "paper" or "search" with its `budget`).
@@ -70,7 +70,13 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
     pending = Counter(t.id for t in owner)
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
     t0 = time.perf_counter()
-    bar = Progress("effort", len(units), "plans")
+    if units:
+        fixed = sum(1 for t in todo if not t.initial.is_random)
+        _log(f"effort: {len(units)} plans to make for {len(todo)} trial(s)"
+             + (f" ({len(todo) - fixed} x {samples} random layouts of A, and {fixed} trial(s) whose A has no random "
+                "blocks, planned once)" if fixed and samples > 1 else f" x {samples} layouts of A")
+             + (f"; {len(trials) - len(todo)} trial(s) reused from the cache" if len(todo) < len(trials) else ""))
+    bar = Progress("effort", len(units), "plans", what="motion plans")
 
     def arrived(k, row):
         bar.advance()
@@ -80,12 +86,12 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
         if pending[trial.id] == 0:
             tables[trial.id] = cache.put("effort", keys[trial.id], effort_table(trial, samples, rows[trial.id]))
             df = tables[trial.id]
-            if log:
+            if log and verbose:
                 _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
                      f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
 
     for t in trials:
-        if log and t.id in tables and t.id not in rows:
+        if log and verbose and t.id in tables and t.id not in rows:
             _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
                  f" over {len(tables[t.id])} layouts  (cached)")
     with bar:
@@ -128,7 +134,7 @@ RUN_CACHE_COLUMNS = ["trial", "sigma", "run", "fell", "engine", "fall_rule", "fa
 
 def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6,
                 fall_rule: str | None = None, fall_threshold: float | None = None, noise_rule: str | None = None,
-                runs_out: list | None = None) -> pd.DataFrame:
+                runs_out: list | None = None, verbose: bool = True) -> pd.DataFrame:
     """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
 
     Each trial's cached file holds its runs' verdicts (RUN_CACHE_COLUMNS); the
@@ -151,7 +157,12 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     for t in todo:
         twins.setdefault(geometry_key(t.target), []).append(t)
     simulate = [group[0] for group in twins.values()]
-    bar = Progress("risk", len(simulate) * len(sigmas) * n_sims, "runs")
+    if todo:
+        _log(f"risk: {len(simulate) * len(sigmas) * n_sims} simulations of B ({len(simulate)} trial(s) x {len(sigmas)} sigma(s) "
+             f"x {n_sims} noisy runs" + (f"; {len(todo) - len(simulate)} trial(s) with an identical B reuse their runs"
+                                         if len(simulate) < len(todo) else "") + ")"
+             + (f"; {len(trials) - len(todo)} trial(s) reused from the cache" if len(todo) < len(trials) else ""))
+    bar = Progress("risk", len(simulate) * len(sigmas) * n_sims, "runs", what="noisy runs of B")
     for k in range(0, len(simulate), chunk):
         group = simulate[k:k + chunk]
         t0 = time.perf_counter()
@@ -164,7 +175,8 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
             runs = table[table["trial"] == t.id].reset_index(drop=True)
             for same in twins[geometry_key(t.target)]:
                 tables[same.id] = cache.put("riskruns", keys[same.id], runs.assign(trial=same.id))
-        _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
+        if verbose:
+            _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     if todo:
         bar.close()
     out = []
@@ -173,7 +185,8 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
             runs_out.append(tables[trial.id])
         df = summarise(tables[trial.id].assign(trial=tables[trial.id]["trial"].astype(str)))
         curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
-        _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
+        if verbose:
+            _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")
         out.append(df)
     return pd.concat(out, ignore_index=True)
 

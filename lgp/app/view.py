@@ -107,13 +107,18 @@ def _gradient_css(n: int) -> str:
     return f"linear-gradient(to right, {stops})"
 
 
-def caption_html(plan, title: str) -> str:
-    """The overlay of a replay: title, action being played, effort so far, colour legend."""
+def caption_html(plan, title: str, back: str | None = None) -> str:
+    """The overlay of a replay: title, action being played, effort so far, colour
+    legend, a play/pause button and (`back`, a relative URL) a link back to the page."""
     data = _caption_data(plan, title)
     n = len(placement_order(plan))
+    back_link = (f'<a id="lgp-back" href="{html.escape(back)}" style="margin-right:10px">&larr; results page</a>'
+                 if back else "")
     return f"""
 <div id="lgp-caption" style="position:fixed;left:12px;top:12px;z-index:10;background:rgba(255,255,255,0.92);
  font:14px/1.4 system-ui,sans-serif;color:#111;padding:8px 12px;border-radius:6px;box-shadow:0 1px 4px rgba(0,0,0,.25);max-width:560px">
+ <div style="margin-bottom:4px">{back_link}<button id="lgp-play" type="button"
+  style="font:inherit;padding:2px 10px;cursor:pointer">&#10074;&#10074; pause</button></div>
  <div style="font-weight:700">{html.escape(title)}</div>
  <div id="lgp-action">&nbsp;</div><div id="lgp-effort">&nbsp;</div>
  <div style="display:flex;align-items:center;gap:6px;font-size:12px;margin-top:4px">placed first
@@ -124,6 +129,14 @@ def caption_html(plan, title: str) -> str:
 (function () {{
   var D = {script_json(data)};
   var action = document.getElementById('lgp-action'), effort = document.getElementById('lgp-effort');
+  var button = document.getElementById('lgp-play');
+  function animator() {{ return (typeof viewer !== 'undefined' && viewer.animator) ? viewer.animator : null; }}
+  function label() {{ var a = animator(); button.innerHTML = (a && a.playing) ? '&#10074;&#10074; pause' : '&#9654; play'; }}
+  button.addEventListener('click', function () {{
+    var a = animator(); if (!a) return;
+    if (a.playing) a.pause(); else a.play();
+    label();
+  }});
   function update() {{
     var t = (typeof viewer !== 'undefined' && viewer.animator) ? viewer.animator.time : 0;
     var k = Math.floor((t - D.t0) / D.phase);
@@ -134,15 +147,31 @@ def caption_html(plan, title: str) -> str:
     var i = Math.max(0, Math.min(D.cumulative.length - 1, Math.round((t - D.t0) / D.tau)));
     effort.textContent = 't = ' + t.toFixed(1) + ' s, effort so far ' + D.cumulative[i].toFixed(3) + ' of ' + D.total.toFixed(3) + ' J s';
   }}
-  update();
-  setInterval(update, 100);
+  update(); label();
+  setInterval(function () {{ update(); label(); }}, 100);
 }})();
 </script>
 """
 
 
-def replay_html(plan, title: str = "") -> str:
-    """The replay of `plan` as one HTML string (see the module docstring)."""
+def _quiet_meshcat(Meshcat):
+    """A Meshcat server without its "Meshcat listening for connections at
+    http://localhost:7000" log line: the replay is saved as a static HTML file and
+    needs no server, so the line would only mislead (issue 26)."""
+    import logging
+
+    logger = logging.getLogger("drake")
+    level = logger.level
+    logger.setLevel(max(level, logging.WARNING))
+    try:
+        return Meshcat()
+    finally:
+        logger.setLevel(level)
+
+
+def replay_html(plan, title: str = "", back: str | None = None) -> str:
+    """The replay of `plan` as one HTML string (see the module docstring); `back`: a
+    relative URL the overlay links to (the results page), or None."""
     from pydrake.geometry import Box, Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba, Role
     from pydrake.math import RigidTransform, RotationMatrix
     from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
@@ -156,7 +185,7 @@ def replay_html(plan, title: str = "") -> str:
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
     add_arm(plant, arm.config)
     plant.Finalize()
-    meshcat = Meshcat()
+    meshcat = _quiet_meshcat(Meshcat)
     MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, MeshcatVisualizerParams(role=Role.kIllustration, prefix="arm"))
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
@@ -194,7 +223,7 @@ def replay_html(plan, title: str = "") -> str:
     title = title or f"{plan.initial.label} -> {plan.target.label}"
     page = page.replace("<title>Drake MeshCat</title>", f"<title>{html.escape(title)}</title>", 1)
     cut = page.rfind("</body>")
-    return page[:cut] + caption_html(plan, title) + page[cut:]
+    return page[:cut] + caption_html(plan, title, back) + page[cut:]
 
 
 def write_html(plan, path, title: str = "") -> str:

@@ -96,7 +96,8 @@ class Plan:
         model's measure of the plan (models.effort.kinetic_energy), not the plan's."""
         actions = self.actions
         shown = " -> ".join(map(str, actions[:2])) + (" -> ..." if len(actions) > 2 else "")
-        komo = f", {self.komo.solver} {self.komo.status}, cost {self.komo.cost:.4g}" if self.komo is not None else ""
+        # not the optimiser's objective ("cost 2124" read as effort): the effort is models.effort.kinetic_energy(plan)
+        komo = f", {self.komo.solver} {self.komo.status}" if self.komo is not None else ""
         duration = float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
         return (f"Plan({self.initial.label or 'scene'}: {len(actions)} actions [{shown}], "
                 f"{duration:g} s in {len(self.t)} slices{komo}, planned in {self.planning_time:.2f} s)")

@@ -68,7 +68,7 @@ def main(argv=None) -> int:
               f"actions {table['n_actions'].iloc[0]:3d}  {table['solve_time'].mean():6.3f} s/plan{searched}", flush=True)
     table = pd.concat(tables, ignore_index=True)
     if args.out:
-        write_csv_atomic(table, args.out)
+        write_csv_atomic(table, cli.make_parent(args.out))
     return 0
 
 

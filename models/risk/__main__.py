@@ -101,14 +101,14 @@ def main(argv=None) -> int:
     table = summarise(runs)
     order = {t.id: k for k, t in enumerate(trials)}
     table = table.sort_values(["trial", "sigma"], key=lambda c: c.map(order) if c.name == "trial" else c).reset_index(drop=True)
-    write_csv_atomic(table, args.table)
+    write_csv_atomic(table, cli.make_parent(args.table))
     if args.runs:
-        write_csv_atomic(runs, args.runs)
+        write_csv_atomic(runs, cli.make_parent(args.runs))
     if args.precision:
         from models.risk.precision import precision_text, required_precision
 
         precision = required_precision(runs, args.precision_levels, seed=args.seed)
-        write_csv_atomic(precision, args.precision)
+        write_csv_atomic(precision, cli.make_parent(args.precision))
         for level, g in precision.groupby("level", sort=False):
             print(f"sigma* (risk reaches {level:g}): " + ", ".join(f"{r['trial']} {precision_text(r)}" for _, r in g.iterrows()))
     wide = table.pivot(index="trial", columns="sigma", values="risk").reindex([t.id for t in trials])
@@ -148,7 +148,7 @@ def _build_risk(args) -> int:
         print(agg.drop(columns=["engine"]).to_string(index=False, float_format=lambda x: f"{x:.3f}"))
         print(f"  ({time.perf_counter() - t1:.1f} s)", file=sys.stderr, flush=True)
     if args.out:
-        write_csv_atomic(pd.concat(tables, ignore_index=True), args.out)
+        write_csv_atomic(pd.concat(tables, ignore_index=True), cli.make_parent(args.out))
     print(f"{len(ids)} trial(s) in {time.perf_counter() - t0:.1f} s" + (f" -> {args.out}" if args.out else ""), file=sys.stderr)
     return 0
 

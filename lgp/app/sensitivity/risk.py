@@ -123,7 +123,9 @@ def risk_sensitivity_table(ctx: Context, engines: list[str]) -> pd.DataFrame:
 
 def risk_sensitivity_summary(table: pd.DataFrame) -> pd.DataFrame:
     """Per engine, rule and sigma: trials with risk > 0, each of the paper's risk
-    contrasts (H riskier than E) and how many of them come out."""
+    contrasts (H riskier than E, under the one tie rule, analysis.pairs.pair_order)
+    and how many of them come out."""
+    from analysis.pairs import pair_order
     out = []
     if "noise_rule" not in table:
         table = table.assign(noise_rule="lift")
@@ -136,7 +138,7 @@ def risk_sensitivity_summary(table: pd.DataFrame) -> pd.DataFrame:
                "unstable_unperturbed": int((~g["stands_unperturbed"].astype(bool)).sum())}
         for pair in RISK_PAIRS:
             h, e = risk.get(f"{pair}H", np.nan), risk.get(f"{pair}E", np.nan)
-            row[f"{pair}H>{pair}E"] = bool(h > e) if np.isfinite(h) and np.isfinite(e) else None
+            row[f"{pair}H>{pair}E"] = pair_order(e, h) == "E<H" if np.isfinite(h) and np.isfinite(e) else None
         row["contrasts"] = sum(bool(row[f"{p}H>{p}E"]) for p in RISK_PAIRS)
         out.append(row)
     return pd.DataFrame(out)

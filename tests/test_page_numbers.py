@@ -1,0 +1,54 @@
+"""Numbers as the results page writes them (lgp.app.page, lgp.app.charts): at most 4
+significant digits, round-off of a fixed layout not printed as a spread, no raw nan,
+a bootstrap p of 0 as "< 1/n", risk axes scaled to the data, and a chosen sigma at
+the edge of its grid warned about."""
+import numpy as np
+import pandas as pd
+import pytest
+
+from lgp.app.charts import num, risk_svg, risk_top
+from lgp.app.page import p_value, percent, plus_minus
+from lgp.app.report import sigma_edge_warnings
+
+
+@pytest.mark.parametrize("value, text", [(0.115912345, "0.1159"), (2124.0, "2124"), (20000.0, "20000"),
+                                         (1.5e-5, "1.5e-05"), (float("nan"), "n/a"), (None, "n/a"), (0.065, "0.065")])
+def test_a_number_has_at_most_four_significant_digits(value, text):
+    assert num(value) == text
+
+
+def test_a_spread_of_round_off_is_not_printed_as_a_spread():
+    # 10E's case: every layout gives the same plan, sd 4.2e-17 on 0.1159 J s
+    assert plus_minus(0.11591, 4.2e-17, "J s", 30) == "0.1159 J s <small>(same for every layout)</small>"
+    # a real spread: the mean rounded to the sd's last digit, the sd to 2 digits
+    assert plus_minus(0.37123, 0.07432, "J s", 3) == "0.371 &plusmn; 0.074 J s"
+
+
+def test_a_bootstrap_p_of_zero_is_a_bound_and_nan_is_not_shown():
+    assert p_value(0.0, 200) == "< 1/200"
+    assert p_value(0.0312, 200) == "0.031"
+    assert p_value(float("nan"), 200) == "n/a"
+
+
+def test_relative_differences_are_percent_and_a_tie_says_so():
+    assert percent(1.2612) == "+126 %"
+    assert percent(1.01e-5) == "+0.001 % (tie)"
+    assert percent(1.1e-16) == "0 %"
+
+
+def test_the_risk_axis_is_scaled_to_the_curve_and_its_top_written():
+    assert risk_top([0, 0.02, 0.015]) == 0.02 and risk_top([0, 0.3]) == 0.5 and risk_top([0, 0]) == 1.0
+    svg = risk_svg([0.05, 0.1], [0.0, 0.02], 0.065)
+    assert ">0.02</text>" in svg  # the top of the axis, written
+    # the 0.02 point is drawn at the top of the frame, not near the bottom as on a 0..1 axis
+    ys = [float(p.split(",")[1]) for p in svg.split('points="')[1].split('"')[0].split()]
+    assert ys[1] == pytest.approx(4.0, abs=0.1)
+
+
+def test_a_sigma_chosen_at_the_edge_of_the_grid_is_warned_about():
+    profile = pd.DataFrame({"dataset": ["a"] * 3, "sigma": [0.05, 0.065, 0.1], "rmse": [0.3, 0.2, 0.1]})
+    edge = {"sigma_profile": profile, "sigma_choice": pd.DataFrame({"dataset": ["a"], "sigma": [0.1]})}
+    inside = {"sigma_profile": profile, "sigma_choice": pd.DataFrame({"dataset": ["a"], "sigma": [0.065]})}
+    (warning,) = sigma_edge_warnings(edge)
+    assert "upper edge of the grid (0.05 to 0.1 d)" in warning and "--sigmas" in warning
+    assert sigma_edge_warnings(inside) == [] and sigma_edge_warnings(None) == []
