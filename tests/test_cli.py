@@ -89,7 +89,6 @@ BAD = [
     ("models.risk", ["--table", "{tmp}/t.csv", "--sigmas", "-0.065"], 2, "(0, 1]"),
     ("models.risk", ["--table", "{tmp}/t.csv", "--trials", "99X"], 2, "unknown trial id"),
     ("models.risk", ["--table", "{tmp}/t.csv", "--jobs", "0"], 2, "--jobs"),
-    ("models.risk", ["--table", "/nonexistent/dir/t.csv"], 2, "does not exist"),
     ("models.risk", ["--table", "{tmp}/t.csv", "--sigma-grid", "huge"], 2, "--sigma-grid: invalid choice: 'huge' (choose from 'paper', 'wide')"),
     ("models.risk", ["--table", "{tmp}/t.csv", "--noise-rule", "drop"], 2, "--noise-rule: invalid choice: 'drop' (choose from 'lift', 'settle')"),
     ("models.risk", ["--table", "{tmp}/t.csv", "--sigmas", "1.01"], 2, "--sigmas: a sigma must be in (0, 1]"),
