@@ -127,7 +127,7 @@ def test_a_unit_that_always_kills_its_worker_stops_the_map_in_one_line(tmp_path)
 
 
 RUN = [sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "8", "--n-sims", "60",
-       "--sigmas", "0.05", "0.1", "--jobs", "2", "--no-replays"]
+       "--sigmas", "0.05", "0.1", "--jobs", "2", "--no-replays", "--verbose"]  # --verbose: the per-trial lines the cues wait for
 
 
 def _csvs(out: Path) -> dict:
