@@ -36,8 +36,8 @@ MODEL_TERMS = {"full": ("E(1-R)", "E*R"), "effort": ("E",), "risk": ("R",)}
 #: may stand in for R: final-stage risk, max over stages, expected number of
 #: collapses, probability of at least one, and the care-weighted sum. Only
 #: final, max and any are probabilities; expected and care may exceed 1.
-RISK_MEASURES: tuple[str, ...] = ("final", "max", "expected", "any", "care")
-PROBABILITY_MEASURES = ("final", "max", "any")
+RISK_MEASURES: tuple[str, ...] = ("final", "max", "expected", "any", "care", "sequential")
+PROBABILITY_MEASURES = ("final", "max", "any", "sequential")
 #: Models whose R is a build-risk aggregate are named like ``full[max]``.
 MEASURE_BASES: tuple[str, ...] = ("full", "risk")
 #: Two sigmas closer than this are the same grid value (0.065 vs 0.0650000001).

@@ -78,6 +78,17 @@ def sigma(text: str) -> float:
     return value
 
 
+def precision_level(text: str) -> float:
+    """A risk level of the required precision sigma*, in (0, 1)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a risk in (0, 1), got {text!r}") from None
+    if not (math.isfinite(value) and 0 < value < 1):
+        raise argparse.ArgumentTypeError(f"a precision level must be a risk in (0, 1), got {text!r}")
+    return value
+
+
 def checked(check: Callable[[str], object], what: str) -> Callable[[str], object]:
     """A validator from a library's own check: ``check(text)`` returns the value or
     raises ValueError, whose message argparse then prints (prefixed ``argument

@@ -24,6 +24,12 @@ DURATION = 4.0
 SIGMA_GRID: tuple[float, ...] = tuple(round(0.05 + 0.005 * k, 3) for k in range(11))
 #: The sigma the paper chose for all datasets ("sigma = 0.065").
 PAPER_SIGMA = 0.065
+#: A grid past the paper's (beyond the paper; issue 22): 0.05 d to 0.30 d in steps
+#: of 0.01 d, plus the paper's points, sorted. At the paper's grid most risks are 0;
+#: the paper's risk contrasts appear past it (docs/results.md, "Pairs over sigma").
+WIDE_SIGMA_GRID: tuple[float, ...] = tuple(sorted({round(0.05 + 0.01 * k, 3) for k in range(26)} | set(SIGMA_GRID)))
+#: The named sigma grids (`--sigma-grid NAME`); "paper" is the default everywhere.
+SIGMA_GRIDS: dict[str, tuple[float, ...]] = {"paper": SIGMA_GRID, "wide": WIDE_SIGMA_GRID}
 #: Bootstrap resamples of participants [paper: 1000].
 N_BOOT = 1000
 

@@ -6,6 +6,8 @@
     python -m lgp.reproduce --human-data FILE.csv   # plus the Results section (docs/human-data.md)
     python -m lgp.reproduce --quick --sensitivity   # plus risk by engine x fall rule, effort by design (lgp/app/sensitivity/)
     python -m lgp.reproduce --fall-rule 3d --fall-threshold 0.1   # the risk model with another fall rule
+    python -m lgp.reproduce --sigma-grid wide       # risk past the paper's grid (0.05..0.30 d): "Pairs over sigma"
+    python -m lgp.reproduce --noise-rule settle     # noisy blocks set onto their supports instead of lifted
     python -m lgp.reproduce --approach-height 0 --slices 40       # effort with another motion design (docs/effort.md)
 
 Every expensive result (effort of one trial, risk curve of one trial) is cached
@@ -23,11 +25,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 import stimuli
 from lgp import cli
 from lgp.planner.design import check_approach_height
-from lgp.paper import PAPER_SIGMA, TRIAL_IDS
+from lgp.paper import PAPER_SIGMA, SIGMA_GRIDS, TRIAL_IDS
 from lgp.executor import WorkerDied, executor_for_scheduler, stop_signals
 from lgp.app.progress import log as progress_log
 from lgp.app.cache import library_versions, write_csv_atomic
@@ -71,7 +74,13 @@ def parse_args(argv=None) -> RunConfig:
                    help="trial ids (case-insensitive), or 'all' for every trial file (default: the paper's 24)")
     p.add_argument("--samples", type=cli.positive_int, help=f"M, random layouts of A per trial (default {D('samples')}; --quick {QUICK['samples']})")
     p.add_argument("--n-sims", type=cli.positive_int, help=f"N, noisy simulations per trial and sigma (default {D('n_sims')}; --quick {QUICK['n_sims']})")
-    p.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
+    grid = p.add_mutually_exclusive_group()
+    grid.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
+    grid.add_argument("--sigma-grid", choices=list(SIGMA_GRIDS),
+                      help="a named sigma grid: paper (default) or wide (0.05..0.30 d step 0.01 plus the paper's points)")
+    p.add_argument("--noise-rule", choices=["lift", "settle"],
+                   help="heights of the noisy blocks: lift (default) or settle (every block rests on what lies beneath it; "
+                        "docs/risk.md)")
     p.add_argument("--engine", help="physics engine for risk: mujoco, drake, physx (optional extra) (default: mujoco)")
     p.add_argument("--profile", help="engine profile: faithful (default) or, for physx, game-defaults (UNFAITHFUL; docs/risk.md)")
     p.add_argument("--fall-rule", default=D("fall_rule"), type=cli.one_of(FALL_RULES, "fall rule"),
@@ -108,7 +117,7 @@ def parse_args(argv=None) -> RunConfig:
     p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/app/build_risk.py)")
     p.add_argument("--build-sigmas", type=cli.sigma, nargs="+",
                    help=f"noise levels of --build-risk in (0, 1] (default {' '.join(f'{s:g}' for s in BUILD_SIGMAS)})")
-    p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care"],
+    p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care", "sequential"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
     p.add_argument("--allow-simulated", action="store_true",
@@ -229,8 +238,10 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
                                        **args.planner_choice())
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
+        risk_runs: list = []
         risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
-                           fall_rule=args.fall_rule, fall_threshold=args.fall_threshold, verbose=args.verbose)
+                           fall_rule=args.fall_rule, fall_threshold=args.fall_threshold, noise_rule=args.noise_rule,
+                           runs_out=risk_runs, verbose=args.verbose)
         clock.lap("risk")
         sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log,
                                                                      effort_tables=effort_tables)) \
@@ -243,7 +254,7 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
             stages = build_risk.build_risk_tables(trials, args.build_sigmas or build_risk.BUILD_SIGMAS, args.n_sims,
                                                    args.samples, args.seed, args.engine, executor, cache,
                                                    fall_rule=args.fall_rule, fall_threshold=args.fall_threshold,
-                                                   approach_height=args.approach_height)
+                                                   approach_height=args.approach_height, noise_rule=args.noise_rule)
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,
@@ -252,9 +263,13 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
+    from models.risk.precision import required_precision  # sigma* per trial (issue 22)
+
+    precision = required_precision(pd.concat(risk_runs, ignore_index=True), n_boot=args.n_boot, seed=args.seed)
+    written.append(write_csv_atomic(precision, out / "risk_precision.csv"))
     if replays:
         written += [Path(p) for p in replays.values()]
-    sections, build = [], None
+    sections, build, over_html = [], None, None
     for s in sensitive:  # --sensitivity (lgp/app/sensitivity/)
         written += s.files
         sections.append("\n".join(s.lines))
@@ -276,6 +291,15 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
         e_samples, e_mean, r = (df[df["trial"].isin(TRIAL_IDS)] for df in (effort_samples, effort, risk))
         pairs = pair_orderings(e_mean, r, sigma, {t.pair: t.dimension for t in paper})
         written.append(write_csv_atomic(pairs_csv_table(pairs), out / "pairs.csv"))
+        from lgp.app import over_sigma  # "Pairs over sigma" (issue 22)
+
+        over = over_sigma.pairs_over_sigma(e_mean, r)
+        written.append(write_csv_atomic(over, out / "pairs_over_sigma.csv"))
+        over_figure = over_sigma.plot_risk_over_sigma(over, out / "figures" / "risk_over_sigma.png",
+                                                      {t.pair: t.dimension for t in paper})
+        written.append(over_figure)
+        sections.insert(0, "\n".join(over_sigma.report_lines(over, precision, "figures/risk_over_sigma.png")))
+        over_html = over_sigma.page_section(over, over_figure, out)
         analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
                                 build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
@@ -298,7 +322,9 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
             sections.append(section)
     else:
         from analysis.pairs import declared_pair_orderings
+        from lgp.app.over_sigma import precision_lines
 
+        sections.insert(0, "\n".join(precision_lines(precision)))
         declared = stimuli.declared_pairs(trials)
         pairs = declared_pair_orderings(effort, risk, sigma, {t.pair: t.dimension for t in trials}, declared) if declared else None
         if pairs is not None:
@@ -316,7 +342,8 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
     if sections:
         append_report(report, sections)
     written.append(report)
-    written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays))
+    written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays,
+                               over_sigma_html=over_html, precision=precision))
     if (out / "page").is_dir():
         written.append(out / "page")
     if args.verbose:
@@ -328,7 +355,7 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
                   "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
                   "n_perm": args.n_perm, "recovery": args.recovery, "recovery_studies": args.recovery_studies,
                   "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
-                  "sensitivity": args.sensitivity, "approach_height": args.approach_height,
+                  "sigma_grid": args.sigma_grid, "noise_rule": args.noise_rule, "sensitivity": args.sensitivity, "approach_height": args.approach_height,
                   "slices_per_phase": args.slices, **{k: repr(v) if k == "budget" else v for k, v in args.planner_choice().items()}}
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}

@@ -58,7 +58,8 @@ def draw_scene(ax, scene: Scene, title: str = "", limits=None) -> None:
 def finished_scene(A: Scene, B: Scene) -> Scene:
     """What the table holds when B is built from A: B's blocks, and every block of A
     that B does not need where A left it (pair 12's bucket keeps its 15 other blocks;
-    lgp.assignment: unassigned blocks stay where they are)."""
+    lgp.assignment: unassigned blocks stay where they are). The one finished table:
+    the rendered pictures' B (stimuli.render.pictures_of) is this too."""
     from lgp.assignment import assign_blocks
 
     used = set(assign_blocks(A, B))

@@ -23,7 +23,8 @@ def synthetic_tables(seed=1):
         r_final = final[s]
         r_max = np.minimum(1, r_final + extra)
         measures = {"final": r_final, "max": r_max, "expected": r_final + 2 * extra,
-                    "any": np.minimum(1, r_final + 1.5 * extra), "care": r_final + 0.5 * extra}
+                    "any": np.minimum(1, r_final + 1.5 * extra), "care": r_final + 0.5 * extra,
+                    "sequential": np.minimum(1, r_final + 0.8 * extra)}
         for i, t in enumerate(TRIAL_IDS):
             risk_rows.append((t, s, r_final[i]))
             build_rows += [(t, s, m, measures[m][i]) for m in RISK_MEASURES]

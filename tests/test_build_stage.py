@@ -67,7 +67,7 @@ def test_pair_table_of_aggregates_and_figure(tmp_path):
     assert anyr["H"] == pytest.approx(1 - 0.6 * 0.8)
     assert "12 of 12" in section and "0 of 12" in section
     assert (tmp_path / "figures" / "build_risk_stages.png").exists()
-    assert set(long["measure"]) == {"final", "max", "expected", "any", "care"}
+    assert set(long["measure"]) == {"final", "max", "expected", "any", "care", "sequential"}
 
 
 def test_participant_sigma_outputs_are_labelled_simulated(tmp_path):

@@ -40,8 +40,9 @@ LAYERS = [
     ("analysis", ["analysis", "analysis.*"], ["ground"]),
     # the application: lgp's application wing (lgp/app/ and its two commands), CLIs,
     # caches, report and page writers
-    ("application", [*APP_WING, "stimuli.sheet", "stimuli.generate", "stimuli.render", "stimuli.experiment",
-                     "stimuli.experiment.*", "analysis.import_study", "*.__main__"], None),
+    # stimuli.render is a package (camera, engine, run, __main__): the renderer and its cached run
+    ("application", [*APP_WING, "stimuli.sheet", "stimuli.generate", "stimuli.render", "stimuli.render.*",
+                     "stimuli.experiment", "stimuli.experiment.*", "analysis.import_study", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]
 RANK = {name: k for k, (name, _, _) in enumerate(LAYERS)}

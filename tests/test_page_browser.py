@@ -45,7 +45,7 @@ def browser():
 def results(browser, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("results")
     cmd = [sys.executable, "-m", "lgp.reproduce", "--quick", "--samples", "2", "--n-sims", "5",
-           "--sigmas", "0.05", "0.065", "0.08", "--out", str(out)]
+           "--sigmas", "0.05", "0.065", "0.08", "0.2", "--out", str(out)]
     run = subprocess.run(cmd, capture_output=True, text=True)
     assert run.returncode == 0, run.stderr[-3000:]
     return out
@@ -114,6 +114,36 @@ def test_pair_table_sorts_by_the_clicked_column(browser, results):
     table.locator("th").nth(col).click()
     assert column() == sorted(before, reverse=True)
     assert errors == []
+    page.close()
+
+
+def test_pairs_over_sigma_section_shows_every_pair_at_every_sigma_with_its_figure(browser, results):
+    page, errors, refused = _open(browser, results / "index.html")
+    section = page.locator("#over-sigma")
+    assert section.count() == 1 and "Pairs over sigma" in section.locator("h2").inner_text()
+    rows = section.locator("table.oversigma tbody tr")
+    assert rows.count() == 4  # one per sigma of the run
+    assert [rows.nth(k).get_attribute("class") for k in range(4)] == ["paper", "paper", "paper", ""]  # 0.2 d is past the grid
+    assert section.locator("table.oversigma thead th").count() == 1 + 12 + 2
+    assert section.locator("thead th.riskpair").evaluate_all("ths => ths.map(t => t.textContent)") == ["4", "5", "7", "8"]
+    # every cell carries both intervals and the Eq. 1 range, and a starred cell is one whose intervals separate
+    import pandas as pd
+
+    over = pd.read_csv(results / "pairs_over_sigma.csv")
+    cells = section.locator("tbody td[title]")
+    assert cells.count() == 4 * 12
+    first = cells.nth(0).get_attribute("title")
+    assert "1E" in first and "1H" in first and "[" in first and "b2/b1" in first
+    starred = section.locator("tbody td.holds").count()
+    assert starred == int(over["holds"].sum())
+    assert (over["holds"] == (over["risk_H_low"] > over["risk_E_high"])).all()
+    width = section.locator("img").evaluate("i => i.complete ? i.naturalWidth : 0")
+    assert width > 800
+    # the trial cards say how careful one must be: sigma* at both levels
+    card = page.locator("#trial-4H .precision").inner_text()
+    assert "risk 0.5" in card and "risk 0.1" in card and "sigma*" in card
+    _keep(page, "results_page_over_sigma.png", full_page=False)
+    assert errors == [] and refused == []
     page.close()
 
 

@@ -26,7 +26,7 @@ def test_sigma_grid_is_the_papers():
 
 def test_risk_is_the_fraction_of_runs_that_fell():
     risk, runs = physical_risk(staircase(4), 0.1, n_sims=40, seed=1, return_table=True)
-    assert list(runs.columns) == ["sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine", "fall_rule", "fall_threshold"]
+    assert list(runs.columns) == ["sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine", "fall_rule", "fall_threshold", "noise_rule"]
     assert list(runs["run"]) == list(range(40))
     assert risk == runs["fell"].mean()
     assert 0 < risk < 1  # a 4-block staircase at sigma = 0.1 d falls sometimes
@@ -49,7 +49,8 @@ def test_same_seed_gives_same_numbers_and_another_seed_other_numbers():
 
 def test_risk_curve_uses_the_same_random_numbers_for_every_sigma():
     curve, runs = risk_curve(staircase(4), [0.06, 0.08, 0.1], n_sims=30, seed=5, jobs=1, return_table=True)
-    assert list(curve.columns) == ["sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold"]
+    assert list(curve.columns) == ["sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold", "noise_rule",
+                                   "risk_low", "risk_high"]
     assert list(curve["sigma"]) == [0.06, 0.08, 0.1] and (curve["n"] == 30).all()
     for sigma in (0.06, 0.1):
         alone = physical_risk(staircase(4), sigma, n_sims=30, seed=5, return_table=True)[1]
@@ -64,13 +65,15 @@ def test_risk_grows_with_noise_on_a_marginal_stack():
 def test_risk_table_is_tidy_in_input_order_and_matches_physical_risk():
     scenes = {"stair": staircase(4), "tower": tower(4), "line": line(3)}
     table = risk_table(scenes, [0.07, 0.1], n_sims=20, seed=2, jobs=1)
-    assert list(table.columns) == ["trial", "sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold"]
+    assert list(table.columns) == ["trial", "sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold", "noise_rule",
+                                   "risk_low", "risk_high"]
     assert list(table["trial"]) == ["stair", "stair", "tower", "tower", "line", "line"]
     assert table.loc[(table.trial == "stair") & (table.sigma == 0.1), "risk"].item() == physical_risk(
         staircase(4), 0.1, n_sims=20, seed=2
     )
     runs = risk_table([staircase(4)], [0.1], n_sims=20, seed=2, jobs=1, runs=True)
-    assert list(runs.columns) == ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine", "fall_rule", "fall_threshold"]
+    assert list(runs.columns) == ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine", "fall_rule", "fall_threshold",
+                                  "noise_rule"]
     assert set(runs["trial"]) == {"staircase4 0.2d"}
 
 
@@ -117,3 +120,20 @@ def test_bad_sigma_or_n_is_refused():
     for n in (-1, 0):  # risk is falls / n: no runs, no risk (never a NaN)
         with pytest.raises(ValueError, match="n_sims >= 1"):
             physical_risk(tower(2), 0.1, n_sims=n)
+
+
+def test_identical_scenes_are_simulated_once_with_the_same_numbers(monkeypatch):
+    import stimuli
+    from models.risk import core
+
+    trials = [stimuli.load_trial(t) for t in ("1H", "9E", "4H")]  # 1H and 9E: the same 6-tower
+    assert core.geometry_key(trials[0].target) == core.geometry_key(trials[1].target) != core.geometry_key(trials[2].target)
+    calls = []
+    real = core._simulate_runs
+    monkeypatch.setattr(core, "_simulate_runs", lambda scene, *a, **k: calls.append(scene.label) or real(scene, *a, **k))
+    table = risk_table(trials, [0.1, 0.2], n_sims=12, seed=1, jobs=1, runs=True)
+    assert trials[1].target.label not in calls and trials[0].target.label in calls
+    a, b = (table[table["trial"] == t].drop(columns="trial").reset_index(drop=True) for t in ("1H", "9E"))
+    pd.testing.assert_frame_equal(a, b)
+    alone = risk_table([trials[1]], [0.1, 0.2], n_sims=12, seed=1, jobs=1, runs=True)
+    pd.testing.assert_frame_equal(alone.drop(columns="trial"), b)  # what 9E gives simulated on its own

@@ -32,14 +32,16 @@ def test_risk_section_is_tidy_matches_the_api_and_is_cached(tmp_path, monkeypatc
     section = sensitivity.risk_section(ctx)
     table = pd.read_csv(tmp_path / "risk_sensitivity.csv")
     assert list(table.columns) == sensitivity.COLUMNS
-    assert len(table) == len(ENGINES) * len(sensitivity.RISK_RULES) * len(trials) * len(sensitivity.RISK_SIGMAS)
-    assert not table.duplicated(["engine", "fall_rule", "fall_threshold", "trial", "sigma"]).any()
+    assert len(table) == (len(ENGINES) * len(sensitivity.RISK_RULES) * len(sensitivity.NOISE_RULES) * len(trials)
+                          * len(sensitivity.RISK_SIGMAS))
+    assert not table.duplicated(["engine", "fall_rule", "fall_threshold", "noise_rule", "trial", "sigma"]).any()
+    assert set(table["noise_rule"]) == {"lift", "settle"}
     assert table.loc[table["engine"] == "physx:game-defaults", "faithful"].eq(False).all()
 
     # every cell is what the risk API gives with that engine and rule, simulated directly
-    for (engine, rule, thr), g in table.groupby(["engine", "fall_rule", "fall_threshold"]):
+    for (engine, rule, thr, noise_rule), g in table.groupby(["engine", "fall_rule", "fall_threshold", "noise_rule"]):
         direct = risk_table(trials, list(sensitivity.RISK_SIGMAS), n_sims=6, seed=2, engine=engine, jobs=1,
-                            fall_rule=rule, fall_threshold=thr)
+                            fall_rule=rule, fall_threshold=thr, noise_rule=noise_rule)
         merged = g.merge(direct, on=["trial", "sigma"], suffixes=("", "_api"))
         assert len(merged) == len(g)
         np.testing.assert_array_equal(merged["risk"], merged["risk_api"])
@@ -47,6 +49,7 @@ def test_risk_section_is_tidy_matches_the_api_and_is_cached(tmp_path, monkeypatc
     summary = pd.read_csv(tmp_path / "risk_sensitivity_summary.csv")
     for _, row in summary.iterrows():
         g = table[(table["engine"] == row["engine"]) & (table["fall_rule"] == row["fall_rule"])
+                  & (table["noise_rule"] == row["noise_rule"])
                   & (table["fall_threshold"] == row["fall_threshold"]) & np.isclose(table["sigma"], row["sigma"])]
         assert row["trials_risk_gt_0"] == (g["risk"] > 0).sum()
         risk = dict(zip(g["trial"], g["risk"]))

@@ -20,6 +20,10 @@ from lgp.paper import PAIRS, PAPER_SIGMA
 
 #: The noise levels the build-risk report uses (issue 11: the paper's sigma, 0.065 d, and 0.10 d).
 BUILD_SIGMAS: tuple[float, ...] = (PAPER_SIGMA, 0.1)
+#: Layouts whose plan the sequential build (mode="sequential") is run on: one,
+#: sample 0 (a tower's plan is the same for every layout; a sequential build of
+#: 30 layouts of a floor is 30 builds of 15 stages per run).
+SEQUENTIAL_SAMPLES = 1
 EASY, HARD = "tab:red", "tab:blue"
 
 
@@ -34,31 +38,42 @@ def build_key_inputs(engine: str | None) -> dict:
 
 def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, engine: str | None, executor,
                       cache: Cache, *, fall_rule: str | None = None, fall_threshold: float | None = None,
-                      approach_height: float | None = None) -> pd.DataFrame:
+                      approach_height: float | None = None, noise_rule: str = "lift",
+                      sequential_samples: int = SEQUENTIAL_SAMPLES) -> pd.DataFrame:
     """The stage table of every trial (models.risk.build_risk), one cached file per
-    trial keyed by the trial file, the parameters and the code it depends on."""
+    trial and mode keyed by the trial file, the parameters and the code it
+    depends on: mode "stages" over `samples` layouts and mode "sequential" over
+    the first `sequential_samples` (the `sequential` aggregate)."""
     from models.risk.build import build_risk
     from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
 
     rule = {"fall_rule": fall_rule or DEFAULT_FALL_RULE,
             "fall_threshold": FALL_THRESHOLD if fall_threshold is None else float(fall_threshold),
-            "approach_height": approach_height}
+            "approach_height": approach_height, "noise_rule": noise_rule}
     depends = build_key_inputs(engine)
     out = []
     for k, trial in enumerate(trials, 1):
-        key = input_key(trial=trial.id, digest=trial.digest, sigmas=[float(s) for s in sigmas], n_sims=n_sims,
-                        samples=samples, seed=seed, **rule, **depends)
         t0 = time.perf_counter()
-        df = cache.get("buildrisk", key)
-        how = "cached"
-        if df is None:
-            df = cache.put("buildrisk", key, build_risk(trial, list(sigmas), n_sims=n_sims, samples=samples, seed=seed,
-                                                        engine=engine, executor=executor, **rule))
-            how = f"{time.perf_counter() - t0:.1f} s"
+        hows, tables = [], []
+        for mode, m in (("stages", samples), ("sequential", min(samples, sequential_samples))):
+            key = input_key(trial=trial.id, digest=trial.digest, sigmas=[float(s) for s in sigmas], n_sims=n_sims,
+                            samples=m, seed=seed, mode=mode, **rule, **depends)
+            df = cache.get("buildrisk", key)
+            how = "cached"
+            if df is None:
+                t1 = time.perf_counter()
+                df = cache.put("buildrisk", key, build_risk(trial, list(sigmas), n_sims=n_sims, samples=m, seed=seed,
+                                                            engine=engine, executor=executor, mode=mode, **rule))
+                how = f"{time.perf_counter() - t1:.1f} s"
+            hows.append(f"{mode} {how}")
+            tables.append(df)
+        df, seq = tables
         final = df[df["stage"] == df.groupby("sample")["stage"].transform("max")]
         curve = " ".join(f"{r:.2f}" for r in final.groupby("sigma")["risk"].mean())
-        _log(f"[build  {k:2d}/{len(trials)}] {trial.id:>3}: {df['stage'].max()} stages, final-stage risk {curve}  ({how})")
-        out.append(df)
+        collapsed = " ".join(f"{r:.2f}" for r in seq.groupby("sigma")["risk"].sum() / seq.groupby("sigma")["sample"].nunique())
+        _log(f"[build  {k:2d}/{len(trials)}] {trial.id:>3}: {df['stage'].max()} stages, final-stage risk {curve}, "
+             f"sequential build collapses {collapsed}  ({', '.join(hows)})")
+        out += tables
     return pd.concat(out, ignore_index=True)
 
 
@@ -146,13 +161,19 @@ def build_risk_outputs(stages: pd.DataFrame, out: Path, command: str) -> tuple[l
     lines = ["## Risk through the build (beyond the paper)", "",
              f"Command: `{command}`. Stages are the states after each Place of the plan of every layout "
              "(models/risk/build.py); aggregates per plan, averaged over layouts: final = r_K, max = max r_k, "
-             "expected = sum r_k, any = 1 - prod(1 - r_k), care = sum w_k r_k (w_k: share of the plan's effort "
-             "already spent on the structure, a squared-carry-distance proxy checked against KOMO).", ""]
+             "expected = sum r_k, any = 1 - prod(1 - r_k) (as if the stages were independent, which they are not: "
+             "they share their random numbers), care = sum w_k r_k (w_k: share of the plan's effort "
+             "already spent on the structure, a squared-carry-distance proxy checked against KOMO); "
+             "sequential = the fraction of runs of one noisy build, carried stage to stage from settled poses, that "
+             f"collapse at some stage (mode=\"sequential\", on the plan of the first {SEQUENTIAL_SAMPLES} layout(s)), "
+             "last_stage = the fraction of the runs reaching the last stage that collapse there (next to final, "
+             "the paper's R).", ""]
     from models.risk.build import MEASURES
 
-    lines += ["| trial | sigma | " + " | ".join(MEASURES) + " | stages |", "|---|---|" + "---|" * (len(MEASURES) + 1)]
+    shown = [*MEASURES, "last_stage"]
+    lines += ["| trial | sigma | " + " | ".join(shown) + " | stages |", "|---|---|" + "---|" * (len(shown) + 1)]
     for _, r in aggregates.iterrows():
-        lines.append(f"| {r['trial']} | {r['sigma']:g} | " + " | ".join(f"{r[m]:.3f}" for m in MEASURES)
+        lines.append(f"| {r['trial']} | {r['sigma']:g} | " + " | ".join(f"{r[m]:.3f}" for m in shown)
                      + f" | {r['stages']:g} |")
     lines.append("")
     complete = set(aggregates["trial"]) >= {f"{p}{lv}" for p in PAIRS for lv in "EH"}

@@ -16,7 +16,7 @@ from analysis.data import MAX_PARTICIPANTS
 from analysis.permutation import N_PERM
 from analysis.recovery import N_STUDIES
 from lgp.executor import default_jobs
-from lgp.paper import N_BOOT, N_SIMS, SAMPLES, SIGMA_GRID
+from lgp.paper import N_BOOT, N_SIMS, SAMPLES, SIGMA_GRID, SIGMA_GRIDS
 from lgp.planner.design import APPROACH, SLICES_PER_PHASE, Design
 from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
 
@@ -46,6 +46,10 @@ class RunConfig:
     profile: str | None = None
     fall_rule: str = DEFAULT_FALL_RULE
     fall_threshold: float = FALL_THRESHOLD
+    #: --sigma-grid: a named grid (lgp.paper.SIGMA_GRIDS) that sets `sigmas`; None: --sigmas or the paper's
+    sigma_grid: str | None = None
+    #: --noise-rule: lift (the default) or settle (models/risk/noise.py)
+    noise_rule: str = "lift"
     approach_height: float = APPROACH
     slices: int = SLICES_PER_PHASE
     planner: str = "paper"
@@ -97,6 +101,8 @@ class RunConfig:
         """The RunConfig of parsed arguments (an argparse.Namespace, or anything with
         these attributes): None means "not given", so the default (or --quick's value)."""
         given = {f.name: getattr(args, f.name) for f in fields(cls) if getattr(args, f.name, None) is not None}
+        if given.get("sigma_grid"):
+            given["sigmas"] = SIGMA_GRIDS[given["sigma_grid"]]
         quick = QUICK if given.get("quick") else {}
         for name, value in quick.items():
             given.setdefault(name, value)

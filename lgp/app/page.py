@@ -346,7 +346,7 @@ def _extra_tables(out: Path, known: set[str]) -> dict[str, pd.DataFrame]:
 
 
 def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, picture: Path | None,
-                replay: Path | None, extras: dict[str, pd.DataFrame], out: Path) -> str:
+                replay: Path | None, extras: dict[str, pd.DataFrame], out: Path, precision: pd.DataFrame | None = None) -> str:
     e = samples["effort"].to_numpy(dtype=float)
     sd = float(np.std(e, ddof=1)) if len(e) > 1 else 0.0
     curve = risk.sort_values("sigma")
@@ -368,6 +368,11 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
     link = (f'<a class="replay" href="{_e(os.path.relpath(replay, out))}">3-D replay of sample 0 &#9654;</a>'
             if replay is not None else '<span class="replay none">no replay (--no-replays)</span>')
     more = ""
+    if precision is not None and len(precision):
+        from models.risk.precision import precision_text
+
+        more += ('<p class="precision"><b>required precision</b> ' + " &middot; ".join(
+            f"risk {r['level']:g} at sigma* {_e(precision_text(r))}" for _, r in precision.iterrows()) + "</p>")
     for title, df in extras.items():
         rows = df[df["trial"] == trial.id]
         if len(rows):
@@ -380,11 +385,22 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
 {pic}
 <div class="stats">
 <div><b>effort</b> {effort_text}<br><small>{effort_note}</small><br>{histogram_svg(e)}</div>
-<div><b>risk</b> {(num(float(at.iloc[0])) if len(at) else "n/a")} at sigma {num(sigma)} d<br><small>over sigma (line: {num(sigma)}; top of the axis: {num(risk_top(curve["risk"]))})</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma)}</div>
+<div><b>risk</b> {_risk_at(curve, sigma)} at sigma {num(sigma)} d<br><small>over sigma (line: {num(sigma)}; top of the axis: {num(risk_top(curve["risk"]))})</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma)}</div>
 </div>
 <p><b>plan</b> {plan_len} &middot; {link}</p>
 {more}
 </article>"""
+
+
+def _risk_at(curve: pd.DataFrame, sigma: float) -> str:
+    """'0.17 [0.11, 0.26]': the risk at `sigma` with its 95% Wilson interval when the table has one."""
+    at = curve[np.isclose(curve["sigma"], sigma)]
+    if not len(at):
+        return "n/a"
+    r = at.iloc[0]
+    if "risk_low" in at:
+        return f"{float(r['risk']):.2f} <small>[{float(r['risk_low']):.2f}, {float(r['risk_high']):.2f}]</small>"
+    return f"{float(r['risk']):.2f}"
 
 
 def _human_section(analysis: dict | None, out: Path) -> str:
@@ -473,7 +489,8 @@ def participant_table(zscored: pd.DataFrame, predictions: pd.DataFrame | None) -
 def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                pairs: pd.DataFrame | None = None, analysis: dict | None = None, figures=(),
                pictures: dict | None = None, replays: dict | None = None,
-               figure_sigma: tuple[float, str] | None = None) -> Path:
+               figure_sigma: tuple[float, str] | None = None, over_sigma_html: str | None = None,
+               precision: pd.DataFrame | None = None) -> Path:
     """Write ``<out>/index.html`` (atomically) and return its path.
 
     `run`: command, parameters, engine, engine_settings, stages (name -> s),
@@ -483,7 +500,7 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
     out = Path(out)
     pictures = pictures or {}
     replays = replays or {}
-    known = {"effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv"}
+    known = {"effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv", "risk_precision.csv", "pairs_over_sigma.csv"}
     extras = _extra_tables(out, known)
     cards = []
     for trial in trials:
@@ -491,7 +508,8 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
         r = risk[risk["trial"] == trial.id]
         if not len(s) or not len(r):
             raise InputError(f"results page: trial {trial.id} has no effort or no risk rows")
-        cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out))
+        prec = None if precision is None else precision[precision["trial"] == trial.id]
+        cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out, prec))
     nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
     comparison = _comparison_section(analysis, out)  # "" when there is nothing to compare: no link to it
     title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"
@@ -500,13 +518,14 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
 <title>{_e(title)}</title><style>{_asset('page.css')}</style></head>
 <body>
 <header><h1>{_e(title)}</h1>
-<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#figures">figures</a>' if figures else ''} <a href="#trials">trials</a> <a href="#human">human data</a>{' <a href="#comparison">model comparison</a>' if comparison else ''}
+<nav><a href="#run">run</a> <a href="#pairs">pairs</a>{' <a href="#over-sigma">pairs over sigma</a>' if over_sigma_html else ''}{' <a href="#figures">figures</a>' if figures else ''} <a href="#trials">trials</a> <a href="#human">human data</a>{' <a href="#comparison">model comparison</a>' if comparison else ''}
 &middot; files: <a href="report.md">report.md</a> <a href="effort.csv">effort.csv</a> <a href="effort_samples.csv">effort_samples.csv</a> <a href="risk.csv">risk.csv</a>{' <a href="pairs.csv">pairs.csv</a>' if pairs is not None else ''}</nav>
 </header>
 <main>
 {_quick_banner(run)}
 {_run_section(run)}
 {_pairs_section(pairs, analysis, figure_sigma)}
+{over_sigma_html or ""}
 {_figures_section([Path(f) for f in figures], out, *(figure_sigma or (None, None)))}
 <section id="trials"><h2>Trials</h2><p class="trialnav">{nav}</p>
 <p>A is the layout of sample 0 (the one the replay plays); effort is over all {effort_samples.groupby("trial").size().max()} layouts.
@@ -534,7 +553,8 @@ def _parameter(v) -> str:
 
 def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                 pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock,
-                replays: dict | None = None) -> Path:
+                replays: dict | None = None, over_sigma_html: str | None = None,
+                precision: pd.DataFrame | None = None) -> Path:
     """The page of a `lgp.reproduce` run (its lgp.app.config.RunConfig `args`):
     pictures, run record, index.html."""
     from models.risk import DEFAULT_ENGINE, get_engine
@@ -578,4 +598,4 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
     return write_page(out, run=run, trials=trials, effort_samples=effort_samples, risk=risk, sigma=sigma, pairs=pairs,
                       figure_sigma=figure_sigma,
                       analysis=analysis if args.human_data else None, figures=figures,
-                      pictures=pictures, replays=replays)
+                      pictures=pictures, replays=replays, over_sigma_html=over_sigma_html, precision=precision)

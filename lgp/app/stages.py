@@ -114,48 +114,76 @@ def engine_key_inputs(engine: str | None, model: str) -> dict:
             "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra)}
 
 
-def risk_key_inputs(engine: str | None, fall_rule: str | None = None, fall_threshold: float | None = None) -> dict:
+def risk_key_inputs(engine: str | None, fall_rule: str | None = None, fall_threshold: float | None = None,
+                    noise_rule: str | None = None) -> dict:
     """What a risk table depends on besides the trial and the parameters:
-    engine_key_inputs of models.risk.core and the fall rule (None: the model's default)."""
+    engine_key_inputs of models.risk.core, the fall rule and the noise rule (None:
+    the model's defaults)."""
     from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
+    from models.risk.noise import DEFAULT_NOISE_RULE
 
     return {**engine_key_inputs(engine, "models.risk.core"), "fall_rule": fall_rule or DEFAULT_FALL_RULE,
-            "fall_threshold": float(FALL_THRESHOLD if fall_threshold is None else fall_threshold)}
+            "fall_threshold": float(FALL_THRESHOLD if fall_threshold is None else fall_threshold),
+            "noise_rule": noise_rule or DEFAULT_NOISE_RULE}
+
+
+#: The per-run columns a run caches (what the risk table and the required
+#: precision's bootstrap over runs are computed from).
+RUN_CACHE_COLUMNS = ["trial", "sigma", "run", "fell", "engine", "fall_rule", "fall_threshold", "noise_rule"]
 
 
 def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6,
-                fall_rule: str | None = None, fall_threshold: float | None = None, verbose: bool = True) -> pd.DataFrame:
+                fall_rule: str | None = None, fall_threshold: float | None = None, noise_rule: str | None = None,
+                runs_out: list | None = None, verbose: bool = True) -> pd.DataFrame:
     """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
 
+    Each trial's cached file holds its runs' verdicts (RUN_CACHE_COLUMNS); the
+    risk table (with its Wilson intervals) is summarised from them, and
+    `runs_out`, when given, receives the per-run tables (for the required precision).
     Uncached trials are simulated a few at a time on the run's one executor, so
     the grid keeps every worker busy and an interruption loses at most one chunk.
     """
-    from models.risk import risk_table
+    from models.risk import risk_table, summarise
 
-    depends = risk_key_inputs(engine, fall_rule, fall_threshold)
+    depends = risk_key_inputs(engine, fall_rule, fall_threshold, noise_rule)
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
-    tables = {t.id: cache.get("risk", keys[t.id]) for t in trials}
+    tables = {t.id: cache.get("riskruns", keys[t.id]) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
+    # a trial whose B is identical to another's has the same runs (models.risk.core.geometry_key):
+    # simulate one of each, give the others its runs under their own id
+    from models.risk.core import geometry_key
+
+    twins: dict[str, list] = {}
+    for t in todo:
+        twins.setdefault(geometry_key(t.target), []).append(t)
+    simulate = [group[0] for group in twins.values()]
     if todo:
-        _log(f"risk: {len(todo) * len(sigmas) * n_sims} simulations of B ({len(todo)} trial(s) x {len(sigmas)} sigma(s) "
-             f"x {n_sims} noisy runs)" + (f"; {len(trials) - len(todo)} trial(s) reused from the cache" if len(todo) < len(trials) else ""))
-    bar = Progress("risk", len(todo) * len(sigmas) * n_sims, "runs", what="noisy runs of B")
-    for k in range(0, len(todo), chunk):
-        group = todo[k:k + chunk]
+        _log(f"risk: {len(simulate) * len(sigmas) * n_sims} simulations of B ({len(simulate)} trial(s) x {len(sigmas)} sigma(s) "
+             f"x {n_sims} noisy runs" + (f"; {len(todo) - len(simulate)} trial(s) with an identical B reuse their runs"
+                                         if len(simulate) < len(todo) else "") + ")"
+             + (f"; {len(trials) - len(todo)} trial(s) reused from the cache" if len(todo) < len(trials) else ""))
+    bar = Progress("risk", len(simulate) * len(sigmas) * n_sims, "runs", what="noisy runs of B")
+    for k in range(0, len(simulate), chunk):
+        group = simulate[k:k + chunk]
         t0 = time.perf_counter()
         base = bar.done
         table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
                            fall_rule=depends["fall_rule"], fall_threshold=depends["fall_threshold"],
-                           progress=lambda done, total: bar.advance(base + done - bar.done))
+                           noise_rule=depends["noise_rule"], runs=True,
+                           progress=lambda done, total: bar.advance(base + done - bar.done))[RUN_CACHE_COLUMNS]
         for t in group:
-            tables[t.id] = cache.put("risk", keys[t.id], table[table["trial"] == t.id].reset_index(drop=True))
+            runs = table[table["trial"] == t.id].reset_index(drop=True)
+            for same in twins[geometry_key(t.target)]:
+                tables[same.id] = cache.put("riskruns", keys[same.id], runs.assign(trial=same.id))
         if verbose:
             _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     if todo:
         bar.close()
     out = []
     for k, trial in enumerate(trials, 1):
-        df = tables[trial.id]
+        if runs_out is not None:
+            runs_out.append(tables[trial.id])
+        df = summarise(tables[trial.id].assign(trial=tables[trial.id]["trial"].astype(str)))
         curve = " ".join(f"{r:.2f}" for r in df.sort_values("sigma")["risk"])
         if verbose:
             _log(f"[risk   {k:2d}/{len(trials)}] {trial.id:>3}: risk over sigma {curve}  ({'cached' if trial not in todo else 'new'})")

@@ -2,13 +2,17 @@
 
     python -m models.risk --table docs/risk_table.csv [--runs runs.csv]
         [--n-sims 100] [--seed 0] [--engine mujoco|drake|physx] [--profile faithful|game-defaults]
-        [--fall-rule horizontal|3d] [--fall-threshold 0.25] [--jobs N] [--sigmas 0.05 0.065 ...]
+        [--fall-rule horizontal|3d] [--fall-threshold 0.25] [--noise-rule lift|settle] [--jobs N]
+        [--sigmas 0.05 0.065 ... | --sigma-grid paper|wide]
+        [--precision risk_precision.csv [--precision-levels 0.5 0.1]]
 
-Writes the tidy (trial, sigma, risk, falls, n, engine, fall_rule, fall_threshold)
-table as CSV, optionally the per-run table, and prints risk per trial and sigma.
+Writes the tidy (trial, sigma, risk, falls, n, engine, fall_rule, fall_threshold,
+noise_rule, risk_low, risk_high) table as CSV, optionally the per-run table and
+the required precision sigma* per trial (models/risk/precision.py), and prints
+risk per trial and sigma.
 
     python -m models.risk --build-risk 7H [6E ...] [--sigmas 0.065 0.1] [--samples 30]
-        [--n-sims 100] [--out stages.csv]
+        [--n-sims 100] [--mode stages|sequential] [--out stages.csv]
 
 Risk through the build (models/risk/build.py): prints each trial's stage curve
 (mean risk per stage over the layouts) and its aggregates; `--out` writes the
@@ -22,9 +26,11 @@ import sys
 import time
 
 from lgp import cli
-from lgp.paper import N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID
+from lgp.paper import N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, SIGMA_GRIDS
 from models.risk.core import DEFAULT_ENGINE, _engine_name, check_fall_rule, risk_table, summarise
 from models.risk.engine import DEFAULT_FALL_RULE, ENGINES, FALL_RULES, FALL_THRESHOLD, PROFILES
+from models.risk.noise import DEFAULT_NOISE_RULE, NOISE_RULES
+from models.risk.precision import PRECISION_LEVELS
 
 
 PROG = "python -m models.risk"
@@ -42,13 +48,26 @@ def main(argv=None) -> int:
     p.add_argument("--fall-rule", type=cli.one_of(FALL_RULES, "fall rule"), default=DEFAULT_FALL_RULE, help=f"{' or '.join(FALL_RULES)} displacement (default %(default)s)")
     p.add_argument("--fall-threshold", type=float, default=FALL_THRESHOLD, help="fall threshold in units of d (default %(default)s)")
     p.add_argument("--jobs", type=cli.positive_int, default=None, help="worker processes (default: all cores)")
-    p.add_argument("--sigmas", type=cli.sigma, nargs="+", default=list(SIGMA_GRID), help="noise SDs in (0, 1], fractions of d")
+    p.add_argument("--noise-rule", choices=NOISE_RULES, default=DEFAULT_NOISE_RULE,
+                   help="heights of the noisy blocks: lift (default, blocks may start above their support) or settle "
+                        "(every block rests on what lies beneath it; docs/risk.md)")
+    grid = p.add_mutually_exclusive_group()
+    grid.add_argument("--sigmas", type=cli.sigma, nargs="+", default=None, help="noise SDs in (0, 1], fractions of d")
+    grid.add_argument("--sigma-grid", choices=list(SIGMA_GRIDS), default=None,
+                      help="a named grid: paper (0.05..0.10 d step 0.005, the default) or wide (0.05..0.30 d step 0.01 "
+                           "plus the paper's points)")
+    p.add_argument("--precision", type=cli.output_file, help="also write the required precision sigma* per trial (CSV) here")
+    p.add_argument("--precision-levels", type=cli.precision_level, nargs="+", default=list(PRECISION_LEVELS),
+                   help="risk levels of sigma*, each in (0, 1) (default 0.5 0.1)")
+    p.add_argument("--mode", choices=["stages", "sequential"], default="stages",
+                   help="with --build-risk: each stage on its own (default) or one build carried through (sequential)")
     p.add_argument("--trials", type=cli.trial_id, nargs="+", help="trial ids (default: all 24; case-insensitive)")
     p.add_argument("--build-risk", nargs="+", metavar="TRIAL", type=cli.trial_id_or_all,
                    help="print the stage curve of these trials ('all': the 24)")
     p.add_argument("--samples", type=cli.positive_int, default=SAMPLES, help="layouts of A per trial for --build-risk (default %(default)s)")
     p.add_argument("--out", type=cli.output_file, help="with --build-risk: write the stage table (CSV) here")
     args = p.parse_args(argv)
+    args.sigmas = list(SIGMA_GRIDS[args.sigma_grid] if args.sigma_grid else args.sigmas or SIGMA_GRID)
     try:
         args.engine = _engine_name(args.engine, args.profile)
         check_fall_rule(args.fall_rule, args.fall_threshold)
@@ -78,17 +97,24 @@ def main(argv=None) -> int:
             print(f"  {done}/{total} runs, {now - t0:.0f} s", file=sys.stderr, flush=True)
 
     runs = risk_table(trials, args.sigmas, args.n_sims, args.seed, args.engine, args.jobs, progress, runs=True,
-                      fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
+                      fall_rule=args.fall_rule, fall_threshold=args.fall_threshold, noise_rule=args.noise_rule)
     table = summarise(runs)
     order = {t.id: k for k, t in enumerate(trials)}
     table = table.sort_values(["trial", "sigma"], key=lambda c: c.map(order) if c.name == "trial" else c).reset_index(drop=True)
     write_csv_atomic(table, cli.make_parent(args.table))
     if args.runs:
         write_csv_atomic(runs, cli.make_parent(args.runs))
+    if args.precision:
+        from models.risk.precision import precision_text, required_precision
+
+        precision = required_precision(runs, args.precision_levels, seed=args.seed)
+        write_csv_atomic(precision, cli.make_parent(args.precision))
+        for level, g in precision.groupby("level", sort=False):
+            print(f"sigma* (risk reaches {level:g}): " + ", ".join(f"{r['trial']} {precision_text(r)}" for _, r in g.iterrows()))
     wide = table.pivot(index="trial", columns="sigma", values="risk").reindex([t.id for t in trials])
     print(wide.to_string(float_format=lambda x: f"{x:.2f}"))
     label = args.engine if ENGINES[args.engine].faithful else f"{args.engine} (UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md)"
-    print(f"{len(runs)} runs with {label}, {args.fall_rule} fall rule at {args.fall_threshold:g} d, "
+    print(f"{len(runs)} runs with {label}, {args.fall_rule} fall rule at {args.fall_threshold:g} d, {args.noise_rule} noise rule, "
           f"in {time.perf_counter() - t0:.1f} s -> {args.table}", file=sys.stderr)
     return 0
 
@@ -100,23 +126,25 @@ def _build_risk(args) -> int:
     from models.risk.build import build_risk, build_risk_aggregates, stage_curve
 
     ids = list(stimuli.trial_ids()) if args.build_risk == ["all"] else args.build_risk
-    sigmas = [PAPER_SIGMA] if args.sigmas == list(SIGMA_GRID) else args.sigmas
+    sigmas = [PAPER_SIGMA] if args.sigmas == list(SIGMA_GRID) and not args.sigma_grid else args.sigmas
     t0 = time.perf_counter()
     tables = []
     for tid in ids:
         trial = stimuli.load_trial(tid)
         t1 = time.perf_counter()
         stages = build_risk(trial, sigmas, n_sims=args.n_sims, samples=args.samples, seed=args.seed,
-                            engine=args.engine, jobs=args.jobs)
+                            engine=args.engine, jobs=args.jobs, fall_rule=args.fall_rule,
+                            fall_threshold=args.fall_threshold, mode=args.mode, noise_rule=args.noise_rule)
         tables.append(stages)
         curve = stage_curve(stages)
         for sigma, c in curve.groupby("sigma", sort=False):
-            print(f"{tid} sigma {sigma:g} d: risk by stage (mean over {args.samples} layouts; blocks in structure)")
+            head = "sequential build, share of runs collapsing at each stage" if args.mode == "sequential" else "risk by stage"
+            print(f"{tid} sigma {sigma:g} d: {head} (mean over {args.samples} layouts; blocks in structure)")
             for _, row in c.iterrows():
                 bar = "#" * int(round(40 * row["risk"]))
                 print(f"  stage {row['stage']:2d}  {row['blocks_in_structure']:4.1f} blocks  "
                       f"risk {row['risk']:.3f}  {bar}")
-        agg = build_risk_aggregates(stages)
+        agg = build_risk_aggregates(stages).dropna(axis=1, how="all")
         print(agg.drop(columns=["engine"]).to_string(index=False, float_format=lambda x: f"{x:.3f}"))
         print(f"  ({time.perf_counter() - t1:.1f} s)", file=sys.stderr, flush=True)
     if args.out:

@@ -34,8 +34,32 @@ is averaged), with r_k the risk of stage k = 1..K:
     final    = r_K                              (the paper's R when stage K is B)
     max      = max_k r_k
     expected = sum_k r_k                        (expected number of collapses)
-    any      = 1 - prod_k (1 - r_k)             (P(at least one collapse), stages independent)
+    any      = 1 - prod_k (1 - r_k)             (P(at least one collapse) IF the stages were independent)
     care     = sum_k w_k r_k                    (expected fraction of the plan's work undone)
+    sequential = P(the sequential build collapses at some stage)  (mode="sequential", below)
+
+`any` treats the stages as independent, which they are not: they share their
+random numbers (block j has the same normals at every stage), so a run whose
+base is off falls at several stages together and the true P(at least one
+collapse) of the shared runs lies between `max` and `any`. It is kept as the
+formula it is; `sequential` is a probability computed from the runs.
+
+**Sequential build** (``mode="sequential"``; the Discussion's builder who must
+keep an almost finished tower from crashing): B is built in the plan's order and
+each stage starts from the state the previous one left. Run r starts from A as
+it lies (no noise: nobody placed it); each Place puts its block at its B target
+moved by fresh placement noise -- block j of B with the normals z_B[r, j], the
+same as the paper's R, so at sigma 0 the build is exact and common random
+numbers hold across sigma -- with the noise rule applied to that block alone
+(it is pushed clear of its neighbours and set onto, or under "lift" never into,
+the settled blocks beneath its new outline; the settled blocks do not move).
+The stage is simulated until rest, and its final centres are carried to the
+next stage (orientations are not carried: a block that stands keeps its yaw to
+a fraction of a degree). A run collapses at the first stage in which a block
+moves more than the fall threshold from where that stage started; later
+stages are not simulated. The stage table then counts, per stage, the runs that
+reached it standing (`reached`) and those that collapsed there (`falls`;
+``risk = falls / n_sims``, so the stage risks add up to `sequential`).
 
 w_k is the share of the plan's effort already spent on blocks in the structure
 at stage k, so E * care is the effort (J s) a collapse is expected to undo. The
@@ -61,15 +85,20 @@ from lgp.executor import default_jobs
 from lgp.paper import N_SIMS, SAMPLES
 from lgp.scene import Scene, support_graph, supported_by
 from models.risk.core import UnstableSceneError, _engine_name, check_fall_rule, check_stable, map_runs
-from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
-from models.risk.noise import draw_normals
+from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD, _smallest_width, get_engine
+from models.risk.noise import DEFAULT_NOISE_RULE, NoiseRule, check_noise_rule, draw_normals
 
 #: The stage table, one row per (trial, sample, sigma, stage).
 STAGE_COLUMNS = ["trial", "sample", "sigma", "stage", "action_index", "blocks_in_structure",
-                 "blocks_simulated", "risk", "falls", "n_sims", "work_share", "engine"]
-#: The aggregates of a plan's stage risks (module docstring), in table order.
-MEASURES: tuple[str, ...] = ("final", "max", "expected", "any", "care")
-AGGREGATE_COLUMNS = ["trial", "sigma", *MEASURES, "stages", "samples", "engine"]
+                 "blocks_simulated", "risk", "falls", "n_sims", "work_share", "engine", "mode", "reached",
+                 "noise_rule"]
+#: The ways a build's stages are simulated (module docstring): each stage on its
+#: own from B's poses ("stages"), or one build carried through ("sequential").
+MODES: tuple[str, ...] = ("stages", "sequential")
+#: The aggregates of a plan's stage risks (module docstring), in table order;
+#: `sequential` comes from a mode="sequential" table.
+MEASURES: tuple[str, ...] = ("final", "max", "expected", "any", "care", "sequential")
+AGGREGATE_COLUMNS = ["trial", "sigma", *MEASURES, "last_stage", "stages", "samples", "engine"]
 
 
 class BuildStageError(ValueError):
@@ -96,6 +125,8 @@ class Stage:
     scene: Scene
     work_share: float
     key: str
+    #: the B name of the block this Place put at its B pose
+    placed: str = ""
 
 
 def plan_stages(trial, seed: int = 0, sample: int = 0, approach_height: float | None = None):
@@ -140,7 +171,8 @@ def plan_stages(trial, seed: int = 0, sample: int = 0, approach_height: float | 
                     f"{trial.id} sample {sample} stage {len(stages) + 1}")
         key = _stage_key(sim, [("B", target.names.index(b)) for b in structure] + [("A", a_index[a]) for a in stack])
         share = sum(weights[a] for a in placed) / total if total > 0 else 0.0
-        stages.append(Stage(trial.id, sample, len(stages) + 1, k, structure, stack, sim, share, key))
+        stages.append(Stage(trial.id, sample, len(stages) + 1, k, structure, stack, sim, share, key,
+                            plan.assignment[action.block]))
     return stages
 
 
@@ -169,8 +201,13 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
                engine: str | None = None, jobs: int | None = 1, executor=None,
                progress: Callable[[int, int], None] | None = None, *, profile: str | None = None,
                fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD,
-               approach_height: float | None = None) -> pd.DataFrame:
+               approach_height: float | None = None, mode: str = "stages",
+               noise_rule: str = DEFAULT_NOISE_RULE) -> pd.DataFrame:
     """Risk of every stage of the plans of `samples` layouts of `trial`.
+
+    `mode`: "stages" (default: each stage simulated on its own from B's poses)
+    or "sequential" (one noisy build carried through the stages, module
+    docstring); `noise_rule` that of `physical_risk`.
 
     `trial` is a stimuli.Trial or its id; `sigma` one noise level or several
     (fractions of d; common random numbers across them and across stages).
@@ -195,6 +232,9 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
     for s in sigmas:
         if not s >= 0:
             raise InputError(f"trial {trial.id}: sigma must be >= 0 (a fraction of the block size), got {s}")
+    if mode not in MODES:
+        raise InputError(f"trial {trial.id}: unknown build-risk mode {mode!r}; known modes: {', '.join(MODES)}")
+    noise_rule = check_noise_rule(noise_rule)
     name = _engine_name(engine, profile)
     fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
     drawn = range(samples) if trial.initial.is_random else [0]
@@ -226,6 +266,9 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
             raise BuildStageError(f"trial {trial.id} sample {st.sample} stage {st.stage} "
                                   f"(after action {st.action_index}): {e}") from None
     jobs = (executor.jobs if executor is not None else default_jobs()) if jobs is None else max(1, int(jobs))
+    if mode == "sequential":
+        return _sequential(trial, plans, sigmas, z_B, a_index, n_sims, samples, name, fall_rule, fall_threshold,
+                           noise_rule, executor, jobs, progress)
     total = len(keys) * len(sigmas) * n_sims
     chunk = max(1, min(n_sims, -(-total // (8 * jobs)))) if total else 1
     tasks, args = [], []
@@ -238,7 +281,7 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
         for s in sigmas:
             for a in range(0, n_sims, chunk):
                 tasks.append((key, s))
-                args.append((st.scene, s, z[a:min(a + chunk, n_sims)], a, name, fall_rule, fall_threshold))
+                args.append((st.scene, s, z[a:min(a + chunk, n_sims)], a, name, fall_rule, fall_threshold, noise_rule))
     results = map_runs(args, total, executor, jobs, progress)
     falls: dict[tuple[str, float], int] = {}
     for (key, s), res in zip(tasks, results):
@@ -250,8 +293,106 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
             for st in stages:
                 f = falls[st.key, s]
                 rows.append((trial.id, sample, s, st.stage, st.action_index, len(st.structure),
-                             len(st.structure) + len(st.stack), f / n_sims, f, n_sims, st.work_share, name))
+                             len(st.structure) + len(st.stack), f / n_sims, f, n_sims, st.work_share, name,
+                             "stages", n_sims, noise_rule))
     return pd.DataFrame(rows, columns=STAGE_COLUMNS)
+
+
+def _sources(st: Stage, target: Scene, a_index: dict[str, int]) -> list[tuple[str, int]]:
+    """Where each block of a stage scene comes from: ("B", index in B) for the
+    structure, ("A", index among A's fixed blocks) for the stack."""
+    return [("B", target.names.index(b)) for b in st.structure] + [("A", a_index[a]) for a in st.stack]
+
+
+def _sequential(trial, plans, sigmas, z_B, a_index, n_sims, samples, engine, fall_rule, fall_threshold, noise_rule,
+                executor, jobs, progress) -> pd.DataFrame:
+    """mode="sequential" of `build_risk` (module docstring): one task per distinct
+    plan (its sequence of stage scenes), sigma and chunk of runs."""
+    target = trial.target
+    sequences: dict[tuple, list[Stage]] = {}
+    of_sample = {}
+    for sample, stages in plans.items():
+        key = tuple(st.key for st in stages)
+        sequences.setdefault(key, stages)
+        of_sample[sample] = key
+    keys = list(sequences)
+    total = len(keys) * len(sigmas) * n_sims
+    chunk = max(1, min(n_sims, -(-total // (8 * jobs)))) if total else 1
+    tasks, args = [], []
+    for key in keys:
+        stages = sequences[key]
+        plan = []
+        for st in stages:
+            sources = _sources(st, target, a_index)
+            placed = ("B", target.names.index(st.placed))
+            plan.append((st.scene, sources, sources.index(placed) if placed in sources else None))
+        for s in sigmas:
+            for a in range(0, n_sims, chunk):
+                b = min(a + chunk, n_sims)
+                tasks.append((key, s))
+                args.append((plan, s, z_B[a:b], engine, fall_rule, fall_threshold, noise_rule))
+    done = [0]
+
+    def arrived(k, res):
+        done[0] += res.shape[0]
+        if progress:
+            progress(done[0], total)
+
+    from lgp.executor import borrowed
+
+    with borrowed(executor, 1 if len(args) <= 1 else min(jobs, len(args))) as ex:
+        results = ex.map(_sequential_worker, args, arrived)
+    collapsed: dict[tuple, list[np.ndarray]] = {}
+    for task, res in zip(tasks, results):
+        collapsed.setdefault(task, []).append(res)
+    rows = []
+    for sample in range(samples):
+        key = of_sample[sample if trial.initial.is_random else 0]
+        stages = sequences[key]
+        for s in sigmas:
+            at = np.concatenate(collapsed[key, s])  # stage (1-based) at which each run collapsed, 0: stood
+            reached = n_sims
+            for st in stages:
+                f = int((at == st.stage).sum())
+                rows.append((trial.id, sample, s, st.stage, st.action_index, len(st.structure),
+                             len(st.structure) + len(st.stack), f / n_sims, f, n_sims, st.work_share, engine,
+                             "sequential", reached, noise_rule))
+                reached -= f
+    return pd.DataFrame(rows, columns=STAGE_COLUMNS)
+
+
+def _sequential_worker(args) -> np.ndarray:
+    """Runs of one sequential build: for each run (rows of z_B), the stage at which
+    it collapsed (1-based), 0 when it stood to the end."""
+    plan, sigma, z_B, engine, fall_rule, fall_threshold, noise_rule = args
+    eng = get_engine(engine)
+    runs = len(z_B)
+    at = np.zeros(runs, dtype=int)
+    settled: dict[tuple[str, int], np.ndarray] = {}  # source -> (runs, 3) centres after the last stage
+    for k, (scene, sources, placed) in enumerate(plan, start=1):
+        n = len(scene)
+        start = np.broadcast_to(scene.positions, (runs, n, 3)).copy()
+        for q, src in enumerate(sources):
+            if src in settled:
+                start[:, q] = settled[src]
+        z = np.zeros((runs, n, 3))
+        movable = np.zeros(n, bool)
+        if placed is not None:  # the block this Place put: fresh placement noise
+            movable[placed] = True
+            z[:, placed] = z_B[:, sources[placed][1]]
+        p_WB = NoiseRule(scene, noise_rule, movable).positions(sigma, z, start) if movable.any() else start
+        threshold = fall_threshold * _smallest_width(scene)
+        for r in np.flatnonzero(at == 0):
+            rollout = eng.simulate(scene, fall_threshold=fall_threshold, p_WB=p_WB[r])
+            moved = rollout.horizontal_displacement() if fall_rule == "horizontal" else rollout.displacement_3d()
+            if len(moved) and moved.max() > threshold:
+                at[r] = k
+            else:
+                for q, src in enumerate(sources):
+                    settled.setdefault(src, np.zeros((runs, 3)))[r] = rollout.p_WB_final[q]
+    return at
+
+
 
 
 def aggregate_plan(risks: Sequence[float], shares: Sequence[float]) -> dict[str, float]:
@@ -271,14 +412,31 @@ def aggregate_plan(risks: Sequence[float], shares: Sequence[float]) -> dict[str,
 def build_risk_aggregates(stages: pd.DataFrame) -> pd.DataFrame:
     """Per (trial, sigma): each aggregate of `aggregate_plan` averaged over the
     plan's samples (layouts), with the number of stages (mean over samples) and
-    samples. Columns AGGREGATE_COLUMNS."""
+    samples. Columns AGGREGATE_COLUMNS. A table with mode="sequential" rows (one
+    or both modes, concatenated) gives `sequential`, P(the sequential build
+    collapses), and `last_stage`, P(its last stage collapses | it got there),
+    the sequential counterpart of `final`; measures of a mode not in the table
+    are NaN."""
+    if "mode" not in stages:
+        stages = stages.assign(mode="stages")
     rows = []
     for (trial, sigma, engine), g in stages.groupby(["trial", "sigma", "engine"], sort=False):
-        per = [aggregate_plan(p.sort_values("stage")["risk"], p.sort_values("stage")["work_share"])
-               for _, p in g.groupby("sample", sort=True)]
-        mean = {m: float(np.mean([a[m] for a in per])) for m in MEASURES}
-        rows.append({"trial": trial, "sigma": sigma, **mean,
-                     "stages": float(g.groupby("sample").size().mean()), "samples": len(per), "engine": engine})
+        out = {m: np.nan for m in MEASURES}
+        out["last_stage"] = np.nan
+        independent, sequential = g[g["mode"] == "stages"], g[g["mode"] == "sequential"]
+        counted = independent if len(independent) else sequential
+        if len(independent):
+            per = [aggregate_plan(p.sort_values("stage")["risk"], p.sort_values("stage")["work_share"])
+                   for _, p in independent.groupby("sample", sort=True)]
+            out.update({m: float(np.mean([a[m] for a in per])) for m in MEASURES if m != "sequential"})
+        if len(sequential):
+            plans = [p.sort_values("stage") for _, p in sequential.groupby("sample", sort=True)]
+            out["sequential"] = float(np.mean([p["falls"].sum() / p["n_sims"].iloc[0] for p in plans]))
+            out["last_stage"] = float(np.mean([p["falls"].iloc[-1] / p["reached"].iloc[-1] if p["reached"].iloc[-1] else np.nan
+                                               for p in plans]))
+        rows.append({"trial": trial, "sigma": sigma, **out,
+                     "stages": float(counted.groupby("sample").size().mean()),
+                     "samples": counted["sample"].nunique(), "engine": engine})
     return pd.DataFrame(rows, columns=AGGREGATE_COLUMNS)
 
 
@@ -294,6 +452,8 @@ def stage_curve(stages: pd.DataFrame, sigma: float | None = None) -> pd.DataFram
     columns trial, sigma, stage, blocks_in_structure (mean), risk (mean), risk_min,
     risk_max, samples."""
     g = stages if sigma is None else stages[np.isclose(stages["sigma"], sigma)]
+    if "mode" in g:
+        g = g[g["mode"] == "stages"] if (g["mode"] == "stages").any() else g
     out = (g.groupby(["trial", "sigma", "stage"], sort=False)
            .agg(blocks_in_structure=("blocks_in_structure", "mean"), risk=("risk", "mean"),
                 risk_min=("risk", "min"), risk_max=("risk", "max"), samples=("sample", "nunique"))
@@ -308,6 +468,6 @@ def build_risk_table(trials: Iterable, sigmas, n_sims: int = N_SIMS, samples: in
                      ignore_index=True)
 
 
-__all__ = ["MEASURES", "STAGE_COLUMNS", "AGGREGATE_COLUMNS", "BuildStageError", "Stage", "plan_stages",
+__all__ = ["MEASURES", "MODES", "STAGE_COLUMNS", "AGGREGATE_COLUMNS", "BuildStageError", "Stage", "plan_stages",
            "build_risk", "build_risk_table", "aggregate_plan", "build_risk_aggregates", "measure_table",
            "stage_curve"]

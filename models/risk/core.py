@@ -37,15 +37,19 @@ from models.risk.engine import (
     fall_certain,
     get_engine,
 )
-from models.risk.noise import NoiseRule, draw_normals
+from models.risk.noise import DEFAULT_NOISE_RULE, NoiseRule, check_noise_rule, draw_normals
 
 #: The engine used when none is named: the one that passes the faithfulness suite
 #: with the better throughput (docs/risk.md).
 DEFAULT_ENGINE = "mujoco"
 
 RUN_COLUMNS = ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine",
-               "fall_rule", "fall_threshold"]
-RISK_COLUMNS = ["trial", "sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold"]
+               "fall_rule", "fall_threshold", "noise_rule"]
+#: risk_low, risk_high: the 95% Wilson score interval of risk = falls / n (Monte Carlo error).
+RISK_COLUMNS = ["trial", "sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold", "noise_rule",
+                "risk_low", "risk_high"]
+#: Two-sided 95% normal quantile of the Wilson intervals.
+WILSON_Z = 1.959963984540054
 
 
 class UnstableSceneError(ValueError):
@@ -151,6 +155,16 @@ def _scene_key(scene: Scene) -> str:
                   *(part for f in scene.fixed for part in (f.p_WO, f.size)))
 
 
+def geometry_key(scene: Scene) -> str:
+    """What a scene's noisy runs depend on besides sigma, n, seed, engine and rules:
+    every block's pose and size in order and the fixed boxes -- not the label or
+    the block names. Two trials with the same key (the identical 6-towers of 1H,
+    9E, 9H, 11E, 11H, for example) have the same runs to the bit, so a grid
+    simulates one of them (run_grid, lgp.app.stages.risk_tables)."""
+    return digest(*(part for b in scene.blocks for part in (b.p_WB, b.size, np.float64(b.yaw))),
+                  *(part for f in scene.fixed for part in (f.p_WO, f.size)))
+
+
 def check_stable(scene: Scene, engine: str | None = None, *, profile: str | None = None,
                  fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD) -> Rollout:
     """Simulate the unperturbed scene once (cached per scene, engine and early-stop
@@ -175,16 +189,17 @@ def check_stable(scene: Scene, engine: str | None = None, *, profile: str | None
 
 
 def _simulate_runs(scene: Scene, sigma: float, z: np.ndarray, runs: Sequence[int], engine: str,
-                   fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD) -> list[dict]:
+                   fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD,
+                   noise_rule: str = DEFAULT_NOISE_RULE) -> list[dict]:
     """Perturb and simulate runs `runs` of the scene (z: their normals, len(runs) x n x 3)."""
     eng = get_engine(engine)
     threshold = fall_threshold * _smallest_width(scene)
-    p_WB = NoiseRule(scene).positions(sigma, np.asarray(z, float).reshape(len(runs), len(scene), 3))
+    p_WB = NoiseRule(scene, noise_rule).positions(sigma, np.asarray(z, float).reshape(len(runs), len(scene), 3))
     rows = []
     for r, p_r in zip(runs, p_WB):
         rollout = eng.simulate(scene, fall_threshold=fall_threshold, p_WB=p_r)
         rows.append({"sigma": sigma, "run": int(r), **_row(rollout, threshold, fall_rule), "engine": engine,
-                     "fall_rule": fall_rule, "fall_threshold": fall_threshold})
+                     "fall_rule": fall_rule, "fall_threshold": fall_threshold, "noise_rule": noise_rule})
     return rows
 
 
@@ -200,7 +215,7 @@ class _Task:
 
 
 def _task_worker(args):
-    """args: (scene, sigma, z, start, engine[, fall_rule, fall_threshold])."""
+    """args: (scene, sigma, z, start, engine[, fall_rule, fall_threshold[, noise_rule]])."""
     scene, sigma, z, start, engine, *rule = args
     return _simulate_runs(scene, sigma, z, range(start, start + len(z)), engine, *rule)
 
@@ -234,6 +249,7 @@ def run_grid(
     profile: str | None = None,
     fall_rule: str = DEFAULT_FALL_RULE,
     fall_threshold: float = FALL_THRESHOLD,
+    noise_rule: str = DEFAULT_NOISE_RULE,
 ) -> pd.DataFrame:
     """Every (scene, sigma, run): a tidy table with columns RUN_COLUMNS, in the
     order of `scenes`, then `sigmas`, then runs.
@@ -245,36 +261,70 @@ def run_grid(
     """
     name = _engine_name(engine, profile)
     fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
+    noise_rule = check_noise_rule(noise_rule)
     sigmas = [check_sigma(s) for s in sigmas]
     n_sims = check_n_sims(n_sims)
     check_seed(seed)
     ids = list(trial_ids) if trial_ids is not None else [s.label for s in scenes]
     for scene in scenes:
         check_stable(scene, name, fall_rule=fall_rule, fall_threshold=fall_threshold)
-    normals = [draw_normals(n_sims, len(scene), seed) for scene in scenes]
+    # a scene identical to an earlier one (geometry_key) has the same runs: simulated once
+    first: dict[str, int] = {}
+    twin = [first.setdefault(geometry_key(scene), i) for i, scene in enumerate(scenes)]
+    unique = [i for i in range(len(scenes)) if twin[i] == i]
+    normals = {i: draw_normals(n_sims, len(scenes[i]), seed) for i in unique}
     jobs = (executor.jobs if executor is not None else default_jobs()) if jobs is None else max(1, int(jobs))
-    total = len(scenes) * len(sigmas) * n_sims
+    total = len(unique) * len(sigmas) * n_sims
     # chunks small enough to balance the load, large enough to amortise the model build
     chunk = max(1, min(n_sims, -(-total // (8 * jobs)))) if total else 1
     tasks = [
-        _Task(i, s, a, min(a + chunk, n_sims)) for i in range(len(scenes)) for s in sigmas for a in range(0, n_sims, chunk)
+        _Task(i, s, a, min(a + chunk, n_sims)) for i in unique for s in sigmas for a in range(0, n_sims, chunk)
     ]
-    args = [(scenes[t.scene_index], t.sigma, normals[t.scene_index][t.start : t.stop], t.start, name, fall_rule, fall_threshold) for t in tasks]
+    args = [(scenes[t.scene_index], t.sigma, normals[t.scene_index][t.start : t.stop], t.start, name, fall_rule, fall_threshold,
+             noise_rule) for t in tasks]
     results = map_runs(args, total, executor, jobs, progress)
-    rows = []
+    by_scene: dict[int, list[dict]] = {}
     for t, res in zip(tasks, results):
-        for row in res:
-            rows.append({"trial": ids[t.scene_index], **row})
-    return pd.DataFrame(rows, columns=RUN_COLUMNS)  # tasks are in (scene, sigma, run) order
+        by_scene.setdefault(t.scene_index, []).extend(res)
+    rows = []
+    for i in range(len(scenes)):  # in (scene, sigma, run) order
+        rows += [{"trial": ids[i], **row} for row in by_scene.get(twin[i], [])]
+    return pd.DataFrame(rows, columns=RUN_COLUMNS)
+
+
+def wilson_interval(falls, n, z: float = WILSON_Z):
+    """The Wilson score interval (95% by default) of a binomial proportion falls / n:
+    (low, high), arrays like `falls`. Unlike the normal approximation it is not
+    empty at 0 of 100 (0 to 0.037) and stays inside [0, 1]."""
+    k = np.asarray(falls, dtype=float)
+    n = np.asarray(n, dtype=float)
+    p = k / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    low = np.where(k == 0, 0.0, np.clip(centre - half, 0.0, 1.0))  # exact ends: no 1e-18 rounding at 0 falls
+    high = np.where(k == n, 1.0, np.clip(centre + half, 0.0, 1.0))
+    return (low, high) if low.ndim else (float(low), float(high))
 
 
 def summarise(runs: pd.DataFrame) -> pd.DataFrame:
-    """Per (trial, sigma): risk = fraction of runs that fell, with falls, n and engine."""
-    g = runs.groupby(["trial", "sigma", "engine", "fall_rule", "fall_threshold"], sort=False)["fell"]
+    """Per (trial, sigma): risk = fraction of runs that fell, with falls, n, engine,
+    the rules and the 95% Wilson interval (risk_low, risk_high)."""
+    if "noise_rule" not in runs:
+        runs = runs.assign(noise_rule=DEFAULT_NOISE_RULE)
+    g = runs.groupby(["trial", "sigma", "engine", "fall_rule", "fall_threshold", "noise_rule"], sort=False)["fell"]
     out = g.agg(falls="sum", n="size").reset_index()
     out["falls"] = out["falls"].astype(int)
     out["risk"] = out["falls"] / out["n"]
+    out["risk_low"], out["risk_high"] = wilson_interval(out["falls"], out["n"])
     return out[RISK_COLUMNS]
+
+
+def contrast_holds(risk_e: pd.Series | dict, risk_h: pd.Series | dict) -> bool:
+    """H riskier than E beyond Monte Carlo noise: H's Wilson interval lies wholly
+    above E's (rows with risk_low, risk_high). A stricter test than a difference
+    of two fractions: intervals that overlap can still differ at the 5% level."""
+    return bool(risk_h["risk_low"] > risk_e["risk_high"])
 
 
 # ----------------------------------------------------------------------------- public API
@@ -292,6 +342,7 @@ def physical_risk(
     profile: str | None = None,
     fall_rule: str = DEFAULT_FALL_RULE,
     fall_threshold: float = FALL_THRESHOLD,
+    noise_rule: str = DEFAULT_NOISE_RULE,
 ):
     """Physical risk of `scene` (a Finish state B): the fraction of `n_sims` perturbed
     copies (noise SD `sigma` * d per axis) that fall within 4 s of simulation.
@@ -309,9 +360,11 @@ def physical_risk(
     that is not a whole number >= 1 (2.5, '4' and True are refused), and a
     `seed` that is not a whole number >= 0 or a Generator (None is refused: it
     would give other numbers on every call).
+    `noise_rule`: "lift" (default, the paper's reading) or "settle" (every block
+    set to rest on what lies beneath its new outline; models/risk/noise.py).
     """
     runs = run_grid([scene], [sigma], n_sims, seed, engine, jobs, profile=profile, fall_rule=fall_rule,
-                    fall_threshold=fall_threshold)
+                    fall_threshold=fall_threshold, noise_rule=noise_rule)
     risk = float(runs["fell"].mean())
     if return_table:
         return risk, runs.drop(columns="trial")
@@ -330,12 +383,13 @@ def risk_curve(
     profile: str | None = None,
     fall_rule: str = DEFAULT_FALL_RULE,
     fall_threshold: float = FALL_THRESHOLD,
+    noise_rule: str = DEFAULT_NOISE_RULE,
 ) -> pd.DataFrame:
     """Risk of one scene at each sigma (same random numbers for every sigma):
     columns sigma, risk, falls, n, engine, fall_rule, fall_threshold (and the
     per-run table with `return_table`)."""
     runs = run_grid([scene], sigmas, n_sims, seed, engine, jobs, profile=profile, fall_rule=fall_rule,
-                    fall_threshold=fall_threshold)
+                    fall_threshold=fall_threshold, noise_rule=noise_rule)
     curve = summarise(runs).drop(columns="trial")
     return (curve, runs.drop(columns="trial")) if return_table else curve
 
@@ -354,13 +408,15 @@ def risk_table(
     profile: str | None = None,
     fall_rule: str = DEFAULT_FALL_RULE,
     fall_threshold: float = FALL_THRESHOLD,
+    noise_rule: str = DEFAULT_NOISE_RULE,
 ) -> pd.DataFrame:
     """Risk of many scenes over a grid of sigma values, as a tidy table.
 
     `trials_or_scenes`: trials (objects with `.id` and `.target`, e.g.
     `stimuli.load_all()`), Scenes (named by their label) or a {trial id: Scene}
     mapping. Returns columns trial, sigma, risk, falls, n, engine, fall_rule,
-    fall_threshold, one row per (trial, sigma) in input order; with `runs=True`
+    fall_threshold, noise_rule, risk_low, risk_high (95% Wilson interval), one
+    row per (trial, sigma) in input order; with `runs=True`
     the per-run table instead (trial, sigma, run, fell, max_displacement,
     max_displacement_3d, sim_time, engine, fall_rule, fall_threshold). `engine`,
     `profile`, `fall_rule`, `fall_threshold`: as in `physical_risk`. Each trial's
@@ -369,7 +425,7 @@ def risk_table(
     ids, scenes = _as_scenes(trials_or_scenes)
     sigmas = list(sigmas)
     table = run_grid(scenes, sigmas, n_sims, seed, engine, jobs, progress, trial_ids=ids, executor=executor,
-                     profile=profile, fall_rule=fall_rule, fall_threshold=fall_threshold)
+                     profile=profile, fall_rule=fall_rule, fall_threshold=fall_threshold, noise_rule=noise_rule)
     if runs:
         return _in_order(table, ids, ["sigma", "run"])
     return _in_order(summarise(table), ids, ["sigma"])

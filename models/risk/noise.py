@@ -25,6 +25,13 @@ sigma give a nearby scene (common random numbers) and sigma = 0 changes nothing:
    not add up along a tower (a block's lift is the largest of its own and its
    supports'), but the top of a 10-tower can start a few mm up.
 
+   That is the default noise rule, ``noise_rule="lift"``. The other,
+   ``noise_rule="settle"`` (beyond the paper; issue 22), keeps step 1 and the
+   horizontal noise but sets every block's height to the rest height on what lies
+   beneath its new outline (or the table), dropping its own vertical noise: no
+   block starts in the air and nothing drops when simulated, so what falls is
+   what topples.
+
 Overlap already present in B (trial files are rounded to 0.1 mm) is tolerated:
 no pair ever overlaps more than it did in B, and no block sits deeper in the
 table than in B.
@@ -37,11 +44,23 @@ from lgp.errors import InputError
 from lgp.geometry import rectangle_overlap
 from lgp.scene import CONTACT_TOLERANCE, Scene
 
+#: The noise rules: how a block's height is set once its horizontal place is
+#: known (module docstring). "lift" is the default and the one of every result
+#: before issue 22.
+NOISE_RULES: tuple[str, ...] = ("lift", "settle")
+DEFAULT_NOISE_RULE = "lift"
 #: Numerical slack (m) below which an overlap counts as none.
 _EPS = 1e-12
 #: Projected Gauss-Seidel sweeps allowed for the side pairs (a compressed line of
 #: 10 needs ~10; a closed box of blocks a few more).
 _MAX_SWEEPS = 500
+
+
+def check_noise_rule(noise_rule: str) -> str:
+    """The noise rule checked: ValueError naming the known ones."""
+    if noise_rule not in NOISE_RULES:
+        raise InputError(f"unknown noise rule {noise_rule!r}; known rules: {', '.join(NOISE_RULES)}")
+    return noise_rule
 
 
 def draw_normals(n_runs: int, n_blocks: int, seed=0) -> np.ndarray:
@@ -54,25 +73,26 @@ def draw_normals(n_runs: int, n_blocks: int, seed=0) -> np.ndarray:
     return rng.standard_normal((n_runs, n_blocks, 3))
 
 
-def perturb(scene: Scene, sigma: float, rng: np.random.Generator) -> Scene:
+def perturb(scene: Scene, sigma: float, rng: np.random.Generator, noise_rule: str = DEFAULT_NOISE_RULE) -> Scene:
     """A noisy copy of `scene`: see the module docstring for the rule.
 
     `sigma` is the noise SD as a fraction of the block size d; `rng` a numpy
-    Generator (one (n_blocks, 3) draw of standard normals is taken from it).
+    Generator (one (n_blocks, 3) draw of standard normals is taken from it);
+    `noise_rule` "lift" (default) or "settle".
     """
-    return perturb_from_normals(scene, sigma, rng.standard_normal((len(scene), 3)))
+    return perturb_from_normals(scene, sigma, rng.standard_normal((len(scene), 3)), noise_rule)
 
 
-def perturb_from_normals(scene: Scene, sigma: float, z: np.ndarray) -> Scene:
+def perturb_from_normals(scene: Scene, sigma: float, z: np.ndarray, noise_rule: str = DEFAULT_NOISE_RULE) -> Scene:
     """`perturb` with the standard normals `z` (n_blocks, 3) given explicitly."""
-    p_WB = perturbed_positions(scene, sigma, z)
+    p_WB = perturbed_positions(scene, sigma, z, noise_rule)
     return scene.with_blocks(b.moved_to(p) for b, p in zip(scene.blocks, p_WB))
 
 
-def perturbed_positions(scene: Scene, sigma: float, z: np.ndarray) -> np.ndarray:
+def perturbed_positions(scene: Scene, sigma: float, z: np.ndarray, noise_rule: str = DEFAULT_NOISE_RULE) -> np.ndarray:
     """Block centres p_WB (n, 3) of the noisy scene (the work of `perturb`); with
     normals z of shape (R, n, 3), the centres (R, n, 3) of R noisy scenes."""
-    return NoiseRule(scene).positions(sigma, z)
+    return NoiseRule(scene, noise_rule).positions(sigma, z)
 
 
 class NoiseRule:
@@ -83,10 +103,18 @@ class NoiseRule:
     numbers to the bit as one `perturbed_positions` call per run
     (tests/test_risk_noise_reference.py keeps the per-run rule as the reference)."""
 
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, noise_rule: str = DEFAULT_NOISE_RULE, movable=None):
+        """`movable` (n,) bools, default all: blocks marked False get no noise and
+        keep their height (a sequential build's settled blocks,
+        models/risk/build.py); side pairs still push them apart half each, as a
+        hand placing a block nudges its neighbour (pushing the new block alone
+        cannot always work: settled neighbours may leave less than a block's
+        width between them)."""
         self.scene = scene
+        self.noise_rule = check_noise_rule(noise_rule)
         blocks = scene.blocks
         n = self.n = len(scene)
+        self.movable = np.ones(n, bool) if movable is None else np.asarray(movable, bool).reshape(n)
         self.p0 = scene.positions
         self.size = np.array([b.size for b in blocks], dtype=float).reshape(n, 3)
         self.cos = np.cos([b.yaw for b in blocks])
@@ -116,7 +144,14 @@ class NoiseRule:
             depth0, normal = _depth(c0_xy, outlines, si, sj)
             allowed = np.maximum(0.0, depth0)  # overlap already in B
             reach = _reach(outlines, si, sj, normal) - allowed  # least (c_j - c_i) . normal
-            self.side = list(zip(si.tolist(), sj.tolist(), normal[:, 0].tolist(), normal[:, 1].tolist(), reach.tolist()))
+            # who moves: 0 half each, 1 i only (j fixed), 2 j only (i fixed); neither: no pair
+            mov = np.concatenate([np.ones(n, bool), np.zeros(m - n, bool)])  # blocks are pushed, fixed boxes not
+            mode = np.where(mov[si] & mov[sj], 0, np.where(mov[si], 1, 2))
+            both = mov[si] | mov[sj]
+            side = [(i, j, n0, n1, rk, md) for i, j, n0, n1, rk, md, b in
+                    zip(si.tolist(), sj.tolist(), normal[:, 0].tolist(), normal[:, 1].tolist(), reach.tolist(),
+                        mode.tolist(), both.tolist()) if b]
+            self.side = side or None
 
         # 2. stacked pairs: the solids beneath each block in B, bottom-up in B's height order
         self.order = sorted(range(n), key=lambda k: (bottom0[k], k))
@@ -131,9 +166,11 @@ class NoiseRule:
             below_j += beneath.tolist()
         self.below_i, self.below_j = np.array(below_i, dtype=int), np.array(below_j, dtype=int)
 
-    def positions(self, sigma: float, z: np.ndarray) -> np.ndarray:
+    def positions(self, sigma: float, z: np.ndarray, start: np.ndarray | None = None) -> np.ndarray:
         """Block centres p_WB of the noisy scenes: (n, 3) for normals z (n, 3), or
-        (R, n, 3) for z (R, n, 3)."""
+        (R, n, 3) for z (R, n, 3). `start` (same shape): centres to perturb instead
+        of B's (a sequential build's settled state; the pairs, their sides and the
+        solids beneath each block are still B's)."""
         scene, n = self.scene, self.n
         z = np.asarray(z, float)
         if z.shape[-2:] != (n, 3) or z.ndim not in (2, 3):
@@ -143,11 +180,13 @@ class NoiseRule:
         one = z.ndim == 2
         z = z[None] if one else z
         runs = len(z)
-        p = np.broadcast_to(self.p0, z.shape).copy()
+        p = np.broadcast_to(self.p0 if start is None else np.asarray(start, float).reshape(z.shape), z.shape).copy()
         if n == 0 or sigma == 0 or runs == 0:
             return p[0] if one else p
         # noise along each block's own axes, scaled by its size along that axis
         delta_B = sigma * z * self.size
+        if not self.movable.all():
+            delta_B = delta_B * self.movable[:, None]
         c, s = self.cos, self.sin
         p[:, :, 0] += c * delta_B[:, :, 0] - s * delta_B[:, :, 1]
         p[:, :, 1] += s * delta_B[:, :, 0] + c * delta_B[:, :, 1]
@@ -177,7 +216,12 @@ class NoiseRule:
             if len(beneath):
                 rests = np.where(on[:, pairs], top[:, beneath] - allowed, -np.inf)
                 z_rest = np.maximum(z_rest, rests.max(axis=1) + self.h[i])
-            p[:, i, 2] = np.maximum(p[:, i, 2], z_rest)
+            if not self.movable[i]:
+                pass  # a settled block keeps its height
+            elif self.noise_rule == "settle":
+                p[:, i, 2] = z_rest  # rests on what lies beneath its new outline
+            else:
+                p[:, i, 2] = np.maximum(p[:, i, 2], z_rest)  # lift: never into its support
             top[:, i] = p[:, i, 2] + self.h[i]
         return p[0] if one else p
 
@@ -206,32 +250,36 @@ def _separate_side_pairs(label, c_xy, pairs, n) -> None:
     and B satisfies all of them, so the sweeps converge.
 
     c_xy: outline centres as a list of [x, y] lists, moved in place; pairs:
-    (i, j, normal x, normal y, reach) tuples. Plain floats, not numpy: a scene
+    (i, j, normal x, normal y, reach, mode) tuples, mode 0 (half each), 1 (only
+    i moves: j is a fixed box or a settled block) or 2 (only j moves). Plain floats, not numpy: a scene
     has tens of pairs, and each push must see the previous ones (measured: numpy
     over all runs of a chunk in lockstep is no faster at 100 runs a chunk, and
     slower at 10 or 20, because a line of 10 takes ~400 sweeps)."""
     for _ in range(_MAX_SWEEPS):
         bad = []
         for pair in pairs:
-            i, j, n0, n1, rk = pair
+            i, j, n0, n1, rk, _ = pair
             ci, cj = c_xy[i], c_xy[j]
             if ((cj[0] - ci[0]) * n0 + (cj[1] - ci[1]) * n1) - rk < -_EPS:
                 bad.append(pair)
         if not bad:
             return
-        for i, j, n0, n1, rk in bad:  # sequential, so each push sees the previous ones
+        for i, j, n0, n1, rk, mode in bad:  # sequential, so each push sees the previous ones
             ci, cj = c_xy[i], c_xy[j]
             excess = rk - ((cj[0] - ci[0]) * n0 + (cj[1] - ci[1]) * n1)
             if excess <= _EPS:
                 continue
             step = excess + _EPS
             px, py = n0 * step, n1 * step
-            if j < n:
+            if mode == 0:
                 ci[0] -= px / 2
                 ci[1] -= py / 2
                 cj[0] += px / 2
                 cj[1] += py / 2
-            else:  # a fixed box does not move
+            elif mode == 1:  # a fixed box (or settled block) does not move
                 ci[0] -= px
                 ci[1] -= py
+            else:
+                cj[0] += px
+                cj[1] += py
     raise RuntimeError(f"{label}: could not separate overlapping neighbours after {_MAX_SWEEPS} sweeps")

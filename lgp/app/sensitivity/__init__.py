@@ -15,7 +15,7 @@ from typing import Callable
 
 from lgp.app.sensitivity.effort import (EFFORT_HEIGHTS, EFFORT_QUICK_SAMPLES, effort_designs,  # noqa: F401
                                         effort_section, effort_sensitivity_tables)
-from lgp.app.sensitivity.risk import (COLUMNS, DEFAULT_RISK_ENGINES, RISK_RULES, RISK_SIGMAS, risk_engines,  # noqa: F401
+from lgp.app.sensitivity.risk import (COLUMNS, DEFAULT_RISK_ENGINES, NOISE_RULES, RISK_RULES, RISK_SIGMAS, risk_engines,  # noqa: F401
                                       risk_section, risk_sensitivity_figure, risk_sensitivity_summary,
                                       risk_sensitivity_table)
 from lgp.app.sensitivity.section import Context, Section  # noqa: F401
@@ -49,4 +49,4 @@ SECTIONS: list[Callable[[Context], Section]] = [risk_section, effort_section]
 
 __all__ = ["SECTIONS", "Context", "Section", "add_arguments", "check_arguments", "run_sections", "risk_section",
            "effort_section", "effort_designs", "effort_sensitivity_tables", "EFFORT_HEIGHTS",
-           "risk_sensitivity_table", "risk_sensitivity_summary", "RISK_RULES", "RISK_SIGMAS"]
+           "risk_sensitivity_table", "risk_sensitivity_summary", "RISK_RULES", "RISK_SIGMAS", "NOISE_RULES"]

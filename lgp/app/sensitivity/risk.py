@@ -1,7 +1,8 @@
 """The risk section of --sensitivity (`risk_section`): the risk of every trial at the paper's
 sigma and at 0.10 d, for each installed engine (mujoco; drake when asked with
 --sensitivity-engines or --engine drake; physx faithful; physx game-defaults,
-UNFAITHFUL) x fall rule (horizontal 0.25 d, 3-D 0.25 d, 3-D 0.1 d): how many
+UNFAITHFUL) x fall rule (horizontal 0.25 d, 3-D 0.25 d, 3-D 0.1 d) x noise rule
+(lift, the default, and settle: models/risk/noise.py): how many
 trials have risk > 0 and which of the paper's four risk contrasts (4H > 4E, 5H >
 5E, 7H > 7E, 8H > 8E) come out. Nothing is fitted or tuned here; every engine
 runs with its own fixed settings (docs/risk.md). Writes risk_sensitivity.csv
@@ -28,11 +29,14 @@ RISK_SIGMAS = (PAPER_SIGMA, 0.10)
 #: simulated once per engine and judged by each rule (exact: every threshold
 #: here has the same early-stop distance, models.risk.engine.fall_certain).
 RISK_RULES = ((DEFAULT_FALL_RULE, FALL_THRESHOLD), ("3d", FALL_THRESHOLD), ("3d", 0.1))
+#: Noise rules of the risk section (each simulated: they give other scenes).
+NOISE_RULES = ("lift", "settle")
 #: Engines of the risk section when none are named: every installed one but Drake
 #: (about 100x slower; add it with --sensitivity-engines ... drake or --engine drake).
 DEFAULT_RISK_ENGINES = ("mujoco", "physx", "physx:game-defaults")
 
-COLUMNS = ["engine", "faithful", "fall_rule", "fall_threshold", "trial", "sigma", "risk", "falls", "n", "stands_unperturbed"]
+COLUMNS = ["engine", "faithful", "fall_rule", "fall_threshold", "noise_rule", "trial", "sigma", "risk", "falls", "n",
+           "stands_unperturbed"]
 
 
 def risk_engines(args) -> tuple[list[str], list[str]]:
@@ -52,13 +56,13 @@ def risk_engines(args) -> tuple[list[str], list[str]]:
     return sorted(dict.fromkeys(names), key=order.index), notes
 
 
-def _engine_runs(ctx: Context, engine: str, n_sims: int, seed: int) -> pd.DataFrame:
+def _engine_runs(ctx: Context, engine: str, n_sims: int, seed: int, noise_rule: str = "lift") -> pd.DataFrame:
     """Per-run tables of every trial for one engine at RISK_SIGMAS, judged by the
     default rule, one cached file per trial; trials whose B falls unperturbed are
     left out (they are flagged by `_stands`)."""
     from models.risk import UnstableSceneError, check_stable, risk_table
 
-    depends = ctx.risk_key(engine)  # the runs are judged by every rule of RISK_RULES afterwards
+    depends = ctx.risk_key(engine, noise_rule=noise_rule)  # the runs are judged by every rule of RISK_RULES afterwards
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(RISK_SIGMAS), n_sims=n_sims, seed=seed,
                             table="runs", **depends) for t in ctx.trials}
     tables = {t.id: ctx.cache.get("sensitivity", keys[t.id]) for t in ctx.trials}
@@ -72,12 +76,13 @@ def _engine_runs(ctx: Context, engine: str, n_sims: int, seed: int) -> pd.DataFr
                 pass
     if todo:
         t0 = time.perf_counter()
-        runs = risk_table(todo, list(RISK_SIGMAS), n_sims=n_sims, seed=seed, engine=engine, runs=True, executor=ctx.executor)
+        runs = risk_table(todo, list(RISK_SIGMAS), n_sims=n_sims, seed=seed, engine=engine, runs=True, executor=ctx.executor,
+                          noise_rule=noise_rule)
         for t in todo:
             tables[t.id] = ctx.cache.put("sensitivity", keys[t.id], runs[runs["trial"] == t.id].reset_index(drop=True))
-        ctx.log(f"[sensitivity] {engine}: {len(runs)} runs of {len(todo)} trials in {time.perf_counter() - t0:.1f} s")
+        ctx.log(f"[sensitivity] {engine}, {noise_rule}: {len(runs)} runs of {len(todo)} trials in {time.perf_counter() - t0:.1f} s")
     else:
-        ctx.log(f"[sensitivity] {engine}: cached")
+        ctx.log(f"[sensitivity] {engine}, {noise_rule}: cached")
     found = [df for df in tables.values() if df is not None]
     return pd.concat(found, ignore_index=True) if found else pd.DataFrame()
 
@@ -97,8 +102,8 @@ def risk_sensitivity_table(ctx: Context, engines: list[str]) -> pd.DataFrame:
     from models.risk import ENGINES, apply_fall_rule, summarise
 
     rows = []
-    for engine in engines:
-        runs = _engine_runs(ctx, engine, ctx.args.n_sims, ctx.args.seed)
+    for engine, noise_rule in ((e, nr) for e in engines for nr in NOISE_RULES):
+        runs = _engine_runs(ctx, engine, ctx.args.n_sims, ctx.args.seed, noise_rule)
         for rule, threshold in RISK_RULES:
             judged = apply_fall_rule(runs, rule, threshold, BLOCK_SIZE) if len(runs) else runs
             risk = summarise(judged) if len(judged) else pd.DataFrame(columns=["trial", "sigma", "risk", "falls", "n"])
@@ -107,7 +112,7 @@ def risk_sensitivity_table(ctx: Context, engines: list[str]) -> pd.DataFrame:
                 for sigma in RISK_SIGMAS:
                     r = risk[(risk["trial"] == t.id) & np.isclose(risk["sigma"], sigma)]
                     base = {"engine": engine, "faithful": ENGINES[engine].faithful, "fall_rule": rule,
-                            "fall_threshold": threshold, "trial": t.id, "sigma": sigma, "stands_unperturbed": stands}
+                            "fall_threshold": threshold, "noise_rule": noise_rule, "trial": t.id, "sigma": sigma, "stands_unperturbed": stands}
                     if len(r):
                         rows.append({**base, "risk": float(r["risk"].iloc[0]), "falls": int(r["falls"].iloc[0]),
                                      "n": int(r["n"].iloc[0])})
@@ -122,10 +127,13 @@ def risk_sensitivity_summary(table: pd.DataFrame) -> pd.DataFrame:
     and how many of them come out."""
     from analysis.pairs import pair_order
     out = []
-    for (engine, faithful, rule, thr, sigma), g in table.groupby(
-            ["engine", "faithful", "fall_rule", "fall_threshold", "sigma"], sort=False):
+    if "noise_rule" not in table:
+        table = table.assign(noise_rule="lift")
+    for (engine, faithful, rule, thr, noise_rule, sigma), g in table.groupby(
+            ["engine", "faithful", "fall_rule", "fall_threshold", "noise_rule", "sigma"], sort=False):
         risk = dict(zip(g["trial"], g["risk"]))
-        row = {"engine": engine, "faithful": bool(faithful), "fall_rule": rule, "fall_threshold": thr, "sigma": sigma,
+        row = {"engine": engine, "faithful": bool(faithful), "fall_rule": rule, "fall_threshold": thr,
+               "noise_rule": noise_rule, "sigma": sigma,
                "trials": int(g["risk"].notna().sum()), "trials_risk_gt_0": int((g["risk"] > 0).sum()),
                "unstable_unperturbed": int((~g["stands_unperturbed"].astype(bool)).sum())}
         for pair in RISK_PAIRS:
@@ -142,21 +150,23 @@ def risk_sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    panels = list(table.groupby(["engine", "fall_rule", "fall_threshold"], sort=False))
+    if "noise_rule" not in table:
+        table = table.assign(noise_rule="lift")
+    panels = list(table.groupby(["engine", "noise_rule", "fall_rule", "fall_threshold"], sort=False))
     ncol = len(RISK_RULES)
     nrow = -(-len(panels) // ncol)
     fig = Figure(figsize=(3.6 * ncol, 2.9 * nrow))
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrow, ncol, sharex=True, sharey=True, squeeze=False)
     colours = dict(zip(RISK_PAIRS, ("tab:red", "tab:blue", "tab:green", "tab:purple")))
-    for ax, ((engine, rule, thr), g) in zip(axes.flat, panels):
+    for ax, ((engine, noise_rule, rule, thr), g) in zip(axes.flat, panels):
         for trial, c in g.groupby("trial", sort=False):
             pair = int(trial[:-1])
             colour = colours.get(pair, "0.75")
             ax.plot(c["sigma"], c["risk"], ls="-" if trial.endswith("H") else "--", marker="o", ms=3, color=colour,
                     lw=1.4 if pair in colours else 0.8, label=trial if pair in colours else None)
         label = engine + ("" if g["faithful"].iloc[0] else " (UNFAITHFUL)")
-        ax.set_title(f"{label}\n{rule} > {thr:g} d", fontsize=9)
+        ax.set_title(f"{label}, {noise_rule}\n{rule} > {thr:g} d", fontsize=9)
         ax.set_ylim(-0.03, 1.03)
         ax.grid(alpha=0.3)
     for ax in axes.flat[len(panels):]:
@@ -166,7 +176,7 @@ def risk_sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
     for ax in axes[:, 0]:
         ax.set_ylabel("risk")
     axes.flat[0].legend(fontsize=6, ncol=2, loc="upper left")
-    fig.suptitle("Risk by engine and fall rule (grey: pairs without a risk contrast)", fontsize=10)
+    fig.suptitle("Risk by engine, noise rule and fall rule (grey: pairs without a risk contrast)", fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
@@ -184,15 +194,17 @@ def risk_section(ctx: Context) -> Section:
     shown = summary.assign(engine=[e if f else f"{e} (UNFAITHFUL)" for e, f in zip(summary["engine"], summary["faithful"])],
                            rule=[f"{r} > {t:g} d" for r, t in zip(summary["fall_rule"], summary["fall_threshold"])])
     shown = shown.assign(suite=["passes" if f else "fails (docs/risk.md)" for f in shown["faithful"]])
-    cols = ["engine", "suite", "rule", "sigma", "trials_risk_gt_0", *[f"{p}H>{p}E" for p in RISK_PAIRS], "contrasts"]
+    cols = ["engine", "suite", "noise_rule", "rule", "sigma", "trials_risk_gt_0", *[f"{p}H>{p}E" for p in RISK_PAIRS],
+            "contrasts"]
     if summary["unstable_unperturbed"].any():
         cols.insert(5, "unstable_unperturbed")
     lines = [
-        "## Sensitivity of risk to the engine and the fall rule",
+        "## Sensitivity of risk to the engine, the noise rule and the fall rule",
         "",
         f"Risk of every trial at sigma = {', '.join(f'{s:g}' for s in RISK_SIGMAS)} d, N = {ctx.args.n_sims} runs, "
-        f"seed {ctx.args.seed}, for each engine x fall rule (a run falls when a block centre ends more than the "
-        "threshold from its start, in the horizontal plane or in 3-D). Same perturbed scenes for every engine; "
+        f"seed {ctx.args.seed}, for each engine x noise rule x fall rule (a run falls when a block centre ends more "
+        "than the threshold from its start, in the horizontal plane or in 3-D; the noise rule `lift` leaves noisy "
+        "blocks up to a few mm above their supports, `settle` sets each onto what lies beneath it). Same perturbed scenes for every engine; "
         "each engine runs with its own fixed settings and nothing was tuned. The faithful engines pass the "
         "faithfulness suite (tests/test_risk_engines.py); physx:game-defaults does not and is shown only to "
         "see how an engine's artefacts move risk. Columns: trials with risk > 0 (of "

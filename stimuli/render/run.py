@@ -1,0 +1,186 @@
+"""A cached render run: A and B of every trial rendered into a folder with one camera
+(`render_trials`), recorded in renders.json with each picture's inputs hash, so a
+second run renders only what changed; where the pictures are kept between runs
+(`render_cache_dir`, `cache_folder`) and a contact sheet of a run's pictures."""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from stimuli.render.camera import DEFAULT_SIZE, Camera, fit_camera, scene_corners
+from stimuli.render.engine import Renderer
+from stimuli.sheet import finished_scene
+
+PROG = "python -m stimuli.render"
+
+
+def pictures_of(trials, seed: int):
+    """(trial id, state, scene) of every picture: A is sample 0 of `seed` (the layout
+    effort reports first, models.effort.sample_rng(seed, 0)), B the finished table
+    (the target and whatever of A it leaves: stimuli.sheet.finished_scene, the same
+    table the sketches draw)."""
+    from models.effort import sample_rng
+
+    out = []
+    for t in trials:
+        A = t.sample_initial(sample_rng(seed, 0))
+        out.append((t.id, "A", A))
+        out.append((t.id, "B", finished_scene(A, t.target)))
+    return out
+
+
+def _code_version() -> str:
+    """Hash of this package's source (every module of stimuli/render/, by name) and
+    Drake's version: editing the renderer renders the pictures again."""
+    h = hashlib.sha256()
+    for path in sorted(Path(__file__).parent.glob("*.py")):
+        h.update(path.name.encode() + b"\0" + path.read_bytes())
+    try:
+        from importlib.metadata import version
+
+        h.update(version("drake").encode())
+    except Exception:  # noqa: BLE001 - a source build of drake has no metadata
+        pass
+    return h.hexdigest()[:16]
+
+
+def _scene_key(scene) -> list:
+    return [[b.name, b.colour, np.round(b.p_WB, 6).tolist(), round(float(b.yaw), 6), np.round(b.size, 6).tolist()] for b in scene.blocks] + \
+           [[f.name, np.round(f.p_WO, 6).tolist(), np.round(f.size, 6).tolist()] for f in scene.fixed]
+
+
+def _picture_key(scene, camera: Camera, code: str) -> str:
+    blob = json.dumps({"scene": _scene_key(scene), "camera": camera.as_dict(), "code": code}, sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:20]
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _render_chunk(camera: Camera, jobs: list[tuple[str, str]]) -> list[float]:
+    """Worker: render (scene pickle path, png path) pairs with one engine; seconds each."""
+    import pickle
+
+    renderer = Renderer(camera)
+    seconds = []
+    for scene_file, png in jobs:
+        with open(scene_file, "rb") as fh:
+            scene = pickle.load(fh)
+        t0 = time.perf_counter()
+        renderer.render(scene, Path(png))
+        seconds.append(time.perf_counter() - t0)
+    return seconds
+
+
+def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, int] = DEFAULT_SIZE, jobs: int = 2,
+                  log=None) -> dict:
+    """Render A and B of every trial into `out_dir`; returns the run's record (the
+    content of renders.json). Pictures whose inputs (scene, camera, code) are
+    unchanged since the last run into `out_dir` are kept, not rendered again."""
+    import pickle
+
+    log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    out = Path(out_dir)
+    pictures = pictures_of(trials, seed)
+    camera = fit_camera(np.vstack([scene_corners(s) for _, _, s in pictures]), *size)
+    code = _code_version()
+    record_path = out / "renders.json"
+    old = {}
+    if record_path.exists():
+        try:
+            old = {p["file"]: p for p in json.loads(record_path.read_text()).get("pictures", [])}
+        except (ValueError, KeyError, TypeError):
+            old = {}
+    out.mkdir(parents=True, exist_ok=True)
+    rows, todo = [], []
+    scratch = tempfile.TemporaryDirectory(prefix="lgp-scenes-")
+    for k, (tid, state, scene) in enumerate(pictures):
+        name = f"{tid}-{state}.png"
+        key = _picture_key(scene, camera, code)
+        rows.append({"trial": tid, "state": state, "file": name, "key": key,
+                     "blocks": len(scene.blocks), "sample": 0 if state == "A" else None})
+        prev = old.get(name)
+        if prev and prev.get("key") == key and (out / name).exists() and prev.get("sha256") == _sha256(out / name):
+            continue
+        scene_file = Path(scratch.name) / f"{k}.pkl"
+        scene_file.write_bytes(pickle.dumps(scene))
+        todo.append((str(scene_file), str(out / name)))
+    t0 = time.perf_counter()
+    seconds: list[float] = []
+    if todo:
+        # A process costs a second or two to start (pydrake, shaders): worth it for many pictures only.
+        jobs = max(1, min(jobs, len(todo) // 8))
+        log(f"{PROG}: rendering {len(todo)} of {len(rows)} pictures ({size[0]}x{size[1]}, RenderEngineVtk) with {jobs} process(es)")
+        chunks = [todo[i::jobs] for i in range(jobs)]
+        if jobs == 1:
+            seconds = _render_chunk(camera, chunks[0])
+        else:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+
+            with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
+                for s in pool.map(_render_chunk, [camera] * jobs, chunks):
+                    seconds += s
+    else:
+        log(f"{PROG}: all {len(rows)} pictures are up to date in {out}")
+    scratch.cleanup()
+    for r in rows:
+        r["sha256"] = _sha256(out / r["file"])
+    record = {"renderer": "drake RenderEngineVtk (VTK OpenGL, offscreen)", "seed": seed,
+              "layout_of_A": "sample 0 of the seed: models.effort.sample_rng(seed, 0)", "camera": camera.as_dict(),
+              "code": code, "rendered": len(todo), "render_seconds": round(time.perf_counter() - t0, 2),
+              "pictures": rows}
+    tmp = record_path.with_name(".renders.json.tmp")
+    tmp.write_text(json.dumps(record, indent=1) + "\n")
+    os.replace(tmp, record_path)
+    return record
+
+
+def render_cache_dir() -> Path:
+    """Where rendered pictures are kept between runs: $LGP_RENDER_CACHE, else
+    $XDG_CACHE_HOME/lgp-difficulty/renders (~/.cache/...). A picture is found again by
+    the hash of its scene, camera and this package's code (renders.json), so a stale
+    one is never used."""
+    base = os.environ.get("LGP_RENDER_CACHE")
+    if base:
+        return Path(base)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lgp-difficulty" / "renders"
+
+
+def cache_folder(trials, seed: int, size) -> Path:
+    """The render cache's folder for one set of trials, seed and picture size (one
+    camera is fitted per set)."""
+    key = hashlib.sha256(json.dumps([[t.id, t.digest] for t in trials] + [seed, list(size)]).encode()).hexdigest()[:16]
+    return render_cache_dir() / key
+
+
+def contact_sheet(out_dir: str | Path, path: str | Path, columns: int = 4, thumb: int = 320) -> Path:
+    """All pictures of `out_dir`'s renders.json on one PNG (A | B per trial, labelled)."""
+    from PIL import Image, ImageDraw
+
+    out = Path(out_dir)
+    record = json.loads((out / "renders.json").read_text())
+    by_trial: dict[str, dict] = {}
+    for p in record["pictures"]:
+        by_trial.setdefault(p["trial"], {})[p["state"]] = out / p["file"]
+    w = thumb
+    h = round(thumb * record["camera"]["height"] / record["camera"]["width"])
+    rows = -(-len(by_trial) // columns)
+    sheet = Image.new("RGB", (columns * 2 * w + (columns - 1) * 8, rows * (h + 16)), "white")
+    draw = ImageDraw.Draw(sheet)
+    for k, (tid, states) in enumerate(by_trial.items()):
+        r, c = divmod(k, columns)
+        for j, state in enumerate(("A", "B")):
+            x, y = c * (2 * w + 8) + j * w, r * (h + 16)
+            sheet.paste(Image.open(states[state]).convert("RGB").resize((w, h)), (x, y + 16))
+            draw.text((x + 4, y + 2), f"{tid}-{state} ({'Start' if state == 'A' else 'Finish'})", fill="black")
+    sheet.save(path)
+    return Path(path)
