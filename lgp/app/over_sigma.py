@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis.pairs import ratio_range
+from lgp.app.report import ratio_text
 from lgp.paper import PAIRS, PAPER_SIGMA, RISK_PAIRS, SIGMA_GRID
 
 COLUMNS = ["pair", "sigma", "risk_E", "risk_E_low", "risk_E_high", "risk_H", "risk_H_low", "risk_H_high", "holds",
@@ -50,23 +52,8 @@ def pairs_over_sigma(effort: pd.DataFrame, risk: pd.DataFrame) -> pd.DataFrame:
                          "risk_H_high": rh["risk_high"], "holds": bool(rh["risk_low"] > re["risk_high"]),
                          "paper_risk_pair": pair in RISK_PAIRS, "effort_E": E[e], "effort_H": E[h],
                          "tied": pair_order(E[e], E[h]) == "tie" and pair_order(re["risk"], rh["risk"]) == "tie"})
-            rows[-1]["full_E_lt_H_for_b2_over_b1"] = _ratio_text(E[e], re["risk"], E[h], rh["risk"], rows[-1]["tied"])
+            rows[-1]["full_E_lt_H_for_b2_over_b1"] = ratio_text(ratio_range(E[e], re["risk"], E[h], rh["risk"], tie=rows[-1]["tied"]))
     return pd.DataFrame(rows, columns=COLUMNS)
-
-
-def _ratio_text(E_e, R_e, E_h, R_h, tie: bool) -> str:
-    """The ratios b2/b1 >= 0 for which Eq. 1 orders the pair E < H, as text:
-    'any', 'none', 'none (tie)', '> 1.07' or '< 3.2' (analysis.pairs.ratio_range)."""
-    from analysis.pairs import ratio_range
-
-    r = ratio_range(E_e, R_e, E_h, R_h, tie=tie)
-    if r.tie:
-        return "none (tie)"
-    if r.every:
-        return "any"
-    if r.empty:
-        return "none"
-    return f"> {r.low:.3g}" if r.high == np.inf else f"< {r.high:.3g}"
 
 
 def ordered_by_one_ratio(table: pd.DataFrame) -> pd.DataFrame:
