@@ -87,14 +87,14 @@ def test_a_run_with_one_trials_risk_entry_copied_over_anothers_recomputes_it(tmp
 
     root = Path(__file__).resolve().parents[1]
     run = [sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "2", "--n-sims", "10",
-           "--sigmas", "0.05", "0.1", "--jobs", "1", "--no-replays", "--out", str(tmp_path / "out")]
+           "--sigmas", "0.05", "0.1", "--jobs", "1", "--no-replays", "--verbose", "--out", str(tmp_path / "out")]
     env = {**os.environ, "PYTHONPATH": str(root)}
     first = subprocess.run(run, cwd=root, env=env, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr[-2000:]
     before = (tmp_path / "out" / "risk.csv").read_bytes()
-    entries = {read_entry(p)["trial"].iloc[0]: p for p in (tmp_path / "out" / "cache").glob("risk-*.csv")}
+    entries = {read_entry(p)["trial"].iloc[0]: p for p in (tmp_path / "out" / "cache").glob("riskruns-*.csv")}
     shutil.copy(entries["7H"], entries["4H"])
     second = subprocess.run(run, cwd=root, env=env, capture_output=True, text=True, timeout=300)
     assert second.returncode == 0, second.stderr[-2000:]
-    assert "of trial 7H, not risk" in second.stderr and "risk 1 hit, 0 miss, 1 recomputed" in second.stderr, second.stderr
+    assert "of trial 7H, not riskruns" in second.stderr and "riskruns 1 hit, 0 miss, 1 recomputed" in second.stderr, second.stderr
     assert (tmp_path / "out" / "risk.csv").read_bytes() == before

@@ -85,8 +85,8 @@ def test_concurrent_writers_of_one_file_use_unique_temporary_names(tmp_path):
 @pytest.mark.slow
 def test_two_real_runs_in_one_folder_one_runs_the_other_is_refused(tmp_path):
     out = tmp_path / "out"
-    first = subprocess.Popen([sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "3", "--n-sims", "20",
-                              "--sigmas", "0.05", "--jobs", "1", "--no-replays", "--out", str(out)],
+    first = subprocess.Popen([sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "10", "--n-sims", "60",
+                              "--sigmas", "0.05", "0.1", "--jobs", "1", "--no-replays", "--out", str(out)],
                              cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while not (out / OutputLock.NAME).exists() and time.monotonic() < deadline:

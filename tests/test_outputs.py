@@ -68,7 +68,7 @@ def test_each_run_lists_and_leaves_only_its_own_outputs_and_reports_true_times(t
     assert reproduce.main([*TINY, "--trials", "1e", "--out", str(out), "--verbose"]) == 0
     subset = capsys.readouterr()
     assert "removed the outputs of an earlier run" in subset.err
-    assert _listed(out) == _on_disk(out) == {"effort_samples.csv", "effort.csv", "risk.csv", "report.md", "index.html", "page/1E.png"}
+    assert _listed(out) == _on_disk(out) == {"effort_samples.csv", "effort.csv", "risk.csv", "risk_precision.csv", "report.md", "index.html", "page/1E.png"}
     assert _printed(subset.out, out) == _listed(out) | {"manifest.json"}
 
     # The full run again, from the cache: compute time is the first run's, this run's time its own.
@@ -83,10 +83,12 @@ def test_each_run_lists_and_leaves_only_its_own_outputs_and_reports_true_times(t
     assert re.search(r"this run took \d+ s", report)
     assert again["input_hash"] == first["input_hash"]
 
-    # With human data: analysis/ replaces figures/, and the report no longer says there are no betas.
+    # With human data: analysis/ replaces figures/ (which keeps only the run's risk-over-sigma
+    # figure, issue 22), and the report no longer says there are no betas.
     assert reproduce.main([*TINY, "--out", str(out), "--human-data", _participants(tmp_path / "h.csv")]) == 0
     capsys.readouterr()
-    assert not (out / "figures").exists() and (out / "analysis" / "orderings.csv").exists()
+    assert {p.name for p in (out / "figures").iterdir()} == {"risk_over_sigma.png"}
+    assert (out / "analysis" / "orderings.csv").exists()
     assert _listed(out) == _on_disk(out)
     report = (out / "report.md").read_text()
     assert "no fitted betas" not in report and "## fits" in report

@@ -62,7 +62,7 @@ def test_a_trial_description_with_a_script_runs_nothing_in_a_browser(tmp_path):
             page.goto(path.resolve().as_uri())
             page.wait_for_timeout(400)  # the caption updates every 100 ms
             action = page.inner_text("#lgp-action")
-            title = page.inner_text("#lgp-caption div")
+            title = page.inner_text("#lgp-title")
         finally:
             browser.close()
     assert dialogs == [], f"a script from the description ran: alert({dialogs})"

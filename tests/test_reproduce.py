@@ -18,7 +18,7 @@ ARGS = ["--trials", "9E", "10E", "6H", "--samples", "1", "--n-sims", "4", "--sig
         "--verbose"]  # --verbose: the per-trial lines and the cache summary line these tests read
 
 
-def _cache_counts(err: str, kinds=("effort", "risk")) -> dict:
+def _cache_counts(err: str, kinds=("effort", "riskruns")) -> dict:
     """The counts of the run's `cache: ...` summary line on stderr, {(kind, outcome): n},
     for entries of `kinds` (default: the result tables, not the B-stands checks)."""
     (line,) = [l for l in err.splitlines() if l.startswith("cache: ")]
@@ -38,7 +38,7 @@ def test_reproduce_writes_tables_and_report_then_reuses_the_cache(tmp_path, caps
     assert reproduce.main([*ARGS, "--out", str(out)]) == 0
     err = capsys.readouterr().err
     assert _cache_counts(err) == {("effort", "hit"): 0, ("effort", "miss"): 3, ("effort", "recomputed"): 0,
-                                  ("risk", "hit"): 0, ("risk", "miss"): 3, ("risk", "recomputed"): 0}
+                                  ("riskruns", "hit"): 0, ("riskruns", "miss"): 3, ("riskruns", "recomputed"): 0}
     assert _cache_counts(err, ["stable"])["stable", "miss"] == 3  # B checked once per trial, before effort
     first = _tables(out)
     assert set(first["risk"]["trial"]) == {"9E", "10E", "6H"} and len(first["risk"]) == 6
@@ -53,7 +53,7 @@ def test_reproduce_writes_tables_and_report_then_reuses_the_cache(tmp_path, caps
     assert reproduce.main([*ARGS, "--out", str(out)]) == 0
     err = capsys.readouterr().err
     assert _cache_counts(err) == {("effort", "hit"): 3, ("effort", "miss"): 0, ("effort", "recomputed"): 0,
-                                  ("risk", "hit"): 3, ("risk", "miss"): 0, ("risk", "recomputed"): 0}
+                                  ("riskruns", "hit"): 3, ("riskruns", "miss"): 0, ("riskruns", "recomputed"): 0}
     assert _cache_counts(err, ["stable"])["stable", "hit"] == 3
     for name, df in _tables(out).items():
         pd.testing.assert_frame_equal(df, first[name])
@@ -79,11 +79,11 @@ def test_interrupted_run_resumes_to_the_same_results(tmp_path, monkeypatch, caps
     assert reproduce.main([*ARGS, "--out", str(cut), "--risk-chunk", "2"]) == 130  # stopped as Ctrl-C stops it
     assert "interrupted" in capsys.readouterr().err
     monkeypatch.setattr(models.risk, "risk_table", real)
-    assert len(list((cut / "cache").glob("risk-*.csv"))) == 2  # the first chunk survived whole
+    assert len(list((cut / "cache").glob("riskruns-*.csv"))) == 2  # the first chunk survived whole
     capsys.readouterr()
     reproduce.main([*ARGS, "--out", str(cut), "--risk-chunk", "2"])
     counts = _cache_counts(capsys.readouterr().err)
-    assert (counts["effort", "hit"], counts["risk", "hit"], counts["risk", "miss"]) == (3, 2, 1)
+    assert (counts["effort", "hit"], counts["riskruns", "hit"], counts["riskruns", "miss"]) == (3, 2, 1)
     for name, df in _tables(cut).items():
         pd.testing.assert_frame_equal(df, _tables(whole)[name])
 
@@ -138,9 +138,14 @@ def _fake_physics(monkeypatch):
         return pd.DataFrame([{"trial": t.id, "sample": s, "effort": 1.0 + t.pair / 10 + (t.level == "H") + s / 100}
                              for t in trials for s in range(samples)])
 
-    def risk(trials, sigmas, n_sims, seed, engine, executor, cache, chunk=6, **fall_rule):
-        return pd.DataFrame([{"trial": t.id, "sigma": s, "risk": min(1.0, s * (2 if t.level == "H" else 1)),
-                              "falls": 0, "n": n_sims, "engine": "none"} for t in trials for s in sigmas])
+    def risk(trials, sigmas, n_sims, seed, engine, executor, cache, chunk=6, runs_out=None, **fall_rule):
+        table = pd.DataFrame([{"trial": t.id, "sigma": s, "risk": min(1.0, s * (2 if t.level == "H" else 1)),
+                               "falls": 0, "n": n_sims, "engine": "none"} for t in trials for s in sigmas])
+        table = table.assign(risk_low=table["risk"], risk_high=table["risk"])  # no Monte Carlo error: a stand-in
+        if runs_out is not None:  # the runs' verdicts, as the real stage hands them on (for risk_precision.csv)
+            runs_out.append(pd.DataFrame([{"trial": r.trial, "sigma": r.sigma, "run": k, "fell": k < r.risk * n_sims}
+                                          for r in table.itertuples() for k in range(n_sims)]))
+        return table
 
     monkeypatch.setattr(reproduce, "effort_tables", effort)
     monkeypatch.setattr(reproduce, "risk_tables", risk)
@@ -200,7 +205,7 @@ def undisturbed(tmp_path_factory):
     out = tmp_path_factory.mktemp("undisturbed") / "r"
     assert reproduce.main([*ARGS, "--out", str(out)]) == 0
     entries = {}
-    for path in sorted([*(out / "cache").glob("effort-*.csv"), *(out / "cache").glob("risk-*.csv")]):
+    for path in sorted([*(out / "cache").glob("effort-*.csv"), *(out / "cache").glob("riskruns-*.csv")]):
         entries[path.name.split("-")[0], read_entry(path)["trial"].iloc[0]] = path.name
     assert len(entries) == 6
     return out, entries
@@ -217,7 +222,7 @@ def test_damaged_cache_entries_are_recomputed_exactly_and_the_run_ends_the_same(
     whole, entries = undisturbed
     out = tmp_path / "r"
     shutil.copytree(whole, out)
-    damaged = {out / "cache" / entries["effort", effort_trial], out / "cache" / entries["risk", risk_trial]}
+    damaged = {out / "cache" / entries["effort", effort_trial], out / "cache" / entries["riskruns", risk_trial]}
     for path in damaged:
         path.write_bytes(damage(path.read_bytes()))
     capsys.readouterr()
@@ -227,7 +232,7 @@ def test_damaged_cache_entries_are_recomputed_exactly_and_the_run_ends_the_same(
     reported = [l for l in err.splitlines() if "damaged entry" in l]
     assert len(reported) == 2 and {p for p in damaged if any(str(p) in l for l in reported)} == damaged
     assert _cache_counts(err) == {("effort", "hit"): 2, ("effort", "miss"): 0, ("effort", "recomputed"): 1,
-                                  ("risk", "hit"): 2, ("risk", "miss"): 0, ("risk", "recomputed"): 1}
+                                  ("riskruns", "hit"): 2, ("riskruns", "miss"): 0, ("riskruns", "recomputed"): 1}
 
     # Every result file and every cache entry is byte-identical to the undisturbed
     # run's, except the wall-clock column of the re-planned effort entry (solve_time).

@@ -119,7 +119,7 @@ def caption_html(plan, title: str, back: str | None = None) -> str:
  font:14px/1.4 system-ui,sans-serif;color:#111;padding:8px 12px;border-radius:6px;box-shadow:0 1px 4px rgba(0,0,0,.25);max-width:560px">
  <div style="margin-bottom:4px">{back_link}<button id="lgp-play" type="button"
   style="font:inherit;padding:2px 10px;cursor:pointer">&#10074;&#10074; pause</button></div>
- <div style="font-weight:700">{html.escape(title)}</div>
+ <div id="lgp-title" style="font-weight:700">{html.escape(title)}</div>
  <div id="lgp-action">&nbsp;</div><div id="lgp-effort">&nbsp;</div>
  <div style="display:flex;align-items:center;gap:6px;font-size:12px;margin-top:4px">placed first
   <span style="display:inline-block;width:140px;height:10px;background:{_gradient_css(n)}"></span> last
