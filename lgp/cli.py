@@ -67,26 +67,27 @@ def nonnegative_int(text: str) -> int:
 seed = nonnegative_int
 
 
-def sigma(text: str) -> float:
-    """A noise SD in units of the block length d, in (0, 1]."""
+def _finite_number(text: str, ok: Callable[[float], bool], expected: str, rule: str) -> float:
+    """`text` as a finite float for which `ok` holds: "expected {expected}" when it is
+    not a number, "{rule}" when it breaks the rule (both name the text)."""
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1] (units of d), got {text!r}") from None
-    if not (math.isfinite(value) and 0 < value <= 1):
-        raise argparse.ArgumentTypeError(f"a sigma must be in (0, 1] (units of the block size d), got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+    if not (math.isfinite(value) and ok(value)):
+        raise argparse.ArgumentTypeError(f"{rule}, got {text!r}")
     return value
+
+
+def sigma(text: str) -> float:
+    """A noise SD in units of the block length d, in (0, 1]."""
+    return _finite_number(text, lambda v: 0 < v <= 1, "a number in (0, 1] (units of d)",
+                          "a sigma must be in (0, 1] (units of the block size d)")
 
 
 def precision_level(text: str) -> float:
     """A risk level of the required precision sigma*, in (0, 1)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a risk in (0, 1), got {text!r}") from None
-    if not (math.isfinite(value) and 0 < value < 1):
-        raise argparse.ArgumentTypeError(f"a precision level must be a risk in (0, 1), got {text!r}")
-    return value
+    return _finite_number(text, lambda v: 0 < v < 1, "a risk in (0, 1)", "a precision level must be a risk in (0, 1)")
 
 
 def checked(check: Callable[[str], object], what: str) -> Callable[[str], object]:
@@ -107,13 +108,7 @@ def checked(check: Callable[[str], object], what: str) -> Callable[[str], object
 
 def positive_number(text: str) -> float:
     """A finite number > 0 (a budget of seconds)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
-    return value
+    return _finite_number(text, lambda v: v > 0, "a number > 0", "must be a finite number > 0")
 
 
 def trial_id(text: str) -> str:
