@@ -182,6 +182,13 @@ class ProcessExecutor:
     def _post_mortem(self, running: set[int]) -> list[tuple[int, int | None, str]]:
         """(pid, unit it was running or None, how it died) of every dead worker."""
         table = {int(self._slots[i]): int(self._slots[i + 1]) for i in range(0, len(self._slots), 2) if self._slots[i]}
+        # The pool's manager thread reaps the workers of a broken pool (it SIGTERMs
+        # the living, then joins all). Two threads reaping one child race: the
+        # loser's waitpid fails (ECHILD) and reads no exit code, so a SIGKILLed
+        # worker could look alive. Let the manager finish first, then read codes.
+        thread = getattr(self._pool, "_executor_manager_thread", None)
+        if thread is not None:
+            thread.join(timeout=10.0)
         dead = []
         for p in self._processes():
             p.join(timeout=1.0)  # a killed worker is reaped at once
