@@ -4,8 +4,6 @@ discretisation (`slices_per_phase`) are parameters of the planner, of the effort
 model and of `python -m lgp.reproduce`, and part of the effort cache key."""
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 import pytest
 
@@ -157,10 +155,38 @@ def worst_carry_intrusion(p, fixed) -> tuple[float, float, str]:
     return below, inside, where
 
 
-@functools.lru_cache(maxsize=None)
+_PLANS: dict[tuple[str, float], object] = {}  # (trial, height) -> layout 0's plan, planned once per session
+
+
+def _plan_layout_0(key: tuple[str, float]):
+    """Layout 0 (seed 0) of a trial planned with approach legs of `height` m (0:
+    clearance), without its arm model (a Drake plant does not pickle; these tests
+    read the trajectories, the actions and the KOMO result)."""
+    import dataclasses
+
+    tid, height = key
+    return dataclasses.replace(plan_of_sample(stimuli.load_trial(tid), 0, 0, approach_height=height), arm=None)
+
+
 def _layout_0_plan(tid: str, height: float):
-    """Layout 0 (seed 0) of a trial planned with approach legs of `height` m (0: clearance)."""
-    return plan_of_sample(stimuli.load_trial(tid), 0, 0, approach_height=height)
+    """Layout 0 of one trial (cached)."""
+    if (tid, height) not in _PLANS:
+        _PLANS[tid, height] = _plan_layout_0((tid, height))
+    return _PLANS[tid, height]
+
+
+def _layout_0_plans(height: float) -> dict[str, object]:
+    """Layout 0 of every trial of the paper with this design, the ones not yet cached
+    planned on both cores (the same plans as one at a time: each is a function of its
+    trial, seed and design)."""
+    from lgp.executor import ProcessExecutor
+    from lgp.paper import TRIAL_IDS
+
+    missing = [(tid, height) for tid in TRIAL_IDS if (tid, height) not in _PLANS]
+    if len(missing) > 1:
+        with ProcessExecutor(2) as executor:
+            _PLANS.update(zip(missing, executor.map(_plan_layout_0, missing)))
+    return {tid: _layout_0_plan(tid, height) for tid in TRIAL_IDS}
 
 
 @pytest.mark.slow
@@ -169,11 +195,8 @@ def test_no_carried_block_goes_below_the_table_or_into_another_block(height, tol
     # Both designs, layout 0 of every trial: no corner of a carried block below the
     # table top (1 um); the legs design within the 1 mm of tests/test_planner.py of
     # any other block or the bucket, the clearance design within OVERLAP_TOLERANCE.
-    from lgp.paper import TRIAL_IDS
-
     bad = []
-    for tid in TRIAL_IDS:
-        p = _layout_0_plan(tid, height)
+    for tid, p in _layout_0_plans(height).items():
         below, inside, where = worst_carry_intrusion(p, p.initial.fixed)
         if below > 1e-6 or inside > tolerance:
             bad.append(f"{tid}: {below * 1000:.3f} mm below the table, {inside * 1000:.3f} mm into a solid ({where})")
@@ -202,11 +225,8 @@ def test_without_legs_effort_is_lower_than_with_them_and_above_the_straight_carr
     # The legs are extra motion (about 0.015 J s per carry), and the clearance design
     # only adds what the table and the other solids demand: every trial's effort
     # without legs lies between the straight-line bound and the legs design's.
-    from lgp.paper import TRIAL_IDS
-
     bad = []
-    for tid in TRIAL_IDS:
-        clearance, legs = _layout_0_plan(tid, 0.0), _layout_0_plan(tid, APPROACH)
+    for (tid, clearance), legs in zip(_layout_0_plans(0.0).items(), _layout_0_plans(APPROACH).values()):
         bound, e, e_legs = straight_carry_bound(legs), kinetic_energy(clearance), kinetic_energy(legs)
         assert straight_carry_bound(clearance) == pytest.approx(bound, rel=1e-6)  # same carries, same places
         if not bound <= e < e_legs:
