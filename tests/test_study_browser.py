@@ -58,29 +58,60 @@ def browser():
         Path(os.environ["LGP_BENCH_OUT"]).write_text(json.dumps(TIMINGS, indent=1) + "\n")
 
 
-@pytest.fixture(scope="module")
-def results(tmp_path_factory) -> Path:
-    """A small --quick run: the effort and risk tables the simulated participants answer from."""
-    out = tmp_path_factory.mktemp("results")
-    run = subprocess.run([sys.executable, "-m", "lgp.reproduce", *QUICK, "--out", str(out)], capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr[-3000:]
-    return out
-
-
 QUICK = ["--quick", "--samples", "2", "--n-sims", "5", "--sigmas", "0.05", "0.065", "0.08"]
 
 
+class _Started:
+    """A command started in the background; `wait()` checks it exited 0 (its stderr's tail if not)."""
+
+    def __init__(self, argv: list[str], log: Path, env=None):
+        self.log = log
+        with open(log, "w") as err:
+            self.process = subprocess.Popen([sys.executable, *argv], stdout=subprocess.DEVNULL, stderr=err, env=env)
+
+    def wait(self) -> None:
+        code = self.process.wait()
+        assert code == 0, self.log.read_text()[-3000:]
+
+
 @pytest.fixture(scope="module")
-def studies(tmp_path_factory) -> dict[str, Path]:
-    root = tmp_path_factory.mktemp("studies")
+def _started(tmp_path_factory):
+    """The --quick run and the first study build, started together (they are
+    independent): (results folder, studies folder, the builds' env, {name: _Started})."""
+    out, root, logs = (tmp_path_factory.mktemp(name) for name in ("results", "studies", "logs"))
     env = {**os.environ, "LGP_RENDER_CACHE": str(root / "renders")}
-    out = {}
-    for task in ex.TASKS:
-        run = subprocess.run([sys.executable, "-m", "stimuli.experiment", "--task", task, "--out", str(root / task),
-                              "--size", SIZE], capture_output=True, text=True, env=env)
-        assert run.returncode == 0, run.stderr[-3000:]
-        out[task] = root / task
+    first = ex.TASKS[0]
+    started = {"results": _Started(["-m", "lgp.reproduce", *QUICK, "--out", str(out)], logs / "results.err"),
+               first: _Started(_build_argv(first, root), logs / f"{first}.err", env)}
+    yield out, root, env, started
+    for run in started.values():  # a fixture that failed early leaves nothing running
+        if run.process.poll() is None:
+            run.process.kill()
+            run.process.wait()
+
+
+def _build_argv(task: str, root: Path) -> list[str]:
+    return ["-m", "stimuli.experiment", "--task", task, "--out", str(root / task), "--size", SIZE]
+
+
+@pytest.fixture(scope="module")
+def results(_started) -> Path:
+    """A small --quick run: the effort and risk tables the simulated participants answer from."""
+    out, _, _, started = _started
+    started["results"].wait()
     return out
+
+
+@pytest.fixture(scope="module")
+def studies(_started) -> dict[str, Path]:
+    """The three tasks built; the first build renders the pictures into the shared
+    render cache, the other two (one after another, after it) find them there."""
+    _, root, env, started = _started
+    started[ex.TASKS[0]].wait()
+    for task in ex.TASKS[1:]:
+        run = subprocess.run([sys.executable, *_build_argv(task, root)], capture_output=True, text=True, env=env)
+        assert run.returncode == 0, run.stderr[-3000:]
+    return {task: root / task for task in ex.TASKS}
 
 
 @pytest.fixture(scope="module")
