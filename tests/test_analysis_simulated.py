@@ -130,6 +130,7 @@ def test_run_analysis_on_simulated_participants_writes_labelled_tables_and_figur
         assert Image.open(png).text["Title"].startswith(SIMULATED_TITLE)
 
 
+@pytest.mark.slow  # the analysis with its figures
 def test_run_analysis_without_human_data_writes_pairs_and_effort_risk_figure(tmp_path, E, RISK):
     out = run_analysis(None, E, RISK, tmp_path, seed=0)
     assert out["settings"].iloc[0]["sigma"] == pytest.approx(0.065)

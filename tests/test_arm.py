@@ -108,6 +108,7 @@ def test_workspace_box_corner_reachable_from_above_with_numerical_ik(arm, corner
         assert _reachable_from_above(arm, np.add(corner, [0, 0, dz]))
 
 
+@pytest.mark.slow  # IK for every block of every trial
 def test_every_block_pose_of_every_trial_is_reachable_from_above(arm):
     # Targets, and the initial layouts of 3 samples, each with its approach point.
     for trial in stimuli.load_all():

@@ -206,6 +206,7 @@ def test_responses_near_1e_minus_299_are_too_small_not_too_large(tmp_path):
     assert "SD underflows to 0" in str(e.value) and "too large" not in str(e.value)
 
 
+@pytest.mark.slow  # a subprocess pipeline run
 def test_bad_human_data_stops_the_run_before_earlier_outputs_are_removed(tmp_path):
     out = tmp_path / "out"
     out.mkdir()

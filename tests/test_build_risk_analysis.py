@@ -38,6 +38,7 @@ def test_measure_names_match_the_build_risk_module():
     assert tuple(MEASURES) == RISK_MEASURES
 
 
+@pytest.mark.slow  # fits on simulated studies
 def test_fit_prefers_the_build_risk_model_the_participants_were_drawn_from(tmp_path):
     risk, build = synthetic_tables()
     as_risk = build[build["measure"] == "max"].drop(columns="measure")

@@ -56,6 +56,7 @@ def _fake_stages():
     return pd.DataFrame(rows)
 
 
+@pytest.mark.slow  # a build-stage run and its figure
 def test_pair_table_of_aggregates_and_figure(tmp_path):
     paths, section, long = build_risk.build_risk_outputs(_fake_stages(), tmp_path, "cmd")
     pairs = pd.read_csv(tmp_path / "build_risk_pairs.csv")

@@ -178,6 +178,7 @@ def test_the_risk_key_covers_what_a_risk_run_loads_and_not_the_planner():
     assert stages.risk_key_inputs(None)["code"] == modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli")
 
 
+@pytest.mark.slow  # copies the project
 def test_editing_the_planner_keeps_the_risk_key(tmp_path):
     root = _copy_project(tmp_path)
     risk = modules_digest("models.risk.core", "models.risk.mujoco_engine", "stimuli", root=root)

@@ -302,7 +302,8 @@ def _env():
 
 
 @pytest.mark.parametrize("argv, code", [(["-m", "lgp.show", "99X"], 2), (["-m", "stimuli.sheet", "--out", "/proc/nodir/s.png"], 2),
-                                        (["-m", "lgp.reproduce", "--sigmas", "-0.05", "--out", "{tmp}/r"], 2)])
+                                        pytest.param(["-m", "lgp.reproduce", "--sigmas", "-0.05", "--out", "{tmp}/r"], 2,
+                                                     marks=pytest.mark.slow)])  # imports the pipeline: ~2 s
 def test_python_dash_m_commands_exit_with_one_line(argv, code, tmp_path):
     argv = [a.format(tmp=tmp_path) for a in argv]
     proc = subprocess.run([sys.executable, *argv], capture_output=True, text=True, env=_env(), cwd=tmp_path, timeout=120)
@@ -329,6 +330,7 @@ def test_ctrl_c_during_a_run_prints_one_line_and_exits_130(tmp_path, after):
     assert last == "python -m lgp.reproduce: interrupted; nothing cached (--no-cache)"
 
 
+@pytest.mark.slow  # a subprocess plans, replays and draws
 def test_show_creates_missing_folders_and_prints_no_meshcat_server_line(tmp_path):
     """The replay is a static HTML file: Drake's "Meshcat listening for connections"
     log line would send a user to a server that is not needed (and gone at exit)."""

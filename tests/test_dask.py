@@ -146,6 +146,7 @@ def test_refused_scheduler_address_fails_at_once_with_one_line():
     assert time.perf_counter() - t0 < 60
 
 
+@pytest.mark.slow  # waits out the connect timeout
 def test_silent_scheduler_address_times_out_within_the_bound():
     # A socket that accepts TCP connections but never speaks Dask's protocol.
     server = socket.socket()

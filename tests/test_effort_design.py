@@ -83,6 +83,7 @@ def test_one_rule_for_the_design_in_the_planner_the_units_the_command_lines_and_
         Design.of(Design(), approach_height=0.02)  # a design or its values, not both
 
 
+@pytest.mark.slow  # a fresh interpreter
 def test_the_design_and_the_planners_entry_points_load_no_drake():
     # Command lines refuse a bad design, and cache keys are computed, before Drake loads.
     import subprocess

@@ -68,6 +68,14 @@ def _start(cmd, cwd, n_workers: int, timeout: float = 120.0):
     pytest.fail(f"{cmd} never had {n_workers} workers (exit {proc.returncode}):\n{err[-2000:]}")
 
 
+def alive_after(pids, seconds: float = 5.0) -> list[int]:
+    """Those of `pids` still running `seconds` from now; returns as soon as none is."""
+    deadline = time.monotonic() + seconds
+    while alive(pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return alive(pids)
+
+
 def _reap(proc, sig):
     proc.send_signal(sig)
     try:
@@ -107,8 +115,8 @@ def test_workers_die_with_a_killed_parent_quietly(tmp_path, start_method):
     time.sleep(0.5)  # the workers are inside tasks now
     workers = descendants(proc.pid)
     out, err = _reap(proc, signal.SIGKILL)
-    time.sleep(5)
-    assert alive(workers) == [], f"workers {alive(workers)} outlived their parent"
+    left = alive_after(workers, 5)
+    assert left == [], f"workers {left} outlived their parent by 5 s"
     assert "Traceback" not in err, err
 
 
@@ -120,8 +128,7 @@ def test_sigterm_stops_the_pool_like_ctrl_c(tmp_path):
     time.sleep(0.5)
     out, err = _reap(proc, signal.SIGTERM)
     assert "Interrupted: stopped by SIGTERM" in err  # raised in the parent, uncaught by this script
-    time.sleep(5)
-    assert alive(workers) == []
+    assert alive_after(workers, 5) == []
 
 
 REPRODUCE = [sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "4",
@@ -142,8 +149,8 @@ def test_a_stopped_reproduce_leaves_no_worker_alive(tmp_path, sig, wait):
         seen |= set(descendants(proc.pid))
         time.sleep(0.1)
     out, err = _reap(proc, sig)
-    time.sleep(5)
-    assert alive(seen) == [], f"{len(alive(seen))} descendants outlived the run"
+    left = alive_after(seen, 5)
+    assert left == [], f"{len(left)} descendants outlived the run by 5 s"
     if sig == signal.SIGTERM:
         assert proc.returncode == 128 + signal.SIGTERM, err[-3000:]
         last = err.strip().splitlines()[-1]

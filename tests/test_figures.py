@@ -34,7 +34,8 @@ def _inside(fig, artist) -> bool:
     return box.x0 >= frame.x0 - 0.5 and box.x1 <= frame.x1 + 0.5 and box.y0 >= frame.y0 - 0.5 and box.y1 <= frame.y1 + 0.5
 
 
-@pytest.mark.parametrize("datasets", [["time"], ["simulated-build"], ["difficulty", "time"],
+@pytest.mark.parametrize("datasets", [["time"], pytest.param(["simulated-build"], marks=pytest.mark.slow),
+                                      pytest.param(["difficulty", "time"], marks=pytest.mark.slow),
                                       ["simulated-difficulty", "simulated-time", "simulated-build"]])
 def test_figure_4_title_lies_inside_the_figure(datasets, tmp_path, drawn):
     figures.plot_model_correlations(_summary(datasets), tmp_path)
@@ -44,6 +45,7 @@ def test_figure_4_title_lies_inside_the_figure(datasets, tmp_path, drawn):
     assert labels == [figures.dataset_label(d) for d in ordered_datasets(datasets)]
 
 
+@pytest.mark.slow  # draws the full pairs figure
 def test_effort_risk_pairs_has_units_on_its_y_axes_and_greys_a_tie_like_a_reversal(tmp_path, drawn):
     E = pd.Series({t: 1.0 + k for k, t in enumerate(TRIAL_IDS)})
     E["6H"] = E["6E"] * (1 + 1e-5)  # a tie under analysis.pairs.TIE_REL

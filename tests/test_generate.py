@@ -73,6 +73,7 @@ def test_reproduce_runs_a_generated_set_and_pairs_only_what_files_declare(tmp_pa
     assert pairs["effort_E"].iloc[0] == effort.set_index("trial").loc["1E", "effort"]
 
 
+@pytest.mark.slow  # subprocess command lines
 def test_a_stimulus_directory_without_trial_files_is_one_line(tmp_path):
     r = _reproduce("--stimuli", str(tmp_path), "--out", str(tmp_path / "out"))
     assert r.returncode == 1

@@ -76,6 +76,7 @@ _FULL_DISK = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # a subprocess run on a full disk
 def test_a_full_disk_leaves_no_partial_output_and_names_the_file(tmp_path):
     """A real full disk: a 96 kB tmpfs in a private mount namespace (unshare -rm)."""
     if shutil.which("unshare") is None or subprocess.run(["unshare", "-rm", "true"]).returncode != 0:
@@ -96,6 +97,7 @@ def test_a_full_disk_leaves_no_partial_output_and_names_the_file(tmp_path):
         assert int(size) > 0 and not name.startswith("."), (name, size)
 
 
+@pytest.mark.slow  # the analysis with its figures
 def test_a_simulated_enospc_in_a_figure_leaves_nothing_and_names_the_figure(tmp_path, sim, monkeypatch):
     import matplotlib.figure
 

@@ -45,6 +45,7 @@ def test_the_lock_is_released_when_its_holder_is_killed(tmp_path):
         pass
 
 
+@pytest.mark.slow  # a lock holder and a run, both subprocesses
 def test_a_run_in_a_held_folder_says_who_holds_it_and_touches_nothing(tmp_path):
     out = tmp_path / "out"
     out.mkdir()

@@ -41,6 +41,7 @@ def test_one_pool_keeps_its_workers_across_maps():
     assert len(first | second) <= 2 and os.getpid() not in first | second
 
 
+@pytest.mark.slow  # seconds of waiting on a pool
 def test_interruption_cancels_the_queue_and_stops_the_workers(tmp_path):
     tasks = [(k, str(tmp_path)) for k in range(40)]
     with pytest.raises(KeyboardInterrupt):

@@ -19,6 +19,7 @@ def test_plan_is_exported_from_lgp():
     assert lgp.plan is search.plan and lgp.Plan is Plan
 
 
+@pytest.mark.slow  # a fresh interpreter imports every module
 def test_lgp_plan_stays_a_function_after_every_submodule_is_imported():
     # In a fresh interpreter, so the order of other tests cannot hide a module
     # named lgp.plan shadowing the function (the defect of issue 9).
@@ -32,7 +33,7 @@ def test_lgp_plan_stays_a_function_after_every_submodule_is_imported():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
-@pytest.mark.parametrize("trial_id, sample", [("2H", 0), ("5E", 1), ("10H", 0), ("4H", 1)])
+@pytest.mark.parametrize("trial_id, sample", [("2H", 0), pytest.param("5E", 1, marks=pytest.mark.slow), ("10H", 0), ("4H", 1)])
 def test_different_ik_seeds_give_the_same_optimum(trial_id, sample):
     # The IK seeds are closed-form solutions on a swivel grid shifted at random;
     # once a bad seed gave twice the cost. These layouts had near-tied optima.
@@ -102,6 +103,7 @@ def test_unreachable_target_raises_planning_error_naming_the_action():
     assert str(info.value.action) == "Place(a, table)"
 
 
+@pytest.mark.slow  # two solvers on one trial
 def test_ipopt_reaches_the_snopt_optimum():
     trial = stimuli.load_trial("10E")
     A = trial.sample_initial(np.random.default_rng(0))
@@ -133,7 +135,7 @@ def test_command_line_prints_the_actions(capsys, tmp_path):
     assert (tmp_path / "9E.png").exists()
 
 
-@pytest.mark.parametrize("trial_id, seed, sample", [("5E", 0, 2), ("2H", 3, 1)])
+@pytest.mark.parametrize("trial_id, seed, sample", [pytest.param("5E", 0, 2, marks=pytest.mark.slow), ("2H", 3, 1)])
 def test_viewer_replays_the_effort_table_row(capsys, trial_id, seed, sample):
     # `python -m lgp.show T --seed S --sample K` plans exactly row (T, K) of
     # effort_samples.csv of a run with --seed S: the same layout, the same effort.

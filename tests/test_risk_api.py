@@ -77,7 +77,7 @@ def test_risk_table_is_tidy_in_input_order_and_matches_physical_risk():
     assert set(runs["trial"]) == {"staircase4 0.2d"}
 
 
-@pytest.mark.parametrize("engine,scenes,n", [("mujoco", 2, 12), ("drake", 1, 2)]
+@pytest.mark.parametrize("engine,scenes,n", [pytest.param("mujoco", 2, 12, marks=pytest.mark.slow), ("drake", 1, 2)]
                          + [("physx", 2, 6)] * ("physx" in available_engines()))
 def test_parallel_grid_gives_identical_numbers_to_serial(engine, scenes, n):
     scenes = [staircase(4), harmonic(4, 0.8)][:scenes]
@@ -122,6 +122,7 @@ def test_bad_sigma_or_n_is_refused():
             physical_risk(tower(2), 0.1, n_sims=n)
 
 
+@pytest.mark.slow  # three trials' risk
 def test_identical_scenes_are_simulated_once_with_the_same_numbers(monkeypatch):
     import stimuli
     from models.risk import core

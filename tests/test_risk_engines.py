@@ -191,6 +191,7 @@ def test_a_run_does_not_depend_on_the_runs_before_it(engine):
     assert first.sim_time == again.sim_time
 
 
+@pytest.mark.slow  # a fresh interpreter
 def test_mujoco_warnings_do_not_write_a_log_into_the_users_directory(tmp_path):
     """MuJoCo's default appends warnings to MUJOCO_LOG.TXT in the current directory;
     the engine keeps them in memory instead (models.risk.mujoco_engine.WARNINGS)."""

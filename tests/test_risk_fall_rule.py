@@ -123,11 +123,12 @@ def test_rules_are_the_documented_ones():
 
 @pytest.mark.parametrize("args,message", [
     (["--fall-rule", "vertical"], "argument --fall-rule: unknown fall rule 'vertical'"),
-    (["--fall-threshold", "0"], "fall threshold must be > 0"),
+    # the others in the full suite (a subprocess each, ~1 s)
+    pytest.param(["--fall-threshold", "0"], "fall threshold must be > 0", marks=pytest.mark.slow),
     # 3D is 3d (like trial ids, case-insensitive): the rule passes and the threshold is what is refused
-    (["--fall-rule", "3D", "--fall-threshold", "0"], "fall threshold must be > 0"),
-    (["--engine", "bullet"], "unknown physics engine"),
-    (["--engine", "physx", "--profile", "fast"], "unknown physx profile"),
+    pytest.param(["--fall-rule", "3D", "--fall-threshold", "0"], "fall threshold must be > 0", marks=pytest.mark.slow),
+    pytest.param(["--engine", "bullet"], "unknown physics engine", marks=pytest.mark.slow),
+    pytest.param(["--engine", "physx", "--profile", "fast"], "unknown physx profile", marks=pytest.mark.slow),
 ])
 def test_cli_refuses_bad_input_with_one_line(tmp_path, args, message):
     res = subprocess.run([sys.executable, "-m", "models.risk", "--table", str(tmp_path / "t.csv"), *args],

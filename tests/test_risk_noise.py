@@ -57,7 +57,8 @@ def assert_no_overlap(before: Scene, after: Scene):
             assert penetration(a, f) <= allowed, f"{after.label}: {a.name} overlaps fixed {f.name}"
 
 
-@pytest.mark.parametrize("scene", SCENES, ids=lambda s: s.label)
+@pytest.mark.parametrize("scene", [pytest.param(s, marks=pytest.mark.slow) if s.label.startswith("grid") else s
+                                   for s in SCENES], ids=lambda s: s.label)  # the 15-block grids in the full suite only
 def test_perturbed_blocks_never_overlap_or_sink(scene):
     rng = np.random.default_rng(7)
     for sigma in (0.05, 0.1, 0.3):

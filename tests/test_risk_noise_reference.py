@@ -120,7 +120,8 @@ def test_vectorised_noise_rule_equals_the_per_run_rule_over_the_paper_grid(trial
     assert_same_as_reference(trial, [0, 1, 2], 40, [*SIGMA_GRID, 0.2, 0.4])
 
 
-@pytest.mark.parametrize("scene", SCENES, ids=lambda s: s.label)
+@pytest.mark.parametrize("scene", [pytest.param(s, marks=pytest.mark.slow) if s.label.startswith(("bucket", "line")) else s
+                                   for s in SCENES], ids=lambda s: s.label)  # the two costliest in the full suite only
 def test_vectorised_noise_rule_equals_the_per_run_rule_on_yawed_boxed_and_fixed_scenes(scene):
     """Textbook structures, a bucket of fixed boxes and yawed blocks, heavy-tailed
     normals (the pushes and lifts work hardest)."""

@@ -142,6 +142,7 @@ def test_centre_of_mass_closed_form_and_its_monte_carlo_agree():
     assert com_estimate(0.065) < 1e-6  # the paper's sigma: a 10-tower practically never topples
 
 
+@pytest.mark.slow  # 100 settled runs
 def test_ten_tower_risk_under_settle_at_the_papers_sigma_is_the_centre_of_mass_estimate():
     scene = stimuli.load_trial("7H").target
     assert len(scene) == 10

@@ -50,7 +50,7 @@ def reference_rollout(mj, model, data, scene, p_WB, duration=4.0, fall_threshold
     return Rollout(p_start, p, t, False)
 
 
-@pytest.mark.parametrize("trial", ["7H", "3E", "4H", "12E"])
+@pytest.mark.parametrize("trial", [pytest.param("7H", marks=pytest.mark.slow), pytest.param("3E", marks=pytest.mark.slow), "4H", "12E"])
 def test_mujoco_run_loop_equals_the_one_step_at_a_time_loop(trial):
     """A tower, a 15-block floor, a 4-block stack and blocks in a bucket, at the
     ends and middle of the paper's sigma range and beyond: 25 runs each."""

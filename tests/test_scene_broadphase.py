@@ -68,6 +68,7 @@ def random_scene(rng, n):
     return Scene(blocks, fixed, "random")
 
 
+@pytest.mark.slow  # many random scenes, pair by pair
 def test_broad_phase_gives_the_pairwise_verdicts_on_random_scenes():
     rng = np.random.default_rng(7)
     kinds = set()

@@ -145,6 +145,7 @@ def test_the_page_shows_fits_profile_bootstrap_and_every_participant(tmp_path):
     assert participants.count("<tr>") - 1 == 12  # one row per participant, plus the header
 
 
+@pytest.mark.slow  # a fresh interpreter
 def test_drawing_a_figure_leaves_the_callers_matplotlib_backend_alone(tmp_path):
     """Issue 21: the figure writers called matplotlib.use("Agg"), which switched a
     notebook's backend off; they draw on their own Figure now."""

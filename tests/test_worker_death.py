@@ -95,6 +95,7 @@ def _run(tmp_path, mode, method, kill_after=None, deadline=60.0):
     return proc.returncode, out, err, time.monotonic() - t0
 
 
+@pytest.mark.slow  # a subprocess pool, a worker killed
 @pytest.mark.parametrize("method", ["fork", "spawn"])
 def test_a_worker_killed_from_outside_is_replaced_and_the_map_completes(tmp_path, method):
     code, out, err, took = _run(tmp_path, "plain", method, kill_after=0.8)
@@ -105,12 +106,14 @@ def test_a_worker_killed_from_outside_is_replaced_and_the_map_completes(tmp_path
     assert "died" in err and "SIGKILL" in err  # said on stderr, one line
 
 
+@pytest.mark.slow  # a subprocess pool, a worker killed
 def test_a_worker_that_died_between_two_maps_is_replaced(tmp_path):
     code, out, err, took = _run(tmp_path, "between", "fork")
     assert code == 0, err[-3000:]
     assert json.loads(out)["results"] == [k * k for k in range(30)]
 
 
+@pytest.mark.slow  # a subprocess pool, a worker killed
 def test_a_unit_that_kills_its_worker_once_is_retried(tmp_path):
     code, out, err, took = _run(tmp_path, "once", "fork")
     assert code == 0, err[-3000:]
@@ -138,18 +141,26 @@ def _csvs(out: Path) -> dict:
     return tables
 
 
+@pytest.fixture(scope="module")
+def undisturbed(tmp_path_factory) -> Path:
+    """The output folder of RUN without a kill and without a cache (made once, read by both stages' cases)."""
+    out = tmp_path_factory.mktemp("ref")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    ref = subprocess.run(RUN + ["--no-cache", "--out", str(out)], cwd=ROOT, env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert ref.returncode == 0, ref.stderr[-3000:]
+    return out
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("stage, cue", [("effort", "[effort  1/2]"), ("risk", "[effort] ")])
-def test_reproduce_survives_a_worker_killed_mid_stage_with_identical_csvs(tmp_path, stage, cue):
+def test_reproduce_survives_a_worker_killed_mid_stage_with_identical_csvs(tmp_path, stage, cue, undisturbed):
     """The issue's probe: kill -9 one worker of a default (process-pool) run while
     it plans or simulates; the run ends by itself, exit 0, with the CSVs of an
     undisturbed run (bar the wall-clock solve_time)."""
     import threading
 
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    ref = subprocess.run(RUN + ["--no-cache", "--out", str(tmp_path / "ref")], cwd=ROOT, env=env,
-                         capture_output=True, text=True, timeout=300)
-    assert ref.returncode == 0, ref.stderr[-3000:]
     proc = subprocess.Popen(RUN + ["--out", str(tmp_path / "hit")], cwd=ROOT, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     lines, seen = [], threading.Event()
@@ -176,6 +187,6 @@ def test_reproduce_survives_a_worker_killed_mid_stage_with_identical_csvs(tmp_pa
     err = "".join(lines)
     assert proc.returncode == 0, err[-3000:]
     assert "died (SIGKILL)" in err, err[-3000:]
-    want, got = _csvs(tmp_path / "ref"), _csvs(tmp_path / "hit")
+    want, got = _csvs(undisturbed), _csvs(tmp_path / "hit")
     for name in want:
         assert got[name].equals(want[name]), name
