@@ -61,13 +61,15 @@ def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None)
 CARD_PICTURE = (480, 320)
 
 
-def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None, jobs: int = 2) -> dict[str, Path]:
+def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None, jobs: int = 2,
+                            executor=None) -> dict[str, Path]:
     """Picture of every trial under `out_dir`: A (sample 0 of `seed`) | B rendered like
     photographs (stimuli.render: one camera for every trial, so a relocated tower looks
     relocated; B the finished table), kept in the render cache
     (stimuli.render.render_cache_dir, shared with stimuli.experiment) between runs.
     Where the renderer cannot run (no OpenGL), the sketches of `trial_pictures`,
-    saying why on stderr."""
+    saying why on stderr. `executor`: a running local lgp.executor to render on
+    (stimuli.render.render_trials)."""
     import sys
 
     from PIL import Image, ImageDraw
@@ -76,7 +78,7 @@ def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | Non
 
     where = cache_folder(trials, seed, CARD_PICTURE)
     try:
-        record = render_trials(trials, where, seed, CARD_PICTURE, jobs, log=lambda m: None)
+        record = render_trials(trials, where, seed, CARD_PICTURE, jobs, log=lambda m: None, executor=executor)
     except Exception as e:  # noqa: BLE001 - any failure of VTK/OpenGL: the sketch still serves
         print(f"lgp.reproduce: trial pictures: rendering failed ({type(e).__name__}: {e}); drawing sketches instead",
               file=sys.stderr, flush=True)
