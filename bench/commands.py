@@ -5,7 +5,7 @@
     python bench/commands.py --only quick show sheet   # a subset (the other rows are kept)
 
 Each command runs in a fresh subprocess and a fresh scratch folder, once cold (an
-empty cache) and, for the pipeline, once more warm (the same command again: all
+empty cache, the render cache of the pictures too) and, for the pipeline, once more warm (the same command again: all
 cached), with ``--jobs 2`` and ``--jobs 1`` (a 2-core and a 1-core machine: the
 range a reader's machine is likely in). Writes `docs/command_times.csv` (one row
 per command, jobs and cache state, with the machine: cores, CPU model, load
@@ -59,7 +59,8 @@ def run(command: str, jobs: int, folder: Path) -> dict:
         argv += ["--jobs", str(jobs)]
     if argv[0] == "pytest":
         argv += ["-p", "no:cacheprovider", str(ROOT / "tests")]
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    # cold means every cache empty, the render cache (~/.cache/lgp-difficulty/renders) too
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "LGP_RENDER_CACHE": str(folder / "render-cache")}
     load_before = _load()
     before = os.times()
     t0 = time.perf_counter()

@@ -31,12 +31,13 @@ import stimuli
 from lgp import cli
 from lgp.planner.design import check_approach_height
 from lgp.paper import PAPER_SIGMA, SIGMA_GRIDS, TRIAL_IDS
-from lgp.executor import WorkerDied, executor_for_scheduler, stop_signals
+from lgp.executor import ProcessExecutor, SerialExecutor, WorkerDied, executor_for_scheduler, stop_signals
 from lgp.app.progress import log as progress_log
 from lgp.app.cache import library_versions, write_csv_atomic
 from lgp.app.config import RunConfig
 from lgp.app.manifest import OutputLock, TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
 from lgp.app.page import write_index
+from lgp.app.pictures import rendered_trial_pictures
 from lgp.app.progress import Stopwatch
 from lgp.app.replays import write_replays
 from lgp.app.report import append_report, engine_description, pairs_csv_table, write_report
@@ -260,6 +261,10 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
             trials, args.seed, out / "replays", cache, executor, _log,
             planner_options={"approach_height": args.approach_height, "slices_per_phase": args.slices, **args.planner_choice()})
         clock.lap("replays")
+        pictures = None
+        if isinstance(executor, (ProcessExecutor, SerialExecutor)):  # local, warm workers: render the page's pictures there
+            pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=args.jobs, executor=executor)
+            clock.lap("trial pictures")
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
@@ -343,7 +348,7 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
         append_report(report, sections)
     written.append(report)
     written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays,
-                               over_sigma_html=over_html, precision=precision))
+                               over_sigma_html=over_html, precision=precision, pictures=pictures))
     if (out / "page").is_dir():
         written.append(out / "page")
     if args.verbose:

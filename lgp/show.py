@@ -1,5 +1,8 @@
 """Inspect the plan of one trial: ``python -m lgp.show 7H --seed 0 --sample 0 --html out.html --png out.png``.
 
+A trial of another folder (``lgp.reproduce --stimuli DIR``): ``python -m lgp.show REV
+--stimuli stimuli/rearrange --planner search``.
+
 Replays row (trial, sample) of `effort_samples.csv` exactly: the layout of A and
 the planner are seeded as `models.effort.physical_effort` seeds them
 (`models.effort.plan_of_sample`), so the effort printed here equals that row's.
@@ -21,6 +24,8 @@ PROG = "python -m lgp.show"
 def main(argv=None) -> int:
     parser = cli.parser(PROG, description=__doc__.splitlines()[0])
     parser.add_argument("trial", type=cli.trial_id, help="trial id, e.g. 7H (case-insensitive)")
+    parser.add_argument("--stimuli", metavar="DIR", type=cli.input_dir,
+                        help="read the trial from the trial files of DIR, as `lgp.reproduce --stimuli` (default: stimuli/trials, the paper's)")
     parser.add_argument("--seed", type=cli.seed, default=0, help="seed of the run, as `lgp.reproduce --seed` (default 0)")
     parser.add_argument("--sample", type=cli.seed, default=0,
                         help="layout index K >= 0: replays row (trial, K) of effort_samples.csv (default 0)")
@@ -45,7 +50,7 @@ def main(argv=None) -> int:
     import stimuli
     from models.effort import describe, kinetic_energy, plan_of_sample
 
-    trial = stimuli.load_trial(args.trial)
+    trial = stimuli.select_trials([args.trial], args.stimuli)[0][0]
     design = {k: v for k, v in (("approach_height", args.approach_height), ("slices_per_phase", args.slices)) if v is not None}
     if args.planner == "search":
         from lgp.search import Budget

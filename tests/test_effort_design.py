@@ -4,6 +4,9 @@ discretisation (`slices_per_phase`) are parameters of the planner, of the effort
 model and of `python -m lgp.reproduce`, and part of the effort cache key."""
 from __future__ import annotations
 
+import functools
+import re
+
 import numpy as np
 import pytest
 
@@ -423,3 +426,47 @@ def test_the_design_without_legs_fails_loudly_when_its_reference_plan_fails(monk
     monkeypatch.setattr(quarter_turns, "solve", failing)
     with pytest.raises(planner.PlanningError, match="reference plan with 0.05 m legs"):
         plan_of_sample(stimuli.load_trial("10E"), 0, 0, approach_height=0.0)  # not _layout_0_plan's cached plan
+
+
+@pytest.mark.slow
+def test_effort_sensitivity_with_the_search_plans_each_design_as_physical_effort_does(tmp_path):
+    # `lgp.reproduce --sensitivity --planner search`: each motion design of the effort
+    # section is planned by the search within the run's budget (RunConfig.planner_choice),
+    # so its effort is physical_effort(..., planner="search") of that design, planned
+    # again apart. REV (stimuli/rearrange) has no plan in the paper's pipeline: a section
+    # that dropped the planner choice would report it failed (effort NaN).
+    from pathlib import Path
+
+    import pandas as pd
+
+    from lgp import reproduce
+    from lgp.app import sensitivity, stages
+    from lgp.app.cache import Cache
+    from lgp.executor import SerialExecutor
+    from lgp.planner import PlanningError
+    from models.effort import physical_effort
+
+    rearrange = Path(stimuli.__file__).parent / "rearrange"
+    args = reproduce.parse_args(["--sensitivity", "--planner", "search", "--budget-solves", "2", "--stimuli", str(rearrange),
+                                 "--trials", "REV", "--samples", "1", "--n-sims", "2", "--seed", "3", "--out", str(tmp_path / "out")])
+    trials, _ = stimuli.select_trials(args.trials, args.stimuli)
+    ctx = sensitivity.Context(args, trials, SerialExecutor(), Cache(tmp_path / "c"), tmp_path, None, lambda m: None,
+                              effort_tables=stages.effort_tables)
+    section = sensitivity.effort_section(ctx)
+    table = pd.read_csv(tmp_path / "effort_sensitivity.csv")
+    assert len(table) == len(sensitivity.effort_designs(args)) == 4
+    failed = [line for line in section.lines if line.startswith("Failed: ")]
+    for row in table.itertuples():
+        options = dict(samples=1, seed=3, approach_height=row.approach_height, slices_per_phase=row.slices_per_phase,
+                       planner="search", budget=args.budget)
+        if np.isnan(row.effort):  # a design the search finds no plan for within the budget: the same error, said
+            with pytest.raises(PlanningError) as e:
+                physical_effort(trials[0], **options)
+            said = f"Failed: {row.design}, REV: {type(e.value).__name__}: {e.value}"
+            untimed = functools.partial(re.sub, r"\d+\.\d s\b", "_ s")  # the search's seconds differ run to run
+            assert untimed(said) in [untimed(line) for line in failed], (said, failed)
+            continue
+        direct = physical_effort(trials[0], **options)
+        assert row.effort == pytest.approx(direct.mean, rel=1e-9), row.design
+        assert (direct.table["set_asides"] == 3).all() and (direct.table["solves"] <= 2).all()
+    assert len(failed) == table["effort"].isna().sum() < len(table)

@@ -9,8 +9,6 @@ offline. Skipped, saying why, only when the browser or playwright is missing
 from __future__ import annotations
 
 import io
-import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -19,26 +17,15 @@ import numpy as np
 import pytest
 
 from lgp.paper import TRIAL_IDS
+from offline_browser import chromium, keep_screenshot, offline_page
 
 pytestmark = pytest.mark.slow
-
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-VIEWPORT = {"width": 1280, "height": 800}
 
 
 @pytest.fixture(scope="module")
 def browser():
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        pytest.skip("playwright is not installed (pip install -e '.[test,browser]'); .ci/run installs it")
-    if not Path(CHROMIUM).exists():
-        pytest.skip(f"no Chromium at {CHROMIUM} (apt-get install -y chromium); .ci/run installs it"
-                    + (f": {os.environ['LGP_NO_BROWSER']}" if os.environ.get("LGP_NO_BROWSER") else ""))
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM)
+    with chromium() as b:
         yield b
-        b.close()
 
 
 @pytest.fixture(scope="module")
@@ -52,29 +39,11 @@ def results(browser, tmp_path_factory) -> Path:
 
 
 def _open(browser, path: Path):
-    """A page at 1280x800 that records console errors and refuses every non-file request."""
-    page = browser.new_page(viewport=VIEWPORT)
-    errors, refused = [], []
-    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: errors.append(str(e)))
-
-    def route(r):
-        if r.request.url.startswith(("file:", "data:", "blob:")):
-            r.continue_()
-        else:
-            refused.append(r.request.url)
-            r.abort()
-
-    page.route("**/*", route)
+    """A page at 1280x800 that records console errors and refuses every non-file request, at `path`, loaded."""
+    page, errors, refused = offline_page(browser)
     page.goto(path.resolve().as_uri())
     page.wait_for_load_state("load")
     return page, errors, refused
-
-
-def _keep(page, name: str, **kw) -> None:
-    if os.environ.get("LGP_SCREENSHOTS"):
-        Path(os.environ["LGP_SCREENSHOTS"]).mkdir(parents=True, exist_ok=True)
-        page.screenshot(path=str(Path(os.environ["LGP_SCREENSHOTS"]) / name), **kw)
 
 
 def test_results_page_opens_offline_with_every_picture_pair_and_trial(browser, results):
@@ -90,11 +59,11 @@ def test_results_page_opens_offline_with_every_picture_pair_and_trial(browser, r
     links = page.evaluate("Array.from(document.querySelectorAll('a.replay')).map(a => a.getAttribute('href'))")
     assert links == [f"replays/{t}.html" for t in TRIAL_IDS]
     assert all((results / link).exists() for link in links)
-    _keep(page, "results_page.png")
+    keep_screenshot(page, "results_page.png")
     # A link to a trial lands on its card.
     page.goto((results / "index.html").resolve().as_uri() + "#trial-7H")
     assert page.evaluate("document.querySelector(':target').id") == "trial-7H"
-    _keep(page, "results_page_trial.png")
+    keep_screenshot(page, "results_page_trial.png")
     assert errors == [] and refused == []
     page.close()
 
@@ -142,7 +111,7 @@ def test_pairs_over_sigma_section_shows_every_pair_at_every_sigma_with_its_figur
     # the trial cards say how careful one must be: sigma* at both levels
     card = page.locator("#trial-4H .precision").inner_text()
     assert "risk 0.5" in card and "risk 0.1" in card and "sigma*" in card
-    _keep(page, "results_page_over_sigma.png", full_page=False)
+    keep_screenshot(page, "results_page_over_sigma.png", full_page=False)
     assert errors == [] and refused == []
     page.close()
 
@@ -173,7 +142,7 @@ def test_replay_renders_the_blocks_in_their_placement_colours(browser, results):
     page.wait_for_timeout(1500)
     caption = page.locator("#lgp-caption").inner_text()
     assert "7H" in caption and "action" in caption and "effort so far" in caption
-    _keep(page, "replay_7H.png")
+    keep_screenshot(page, "replay_7H.png")
     # The end of the recording: the tower is built at the site; caption hidden, canvas only.
     page.evaluate("viewer.animator.pause(); viewer.animator.seek(viewer.animator.duration); viewer.render()")
     page.evaluate("document.getElementById('lgp-caption').style.display = 'none'")
@@ -284,5 +253,5 @@ def test_the_page_fits_a_laptop_and_a_phone(browser, results, width, name):
     overflow = page.evaluate("document.documentElement.scrollWidth - document.documentElement.clientWidth")
     assert overflow <= 2, f"the page is {overflow} px wider than a {width} px screen"
     assert page.locator("#quick").is_visible()  # a --quick page says it is a preview
-    _keep(page, name)
+    keep_screenshot(page, name)
     page.close()

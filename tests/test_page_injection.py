@@ -7,17 +7,15 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from lgp.app.view import caption_html, script_json
+from offline_browser import chromium
 
 EVIL = "</script><script>alert(2)</script><!-- & \u2028 \u2029 -->"
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 
 
 def _plan():
@@ -41,30 +39,18 @@ def test_the_replay_caption_holds_no_script_end_from_the_description():
 
 @pytest.mark.slow
 def test_a_trial_description_with_a_script_runs_nothing_in_a_browser(tmp_path):
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        pytest.skip("playwright is not installed (pip install -e '.[test,browser]')")
-    if not Path(CHROMIUM).exists():
-        pytest.skip(f"no Chromium at {CHROMIUM} (apt-get install -y chromium)")
     path = tmp_path / "replay.html"
     path.write_text(f"<!DOCTYPE html><html><head><meta charset='utf-8'></head><body>"
                     f"{caption_html(_plan(), 'X1: ' + EVIL)}</body></html>")
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=[
-            "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-            "--disable-component-update", "--disable-sync"])
-        try:
-            page = browser.new_page()
-            dialogs, errors = [], []
-            page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
-            page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(path.resolve().as_uri())
-            page.wait_for_timeout(400)  # the caption updates every 100 ms
-            action = page.inner_text("#lgp-action")
-            title = page.inner_text("#lgp-title")
-        finally:
-            browser.close()
+    with chromium() as browser:
+        page = browser.new_page()
+        dialogs, errors = [], []
+        page.on("dialog", lambda d: (dialogs.append(d.message), d.dismiss()))
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(path.resolve().as_uri())
+        page.wait_for_timeout(400)  # the caption updates every 100 ms
+        action = page.inner_text("#lgp-action")
+        title = page.inner_text("#lgp-title")
     assert dialogs == [], f"a script from the description ran: alert({dialogs})"
     assert errors == []
     assert action == "nothing to move"  # the caption's own script ran

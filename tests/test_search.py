@@ -279,3 +279,22 @@ def test_reproduce_runs_generated_rearrangements_end_to_end_with_the_search(tmp_
     samples = pd.read_csv(tmp_path / "out" / "effort_samples.csv")
     assert (samples["set_asides"] > 0).all() and samples["paper_effort"].isna().all()
     assert (tmp_path / "out" / "replays" / "R0001.html").exists()
+
+
+def test_show_replays_a_rearrangement_of_another_folder_with_the_search(tmp_path, capsys):
+    """`lgp.show REV --stimuli stimuli/rearrange --planner search` replays row (REV, 0) of
+    `lgp.reproduce --stimuli stimuli/rearrange --planner search`: the printed effort is
+    physical_effort's for that trial, seed and sample (planned again apart), and the
+    replay and figure are written."""
+    from lgp import show
+    from models.effort import physical_effort
+
+    html, png = tmp_path / "REV.html", tmp_path / "REV.png"
+    assert show.main(["REV", "--stimuli", str(REARRANGE), "--planner", "search", "--seed", "0",
+                      "--html", str(html), "--png", str(png)]) == 0
+    out = capsys.readouterr().out
+    printed = float(next(line for line in out.splitlines() if line.startswith("effort ")).split()[1])
+    row = physical_effort(stimuli.load_file(REARRANGE / "REV.yaml"), samples=1, seed=0, planner="search").table.iloc[0]
+    assert printed == pytest.approx(row["effort"], rel=1e-9)
+    assert row["set_asides"] == 3 and "3 set-asides" in out
+    assert html.stat().st_size > 0 and png.stat().st_size > 0

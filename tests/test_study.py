@@ -298,3 +298,21 @@ def test_a_stimulus_folder_without_pairs_builds_with_pair_counterbalancing_off(t
     pictures = sorted(p.name for p in (tmp_path / "study" / "img").iterdir())
     assert pictures == sorted(f"{t}-{s}.png" for t in ("G0001", "G0002", "G0003", "ANCHOR-EASY", "ANCHOR-HARD") for s in "AB")
     assert (tmp_path / "study" / "lib" / "jspsych.js").stat().st_size > 10_000
+
+
+def test_pictures_rendered_on_a_runs_workers_equal_those_of_fresh_processes(tmp_path):
+    # lgp.reproduce renders the page's pictures on its own warm workers
+    # (render_trials(executor=...)); the pixels are those the standalone path makes.
+    from PIL import Image
+
+    from lgp.executor import ProcessExecutor
+
+    trials = [stimuli.load_trial(t) for t in ("7H", "12E")]
+    fresh = render.render_trials(trials, tmp_path / "fresh", 0, (160, 120), jobs=1, log=lambda m: None)
+    with ProcessExecutor(2) as ex:
+        warm = render.render_trials(trials, tmp_path / "warm", 0, (160, 120), log=lambda m: None, executor=ex)
+    assert warm["rendered"] == fresh["rendered"] == 4
+    for row in fresh["pictures"]:
+        a = np.asarray(Image.open(tmp_path / "fresh" / row["file"]))
+        b = np.asarray(Image.open(tmp_path / "warm" / row["file"]))
+        assert a.shape == b.shape and np.array_equal(a, b), row["file"]

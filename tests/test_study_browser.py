@@ -17,7 +17,6 @@ from __future__ import annotations
 import csv
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -28,14 +27,11 @@ import pandas as pd
 import pytest
 
 from lgp.paper import TRIAL_IDS
+from offline_browser import chromium, keep_screenshot, offline_page
 from stimuli import experiment as ex
 
 pytestmark = pytest.mark.slow
 
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync"]
-VIEWPORT = {"width": 1280, "height": 800}
 #: Participant numbers of the estimation tasks: two blocks of two (an even number).
 PARTICIPANTS = (0, 1, 2, 3)
 SIZE = "320x240"  # small pictures: the test is about the study, not the rendering
@@ -44,16 +40,8 @@ TIMINGS: dict[str, list[float]] = {}
 
 @pytest.fixture(scope="module")
 def browser():
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        pytest.skip("playwright is not installed (pip install -e '.[test,browser]'); .ci/run installs it")
-    if not Path(CHROMIUM).exists():
-        pytest.skip(f"no Chromium at {CHROMIUM} (apt-get install -y chromium); .ci/run installs it")
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+    with chromium() as b:
         yield b
-        b.close()
     if os.environ.get("LGP_BENCH_OUT"):
         Path(os.environ["LGP_BENCH_OUT"]).write_text(json.dumps(TIMINGS, indent=1) + "\n")
 
@@ -132,25 +120,10 @@ def _to_range(values: np.ndarray, lo: float, hi: float, digits: int = 0) -> np.n
 
 
 def _open(browser, url: str, clock: bool = False):
-    context = browser.new_context(viewport=VIEWPORT, accept_downloads=True)
-    page = context.new_page()
-    errors, refused = [], []
-    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: errors.append(str(e)))
-
-    def route(r):
-        if r.request.url.startswith(("file:", "data:", "blob:")):
-            r.continue_()
-        else:
-            refused.append(r.request.url)
-            r.abort()
-
-    page.route("**/*", route)
-    if clock:
-        page.clock.install(time=0)
+    page, errors, refused = offline_page(browser, clock=clock, accept_downloads=True)
     t0 = time.perf_counter()
     page.goto(url)
-    return context, page, errors, refused, t0
+    return page.context, page, errors, refused, t0
 
 
 def _pictures_loaded(page) -> list:
@@ -158,12 +131,6 @@ def _pictures_loaded(page) -> list:
     page.wait_for_function("Array.from(document.querySelectorAll('.lgp-pair img')).every(i => i.complete)")
     return page.evaluate("[document.querySelector('.lgp-pair').dataset.trial]"
                          ".concat(Array.from(document.querySelectorAll('.lgp-pair img')).map(i => i.naturalWidth > 0))")
-
-
-def _keep(page, name: str) -> None:
-    if os.environ.get("LGP_SCREENSHOTS"):
-        Path(os.environ["LGP_SCREENSHOTS"]).mkdir(parents=True, exist_ok=True)
-        page.screenshot(path=str(Path(os.environ["LGP_SCREENSHOTS"]) / name))
 
 
 def _run_estimation(browser, folder: Path, task: str, participant: int, values: dict[str, float], downloads: Path):
@@ -185,7 +152,7 @@ def _run_estimation(browser, folder: Path, task: str, participant: int, values: 
         assert start_ok and finish_ok, f"a picture of {tid} did not load"
         shown.append(tid)
         if participant == 0 and k in (0, 5):
-            _keep(page, f"{task}_{k}.png")
+            keep_screenshot(page, f"{task}_{k}.png")
         value = values.get(tid, 50 if task == "difficulty" else 30)
         page.fill("#jspsych-html-slider-response-response", str(int(value)))
         page.dispatch_event("#jspsych-html-slider-response-response", "change")
@@ -197,7 +164,7 @@ def _run_estimation(browser, folder: Path, task: str, participant: int, values: 
         else:
             page.click("#jspsych-html-slider-response-next")
     page.wait_for_selector("#lgp-done")
-    _keep(page, f"{task}_done.png")
+    keep_screenshot(page, f"{task}_done.png")
     order = page.evaluate("window.LGP_ORDER_SHOWN")
     js_order = page.evaluate(f"window.LGP_ORDER.trialOrder(window.LGP_STUDY.trials, {participant + 2}, 0).map(t => t.id)")
     assert errors == [] and refused == []
@@ -292,7 +259,7 @@ def _run_build(browser, folder: Path, participant: int, seconds: dict[str, float
                 continue
             page.clock.run_for(int(seconds[tid] * 1000))
             if k == 0 and participant == 0:
-                _keep(page, "build_console.png")
+                keep_screenshot(page, "build_console.png")
             if k == len(TRIAL_IDS) - 1:
                 with page.expect_download() as dl:
                     page.keyboard.press(" ")

@@ -116,7 +116,9 @@ def plot_risk_over_sigma(table: pd.DataFrame, path: Path, dimensions: dict | Non
         ax.set_title(f"pair {pair}" + (f": {name}" if name else ""), fontsize=8.5,
                      fontweight="bold" if pair in RISK_PAIRS else "normal")
         ax.set_ylim(0, 1.06)
-        ax.set_xlim(float(s.min()), float(s.max()))
+        lo_s, hi_s = float(s.min()), float(s.max())
+        pad = 0.005 if hi_s == lo_s else 0.0  # one sigma: a point in a narrow window, not a singular axis
+        ax.set_xlim(lo_s - pad, hi_s + pad)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.25, lw=0.5)
     for ax in axes[-1]:

@@ -554,14 +554,16 @@ def _parameter(v) -> str:
 def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                 pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock,
                 replays: dict | None = None, over_sigma_html: str | None = None,
-                precision: pd.DataFrame | None = None) -> Path:
+                precision: pd.DataFrame | None = None, pictures: dict | None = None) -> Path:
     """The page of a `lgp.reproduce` run (its lgp.app.config.RunConfig `args`):
-    pictures, run record, index.html."""
+    pictures (`pictures`, as lgp.app.pictures.rendered_trial_pictures returns them,
+    or rendered here), run record, index.html."""
     from models.risk import DEFAULT_ENGINE, get_engine
 
     out = Path(args.out) if out is None else Path(out)
-    pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=args.jobs)
-    clock.lap("trial pictures")
+    if pictures is None:
+        pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=args.jobs)
+        clock.lap("trial pictures")
     figures = []
     if analysis is not None and "files" in analysis:
         figures = [Path(p) for k, p in analysis["files"][["kind", "path"]].itertuples(index=False) if k == "figure" and str(p).endswith(".png")]

@@ -61,13 +61,27 @@ def trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None)
 CARD_PICTURE = (480, 320)
 
 
-def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None, jobs: int = 2) -> dict[str, Path]:
+def _label_font():
+    """(font, header height in px) of a card's A/B labels: Pillow's own scalable font
+    at 22 px, legible when the page shows the card at half size; the old bitmap
+    font (11 px) where Pillow is older than 10.1."""
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=22), 32
+    except TypeError:  # Pillow < 10.1: no size
+        return ImageFont.load_default(), 18
+
+
+def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None, jobs: int = 2,
+                            executor=None) -> dict[str, Path]:
     """Picture of every trial under `out_dir`: A (sample 0 of `seed`) | B rendered like
     photographs (stimuli.render: one camera for every trial, so a relocated tower looks
     relocated; B the finished table), kept in the render cache
     (stimuli.render.render_cache_dir, shared with stimuli.experiment) between runs.
     Where the renderer cannot run (no OpenGL), the sketches of `trial_pictures`,
-    saying why on stderr."""
+    saying why on stderr. `executor`: a running local lgp.executor to render on
+    (stimuli.render.render_trials)."""
     import sys
 
     from PIL import Image, ImageDraw
@@ -76,7 +90,7 @@ def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | Non
 
     where = cache_folder(trials, seed, CARD_PICTURE)
     try:
-        record = render_trials(trials, where, seed, CARD_PICTURE, jobs, log=lambda m: None)
+        record = render_trials(trials, where, seed, CARD_PICTURE, jobs, log=lambda m: None, executor=executor)
     except Exception as e:  # noqa: BLE001 - any failure of VTK/OpenGL: the sketch still serves
         print(f"lgp.reproduce: trial pictures: rendering failed ({type(e).__name__}: {e}); drawing sketches instead",
               file=sys.stderr, flush=True)
@@ -85,13 +99,14 @@ def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | Non
         cache.files["picture", "miss"] += record["rendered"]
         cache.files["picture", "hit"] += len(record["pictures"]) - record["rendered"]
     w, h = CARD_PICTURE
+    font, top = _label_font()
     paths = {}
     for trial in trials:
-        card = Image.new("RGB", (2 * w + 4, h + 18), "white")
+        card = Image.new("RGB", (2 * w + 4, h + top), "white")
         draw = ImageDraw.Draw(card)
         for j, (state, label) in enumerate((("A", "A: start (sample 0)"), ("B", "B: finish"))):
-            card.paste(Image.open(where / f"{trial.id}-{state}.png").convert("RGB"), (j * (w + 4), 18))
-            draw.text((j * (w + 4) + 4, 3), label, fill="black")
+            card.paste(Image.open(where / f"{trial.id}-{state}.png").convert("RGB"), (j * (w + 4), top))
+            draw.text((j * (w + 4) + 6, 4), label, fill="black", font=font)
         path = Path(out_dir) / f"{trial.id}.png"
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:

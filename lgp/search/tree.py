@@ -340,8 +340,9 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
             why = "; ".join(str(t[1]) for t in tried) or "no sequence of carries reaches B"
             raise SearchError(f"{label}: no plan: every branch of the search explored ({expansions} expansions), "
                               f"{why}", "unsolvable", float(lowest_open))
+        solved = "".join(f"; {t[1]}" for t in tried)  # why each solve gave no plan (failed, or rejected by the sweep check)
         raise SearchError(f"{label}: {stopped} ran out before any plan was found ({solves} KOMO solves, "
-                          f"{expansions} expansions, {seconds:.1f} s); best lower bound {lowest_open:.4f} J s",
+                          f"{expansions} expansions, {seconds:.1f} s{solved}); best lower bound {lowest_open:.4f} J s",
                           "budget", float(lowest_open))
     effort, result, bound = best
     result.planning_time = seconds

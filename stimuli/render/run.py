@@ -81,10 +81,15 @@ def _render_chunk(camera: Camera, jobs: list[tuple[str, str]]) -> list[float]:
 
 
 def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, int] = DEFAULT_SIZE, jobs: int = 2,
-                  log=None) -> dict:
+                  log=None, executor=None) -> dict:
     """Render A and B of every trial into `out_dir`; returns the run's record (the
     content of renders.json). Pictures whose inputs (scene, camera, code) are
-    unchanged since the last run into `out_dir` are kept, not rendered again."""
+    unchanged since the last run into `out_dir` are kept, not rendered again.
+
+    `executor`: a running local lgp.executor (ProcessExecutor or SerialExecutor,
+    e.g. lgp.reproduce's, whose workers have pydrake loaded already) renders the
+    pictures in its own processes, one chunk per worker; otherwise `jobs` fresh
+    processes are started (worth it for many pictures only)."""
     import pickle
 
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
@@ -116,11 +121,18 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
     t0 = time.perf_counter()
     seconds: list[float] = []
     if todo:
-        # A process costs a second or two to start (pydrake, shaders): worth it for many pictures only.
-        jobs = max(1, min(jobs, len(todo) // 8))
+        if executor is not None:  # warm workers: a chunk costs one renderer (0.2 s) and its first picture's shaders
+            jobs = max(1, min(getattr(executor, "jobs", 1), len(todo)))
+        else:  # a fresh process costs a second or two to start (pydrake, shaders): worth it for many pictures only
+            jobs = max(1, min(jobs, len(todo) // 8))
         log(f"{PROG}: rendering {len(todo)} of {len(rows)} pictures ({size[0]}x{size[1]}, RenderEngineVtk) with {jobs} process(es)")
         chunks = [todo[i::jobs] for i in range(jobs)]
-        if jobs == 1:
+        if executor is not None:
+            import functools
+
+            for s in executor.map(functools.partial(_render_chunk, camera), chunks):
+                seconds += s
+        elif jobs == 1:
             seconds = _render_chunk(camera, chunks[0])
         else:
             import multiprocessing as mp
