@@ -44,6 +44,25 @@ def falls(scene, engine, early_stop=True) -> bool:
     return bool(rollout.horizontal_displacement().max() > fall_threshold(scene))
 
 
+def _falls(item) -> bool:
+    return falls(*item)
+
+
+def fall_verdicts(scenes, engine, early_stop=True) -> list[bool]:
+    """falls() of each scene, in order. Drake's (seconds per scene) are simulated on
+    both cores: the same verdicts as one after another, since a run does not depend
+    on the runs before it (test_a_run_does_not_depend_on_the_runs_before_it).
+    `early_stop`: one flag for all, or one per scene."""
+    flags = early_stop if isinstance(early_stop, list) else [early_stop] * len(scenes)
+    items = [(s, engine, bool(e)) for s, e in zip(scenes, flags, strict=True)]
+    if engine != "drake" or len(items) < 2:
+        return [falls(*item) for item in items]
+    from lgp.executor import ProcessExecutor
+
+    with ProcessExecutor(2) as executor:
+        return executor.map(_falls, items)
+
+
 # ----------------------------------------------------------------------------- analytic answers
 
 
@@ -125,7 +144,7 @@ def random_stacks(count, seed, ambiguity=0.04 * D):
 @pytest.mark.parametrize("engine,count", [p for p in [("mujoco", 40), ("drake", 10), ("physx", 40), (GAME, 40)] if p[0] in INSTALLED])
 def test_engine_agrees_with_static_criterion_on_random_stacks(engine, count):
     stacks = random_stacks(count, seed=2)
-    verdicts = [(s.label, falls(s, engine), not static_stable(s)) for s in stacks]
+    verdicts = [(s.label, fell, not static_stable(s)) for s, fell in zip(stacks, fall_verdicts(stacks, engine))]
     assert any(v[2] for v in verdicts) and not all(v[2] for v in verdicts)  # both kinds present
     wrong = [v for v in verdicts if v[1] != v[2]]
     assert not wrong, f"{engine} disagrees with the static criterion on {wrong}"
@@ -149,8 +168,8 @@ def noisy_scenes():
 @pytest.mark.parametrize("other", engines(["drake", "physx", GAME], failure="agree"))
 def test_engines_agree_on_the_same_noisy_scenes(other):
     scenes = noisy_scenes()
-    a = np.array([falls(s, "mujoco") for s in scenes])
-    b = np.array([falls(s, other) for s in scenes])
+    a = np.array(fall_verdicts(scenes, "mujoco"))
+    b = np.array(fall_verdicts(scenes, other))
     assert 0 < a.sum() < len(a), "the check needs both falls and stands"
     agreement = np.mean(a == b)
     assert agreement >= 0.95, f"engines agree on {agreement:.0%} of {len(a)} noisy scenes (mujoco {a.sum()} falls, {other} {b.sum()})"
@@ -164,8 +183,8 @@ EARLY_STOP_SCENES = {"mujoco": 40, "drake": 3, "physx": 40, GAME: 40}
 def test_early_termination_gives_the_verdict_of_the_full_four_seconds(engine):
     count = EARLY_STOP_SCENES[engine]
     scenes = noisy_scenes()[::max(1, len(noisy_scenes()) // count)][:count]
-    early = [falls(s, engine) for s in scenes]
-    full = [falls(s, engine, early_stop=False) for s in scenes]
+    both = fall_verdicts(scenes + scenes, engine, early_stop=[True] * len(scenes) + [False] * len(scenes))
+    early, full = both[:len(scenes)], both[len(scenes):]
     assert early == full
 
 
