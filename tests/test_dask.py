@@ -26,12 +26,24 @@ ROOT = Path(__file__).resolve().parents[1]
 RUN = ["--trials", "1E", "4H", "10E", "--samples", "2", "--n-sims", "4", "--sigmas", "0.05", "0.08", "--no-replays"]
 
 
-def _reproduce(out, *extra):
+def _reproduce_together(runs):
+    """`lgp.reproduce --out OUT *RUN *EXTRA` for each (OUT, *EXTRA) of `runs`, all started
+    at once (independent runs: own folders, own caches); each must exit 0."""
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    r = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--out", str(out), *RUN, *extra],
-                       cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
-    assert r.returncode == 0, r.stderr[-2000:]
-    return r
+    procs = [subprocess.Popen([sys.executable, "-m", "lgp.reproduce", "--out", str(out), *RUN, *extra], cwd=ROOT, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for out, *extra in runs]
+    done = []
+    try:
+        for proc in procs:
+            out, err = proc.communicate(timeout=600)
+            assert proc.returncode == 0, err[-2000:]
+            done.append(subprocess.CompletedProcess(proc.args, proc.returncode, out, err))
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+    return done
 
 
 def _slow_square(x):
@@ -41,9 +53,8 @@ def _slow_square(x):
 
 @pytest.mark.slow
 def test_local_dask_with_one_or_two_workers_writes_the_process_pools_csvs(tmp_path):
-    _reproduce(tmp_path / "pool", "--jobs", "2")
-    _reproduce(tmp_path / "dask1", "--scheduler", "local-dask", "--jobs", "1")
-    _reproduce(tmp_path / "dask2", "--scheduler", "local-dask", "--jobs", "2")
+    _reproduce_together([(tmp_path / "pool", "--jobs", "2"), (tmp_path / "dask1", "--scheduler", "local-dask", "--jobs", "1"),
+                         (tmp_path / "dask2", "--scheduler", "local-dask", "--jobs", "2")])
     for run in ("dask1", "dask2"):
         for name in ("effort.csv", "risk.csv"):
             assert (tmp_path / run / name).read_bytes() == (tmp_path / "pool" / name).read_bytes(), (run, name)
