@@ -215,6 +215,7 @@ def _copy_project(dst):
     return dst
 
 
+@pytest.mark.slow  # copies the project
 def test_editing_a_module_the_computation_imports_changes_the_key(tmp_path):
     root = _copy_project(tmp_path)
     before = modules_digest("models.effort", root=root)

@@ -281,6 +281,7 @@ def test_reproduce_runs_generated_rearrangements_end_to_end_with_the_search(tmp_
     assert (tmp_path / "out" / "replays" / "R0001.html").exists()
 
 
+@pytest.mark.slow  # a search, its replay and figure
 def test_show_replays_a_rearrangement_of_another_folder_with_the_search(tmp_path, capsys):
     """`lgp.show REV --stimuli stimuli/rearrange --planner search` replays row (REV, 0) of
     `lgp.reproduce --stimuli stimuli/rearrange --planner search`: the printed effort is

@@ -300,6 +300,7 @@ def test_a_stimulus_folder_without_pairs_builds_with_pair_counterbalancing_off(t
     assert (tmp_path / "study" / "lib" / "jspsych.js").stat().st_size > 10_000
 
 
+@pytest.mark.slow  # renders on a pool and fresh, ~2 s
 def test_pictures_rendered_on_a_runs_workers_equal_those_of_fresh_processes(tmp_path):
     # lgp.reproduce renders the page's pictures on its own warm workers
     # (render_trials(executor=...)); the pixels are those the standalone path makes.
