@@ -162,6 +162,7 @@ def test_the_target_footprint_counts_against_the_scatter_region(tmp_path):
     assert time.monotonic() - t0 < 10
 
 
+@pytest.mark.slow  # waits out the sampler's time bound
 def test_the_scatter_sampler_gives_up_in_bounded_time_with_one_line(tmp_path, monkeypatch):
     """A region that passes the area bound but jams random placement: the sampler
     stops after SCATTER_SECONDS and says so."""

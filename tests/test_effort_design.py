@@ -316,6 +316,7 @@ def test_show_replays_the_effort_of_a_run_with_another_design(capsys):
     assert f"effort {expected:.12g} J*s" in printed
 
 
+@pytest.mark.slow  # plans 10E with both designs
 def test_clearance_design_lifts_a_tower_clear_with_less_effort_than_the_legs():
     # 10E relocates a 4-block tower 10 cm: each block leaves the top of the tower and
     # lands on the new one. Without legs no corner goes below the table, no block

@@ -111,6 +111,7 @@ def test_ipopt_reaches_the_snopt_optimum():
     assert ipopt.komo.cost == pytest.approx(snopt.komo.cost, rel=5e-3)
 
 
+@pytest.mark.slow  # writes a replay and a figure
 def test_replay_html_is_self_contained_and_figure_is_written(tmp_path):
     from lgp.app.view import write_html, write_png
 

@@ -139,6 +139,7 @@ def test_cli_refuses_bad_input_with_one_line(tmp_path, args, message):
     assert "Traceback" not in res.stderr
 
 
+@pytest.mark.slow  # a fresh interpreter
 def test_physx_without_the_extra_says_how_to_install(tmp_path):
     """With sapien hidden from the import system the CLI prints one line with the
     pip command and the API raises a ValueError saying the same."""

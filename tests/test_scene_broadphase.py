@@ -81,6 +81,7 @@ def test_broad_phase_gives_the_pairwise_verdicts_on_random_scenes():
     assert kinds == {"valid", "overlap", "floats"}  # the random scenes exercised every verdict
 
 
+@pytest.mark.slow  # every pair of many stacks and rows
 def test_broad_phase_verdicts_on_valid_stacks_and_rows():
     rng = np.random.default_rng(3)
     for _ in range(50):
