@@ -2,9 +2,11 @@
 '## name' section of docs/benchmarks.md (other sections are kept)."""
 from __future__ import annotations
 
+import contextlib
 import os
 import platform
 import re
+import signal
 from pathlib import Path
 
 
@@ -35,3 +37,23 @@ def write_section(out: Path, name: str, text: str) -> None:
     else:
         new = old.rstrip("\n") + "\n\n" + text.rstrip("\n") + "\n"
     out.write_text(new.rstrip("\n") + "\n")
+
+
+class Deadline(Exception):
+    """Raised by `deadline` when its time is up."""
+
+
+@contextlib.contextmanager
+def deadline(seconds: float):
+    """Raise Deadline in this (main) thread after `seconds` (SIGALRM): a blocking open
+    of a FIFO or an endless read is interrupted (bench/faults.py, tests/test_bad_inputs.py)."""
+    def ring(signum, frame):
+        raise Deadline(f"still running after {seconds:g} s")
+
+    old = signal.signal(signal.SIGALRM, ring)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)

@@ -23,7 +23,6 @@ import contextlib
 import hashlib
 import os
 import shutil
-import signal
 import sys
 import tempfile
 import time
@@ -36,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from common import machine, write_section  # noqa: E402
+from common import Deadline, deadline, machine, write_section  # noqa: E402
 
 import stimuli  # noqa: E402
 from analysis.data import TRIAL_IDS, load_human_data  # noqa: E402
@@ -44,24 +43,6 @@ from lgp.cli import is_known_error, one_line  # noqa: E402
 
 BASE = (stimuli.TRIAL_DIR / "1E.yaml").read_text()
 X1 = BASE.replace("id: 1E\npair: 1\nlevel: E\n", "id: X1\n")
-
-
-class Deadline(Exception):
-    pass
-
-
-@contextlib.contextmanager
-def deadline(seconds: float):
-    def ring(signum, frame):
-        raise Deadline(f"still running after {seconds:g} s")
-
-    old = signal.signal(signal.SIGALRM, ring)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
 
 
 def judge(run, accept=False) -> tuple[str, str]:

@@ -4,9 +4,7 @@ allocated by its size or any earlier output is removed.
 
 Every case runs under a deadline (SIGALRM), so code that would read /dev/zero
 or wait on a FIFO forever fails the test instead of hanging the suite."""
-import contextlib
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -18,31 +16,12 @@ import pytest
 
 import stimuli
 from analysis.data import TRIAL_IDS, HumanDataError, load_human_data
+from bench.common import deadline  # one SIGALRM deadline for the probe (bench/faults.py) and these tests
 from lgp.inputs import InputFileError, read_bounded
 from stimuli import StimulusError
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = (stimuli.TRIAL_DIR / "1E.yaml").read_text()
-
-
-class Deadline(Exception):
-    pass
-
-
-@contextlib.contextmanager
-def deadline(seconds: float):
-    """Raise Deadline in this (main) thread after `seconds`: a blocking open of a
-    FIFO or an endless read is interrupted and the test fails."""
-    def ring(signum, frame):
-        raise Deadline(f"still running after {seconds:g} s")
-
-    old = signal.signal(signal.SIGALRM, ring)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
 
 
 def _trial_dir(tmp_path, name="X1.yaml", text=None):
