@@ -77,3 +77,24 @@ def test_chosen_sigma_is_named_in_the_legend_not_over_the_points(tmp_path, drawn
     assert "chosen sigma = 0.065 d" in [t.get_text() for t in ax.get_legend().get_texts()]
     labels = [t.get_text() for t in ax.get_legend().get_texts()][:2]
     assert labels == ["Estimated Time", "Build Time"]  # the paper's order, not alphabetical
+
+
+@pytest.mark.parametrize("sigmas", [[0.065], [0.05, 0.065, 0.08]])
+def test_risk_over_sigma_draws_each_pairs_risks_also_at_a_single_sigma(tmp_path, sigmas):
+    # A run at one sigma (--sigmas 0.065) has one point per curve: the figure must
+    # still show it (a line through one point draws nothing). Pair 4's H risk 0.5 is
+    # read back from the PNG's pixels in its panel, under the legend.
+    from matplotlib.colors import to_rgb
+    from PIL import Image
+
+    from lgp.app.over_sigma import HARD, plot_risk_over_sigma
+
+    rows = [{"pair": p, "sigma": s, "risk_E": 0.0, "risk_E_low": 0.0, "risk_E_high": 0.05,
+             "risk_H": 0.5 if p == 4 else 0.0, "risk_H_low": 0.4 if p == 4 else 0.0, "risk_H_high": 0.6 if p == 4 else 0.05,
+             "holds": p == 4} for p in range(1, 13) for s in sigmas]
+    png = plot_risk_over_sigma(pd.DataFrame(rows), tmp_path / "r.png")
+    rgb = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    h, w, _ = rgb.shape
+    panel = rgb[int(0.12 * h):int(0.5 * h), int(3 / 6 * w):int(4 / 6 * w)]  # first row, fourth panel: pair 4
+    blue = (np.abs(panel - np.array(to_rgb(HARD)) * 255).sum(axis=2) < 60).sum()
+    assert blue > 30, blue

@@ -106,9 +106,14 @@ def plot_risk_over_sigma(table: pd.DataFrame, path: Path, dimensions: dict | Non
         s = g["sigma"].to_numpy()
         ax.axvspan(lo, hi, color="0.88", zorder=0, lw=0)
         ax.axvline(PAPER_SIGMA, color="0.5", ls="--", lw=0.8, zorder=1)
-        for level, colour in (("E", EASY), ("H", HARD)):
-            ax.fill_between(s, g[f"risk_{level}_low"], g[f"risk_{level}_high"], color=colour, alpha=0.18, lw=0)
-            ax.plot(s, g[f"risk_{level}"], color=colour, lw=1.6, label=f"{pair}{level}")
+        for level, colour, dx in (("E", EASY, -0.0008), ("H", HARD, 0.0008)):
+            r, low, high = (g[f"risk_{level}{k}"].to_numpy() for k in ("", "_low", "_high"))
+            if len(s) == 1:  # one sigma: a point and its interval (a line of one point draws nothing), E left of H
+                ax.errorbar(s + dx, r, yerr=[r - low, high - r], fmt="o", color=colour, ms=4, capsize=2, lw=1.2,
+                            label=f"{pair}{level}")
+                continue
+            ax.fill_between(s, low, high, color=colour, alpha=0.18, lw=0)
+            ax.plot(s, r, color=colour, lw=1.6, label=f"{pair}{level}")
         held = g[g["holds"]]
         if len(held):
             ax.plot(held["sigma"], np.full(len(held), 1.04), "|", color="k", ms=4, clip_on=False)
