@@ -43,6 +43,7 @@ from analysis.data import (exclude_constant_participants, participant_matrices, 
                            zscore_responses)
 from analysis.models import ModelInputError, effort_per_trial, risk_at_sigma, risk_sigmas
 from analysis.data import TRIAL_IDS
+from analysis.sigma import least_sigma_index
 from lgp.errors import InputError
 
 #: Columns of the per-participant table.
@@ -129,7 +130,7 @@ def _fit_shared(E: np.ndarray, R: np.ndarray, Z: np.ndarray, n_angles: int = 360
             lo = m1
     t = (lo + hi) / 2 if total((lo + hi) / 2)[0] <= values[k] else angles[k]
     _, (rss, a, c) = total(t)
-    return np.argmin(rss, axis=1), t, rss, a, c
+    return least_sigma_index(rss, axis=1), t, rss, a, c
 
 
 def profile_interval(sigmas: np.ndarray, rss: np.ndarray, n: int, level: float = 0.95):
@@ -181,9 +182,9 @@ def fit_participant_sigma(human_df: pd.DataFrame, effort, risk_grid: pd.DataFram
             B = np.column_stack([a[rows, idx], c[rows, idx] * np.cos(t), c[rows, idx] * np.sin(t)])
         else:
             rss, all_b = _rss_free(X, Z)
-            idx = np.argmin(rss, axis=1)
+            idx = least_sigma_index(rss, axis=1)
             B = all_b[np.arange(len(ids)), idx]
-        grid_idx = np.flatnonzero(on_grid)[np.argmin(rss[:, on_grid], axis=1)]
+        grid_idx = np.flatnonzero(on_grid)[least_sigma_index(rss[:, on_grid], axis=1)]
         low, high, lc, hc = profile_interval(sigmas, rss, n, level)
         frames.append(pd.DataFrame({
             "dataset": dataset, "participant": ids, "sigma": sigmas[idx], "sigma_grid": sigmas[grid_idx],

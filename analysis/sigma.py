@@ -20,8 +20,24 @@ from lgp.errors import InputError
 from lgp.paper import PAPER_SIGMA, SIGMA_GRID  # noqa: F401  (re-exported)
 from analysis.models import effort_per_trial, fit_model, risk_at_sigma, risk_sigmas
 
-#: The paper's sigma grid, in units of the block length d: 0.050, 0.055, ..., 0.100.
-#: The sigma the paper reported using for all datasets.
+#: RMSEs closer than this (relative to the least) are a tie: the smaller sigma wins.
+RMSE_TIE_REL = 1e-9
+#: Below this an RMSE (or RSS) is rounding error of an exact fit: ties at zero too.
+RMSE_TIE_ABS = 1e-12
+
+
+def least_sigma_index(values, axis: int = 0, rel: float = RMSE_TIE_REL, abs_tol: float = RMSE_TIE_ABS) -> np.ndarray:
+    """Index along `axis` (sigmas ascending) of the least value, ties explicit:
+    every value within ``rel * |least| + abs_tol`` of the least is tied, and the
+    first of them (the smallest sigma) wins, whatever rounding the CPU did. NaN
+    never wins unless every value is NaN (then index 0). Returns an int array of
+    the other axes' shape (a 0-d array for a vector)."""
+    v = np.asarray(values, dtype=float)
+    v = np.where(np.isnan(v), np.inf, v)
+    best = v.min(axis=axis, keepdims=True)
+    tied = v <= best + rel * np.abs(np.where(np.isfinite(best), best, 0.0)) + abs_tol
+    return np.argmax(tied, axis=axis)
+
 
 
 def sigma_profile(means: pd.DataFrame, effort, risk_table: pd.DataFrame,
@@ -52,19 +68,19 @@ def choose_sigma(profile: pd.DataFrame) -> pd.DataFrame:
 
     Per dataset: the sigma of least RMSE. Pooled (row dataset='pooled'): the
     sigma of least mean RMSE across datasets, the paper's one-sigma-for-all
-    choice. Ties go to the smallest sigma. Returns columns dataset, sigma, rmse
+    choice. Ties (`least_sigma_index`) go to the smallest sigma. Returns columns dataset, sigma, rmse
     (the pooled row's rmse is the mean RMSE), rule.
     """
     rows = []
     for dataset, group in profile.sort_values("sigma").groupby("dataset", sort=True):
-        best = group.iloc[int(np.argmin(group["rmse"].to_numpy()))]
+        best = group.iloc[int(least_sigma_index(group["rmse"].to_numpy()))]
         rows.append((dataset, best["sigma"], best["rmse"], "least RMSE in this dataset"))
     datasets = profile["dataset"].nunique()
     counts = profile.groupby("sigma")["dataset"].nunique()
     if (counts != datasets).any():
         raise InputError("sigma profile is ragged: every dataset needs every sigma to pool")
     mean_rmse = profile.groupby("sigma")["rmse"].mean().sort_index()
-    k = int(np.argmin(mean_rmse.to_numpy()))
+    k = int(least_sigma_index(mean_rmse.to_numpy()))
     rows.append(("pooled", float(mean_rmse.index[k]), float(mean_rmse.iloc[k]),
                  f"least mean RMSE over {datasets} dataset(s)"))
     return pd.DataFrame(rows, columns=["dataset", "sigma", "rmse", "rule"])

@@ -47,7 +47,7 @@ def zero_heavy_risk(seed=0, sigmas=(0.05, 0.065, 0.08, 0.1)):
 def brute_force(Y, E, grid, scheme):
     """Held-out predictions by an explicit loop: numpy.linalg.lstsq on the training
     rows of each fold, sigma by the least mean training RMSE of Eq. 1 (the paper's
-    form), ties to the smaller sigma. Where Eq. 1's E*R column has nothing beyond
+    form), ties (relative difference below 1e-9) to the smaller sigma. Where Eq. 1's E*R column has nothing beyond
     1 and E in training, the minimum-norm fit of y = b0 + b1 E + c E R (c = 0)."""
     train, test = make_folds(scheme)
     B, D, T = Y.shape
@@ -59,7 +59,8 @@ def brute_force(Y, E, grid, scheme):
                 X = np.column_stack([np.ones(T), E * (1 - R), E * R])
                 crit.append(np.mean([np.sqrt(np.mean((Y[b, d, tr] - X[tr] @ np.linalg.lstsq(X[tr], Y[b, d, tr], rcond=None)[0]) ** 2))
                                      for d in range(D)]))
-            R = grid.risk[int(np.argmin(crit))]
+            # Ties explicit: RMSEs within 1e-9 (relative) of the least are equal; the smallest sigma wins.
+            R = grid.risk[min(k for k, c in enumerate(crit) if c <= min(crit) * (1 + 1e-9) + 1e-12)]
             ER = E * R
             resid = ER[tr] - np.column_stack([np.ones(len(tr)), E[tr]]) @ np.linalg.lstsq(
                 np.column_stack([np.ones(len(tr)), E[tr]]), ER[tr], rcond=None)[0]

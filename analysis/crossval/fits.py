@@ -12,6 +12,7 @@ from analysis.crossval.folds import make_folds, pairs_of
 from analysis.data import TRIAL_IDS
 from analysis.models import ModelInputError, rowwise_pearson, split_model
 from analysis.pairs import pair_order_codes
+from analysis.sigma import least_sigma_index
 
 #: A column of E*R (or R) whose part beyond the intercept and E has a norm below
 #: this fraction of its own is "nothing beyond them" (the fold predicts as effort-only).
@@ -90,9 +91,9 @@ def cv_arrays(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray], mod
         else:
             crit = np.sqrt(rss_full / n_tr)            # training RMSE (B, S, F, D)
             if pool:
-                pick = np.repeat(np.argmin(crit.mean(axis=-1), axis=1)[..., None], D, axis=-1)
+                pick = np.repeat(least_sigma_index(crit.mean(axis=-1), axis=1)[..., None], D, axis=-1)
             else:
-                pick = np.argmin(crit, axis=1)         # (B, F, D); ties: the first, the smaller sigma
+                pick = least_sigma_index(crit, axis=1)  # (B, F, D); ties: the smaller sigma
         chosen[source] = pick
         full_name = "full" if source == "R" else f"full[{source}]"
         risk_name = "risk" if source == "R" else f"risk[{source}]"
