@@ -15,20 +15,30 @@ a study's CSV, a file of another study (another stimulus set, layout or order se
 than the first file's, or than --study DIR's study.json), a participant of a task
 who appears twice (in two files or twice in one), a trial id outside the 24, a
 truncated file (a row cut short, or a participant with fewer trials than the study
-has), a non-numeric response, and SIMULATED rows mixed with real ones. Rows of
-simulated participants (tests only) become datasets ``simulated-<task>``.
+has), a non-numeric response (the one number parser of ``--human-data``:
+``1_70`` and non-ASCII digits are refused in both), and SIMULATED rows mixed with
+real ones. Rows of simulated participants (tests only) become datasets
+``simulated-<task>``.
+
+Every input is read through the project's bounded reader (lgp.inputs): a FIFO, a
+device such as /dev/zero, a directory or a file larger than MAX_FILE_BYTES
+(study.json: MAX_STUDY_JSON_BYTES; all files together: MAX_TOTAL_BYTES) is
+refused in one line naming the limit, before it is read; so is a field longer
+than MAX_FIELD_CHARS or a column named twice. The output is written by the
+project's one writer (lgp.atomic): a unique temporary name renamed over --out (two
+imports to one --out leave one whole file), no cell a spreadsheet would run as a
+formula (``=HYPERLINK(...)``, ``@SUM(...)``, a file named ``=1+2.csv`` in
+``source``), and on a full disk an error naming the file with no partial file left.
 """
 from __future__ import annotations
 
-import csv
-import io
 import json
-import math
-import os
 import sys
 from pathlib import Path
 
+from analysis.data.validation import MAX_FIELD_CHARS, CsvShapeError, csv_records, parse_response
 from lgp import cli
+from lgp.inputs import InputFileError, read_bounded
 from lgp.paper import TRIAL_IDS
 
 PROG = "python -m analysis.import_study"
@@ -38,6 +48,12 @@ REQUIRED = ("study", "task", "participant", "simulated", "condition", "phase", "
 TASKS = ("difficulty", "time", "build")
 #: Columns of the output, after the four of the human-data format.
 EXTRA = ("study", "position", "condition", "first_in_pair", "rt_ms", "collapses", "source")
+#: Largest study CSV read (one participant's session is about 10 kB).
+MAX_FILE_BYTES = 8_000_000
+#: Largest study.json read (a built study's is about 20 kB).
+MAX_STUDY_JSON_BYTES = 4_000_000
+#: Most bytes read from all FILES together.
+MAX_TOTAL_BYTES = 64_000_000
 
 
 class StudyDataError(ValueError):
@@ -48,27 +64,29 @@ class StudyDataError(ValueError):
         self.problems = tuple(problems)
 
 
-def _read(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
+def _read(path: Path, budget: int | None = None) -> tuple[list[str], list[tuple[int, list[str]]], int]:
+    """(header, [(line, fields)], bytes read) of a study CSV, read bounded."""
+    limit = MAX_FILE_BYTES if budget is None else min(MAX_FILE_BYTES, max(budget, 0))
+    name = ("analysis.import_study.MAX_FILE_BYTES" if limit == MAX_FILE_BYTES else
+            f"what analysis.import_study.MAX_TOTAL_BYTES = {MAX_TOTAL_BYTES} for all files leaves after the files before it")
     try:
-        raw = path.read_bytes()
-    except OSError as e:
-        raise StudyDataError([f"{path}: cannot read ({e.strerror})"]) from None
+        raw = read_bounded(path, limit, "study CSV", limit_name=name)
+    except InputFileError as e:
+        raise StudyDataError([str(e)]) from None
+    if b"\x00" in raw:  # no study CSV holds NUL: a sparse or binary file, or UTF-16 text
+        line = raw[: raw.index(b"\x00")].count(b"\n") + 1
+        raise StudyDataError([f"{path}: line {line}: NUL bytes: not a study CSV (a binary file, or UTF-16 text)"])
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         raise StudyDataError([f"{path}: not UTF-8 text (byte {e.start}): not a study CSV"]) from None
-    reader = csv.reader(io.StringIO(text, newline=""))
     try:
-        lines = list(reader)
-    except csv.Error as e:
-        raise StudyDataError([f"{path}: line {reader.line_num}: broken CSV ({e}): the file is truncated or damaged"]) from None
+        lines = csv_records(text, str(path), MAX_FIELD_CHARS)
+    except CsvShapeError as e:
+        raise StudyDataError([str(e)]) from None
     if not lines:
         raise StudyDataError([f"{path}: empty file: not a study CSV (a header line and one row per response)"])
-    header, rows = lines[0], []
-    for k, fields in enumerate(lines[1:], start=2):
-        if fields:
-            rows.append((k, fields))
-    return header, rows
+    return lines[0][1], lines[1:], len(raw)
 
 
 def import_files(paths, study: str | None = None) -> list[dict]:
@@ -79,12 +97,14 @@ def import_files(paths, study: str | None = None) -> list[dict]:
     seen: dict[tuple[str, str], str] = {}  # (task, participant) -> where first seen
     first_file = None
     simulated_kinds: dict[bool, str] = {}
+    budget = MAX_TOTAL_BYTES
     for path in map(Path, paths):
         try:
-            header, rows = _read(path)
+            header, rows, size = _read(path, budget)
         except StudyDataError as e:
             problems += e.problems
             continue
+        budget -= size
         missing = [c for c in REQUIRED if c not in header]
         if missing:
             problems.append(f"{path}: line 1: not a study CSV of stimuli.experiment (missing column(s) {', '.join(missing)})")
@@ -130,12 +150,9 @@ def import_files(paths, study: str | None = None) -> list[dict]:
                     problems.append(f"{path}: line {line}: participant {pid} answered trial {tid} twice (first on line {trials_seen[tid]})")
                     continue
                 trials_seen[tid] = line
-                try:
-                    value = float(r["response"])
-                except ValueError:
-                    value = math.nan
-                if not math.isfinite(value):
-                    problems.append(f"{path}: line {line}: response {r['response']!r} is not a finite number")
+                value = parse_response(r["response"])  # the parser of --human-data: one rule for both
+                if isinstance(value, str):
+                    problems.append(f"{path}: line {line}: {value}")
                     continue
                 dataset = ("simulated-" if r["simulated"] == "SIMULATED" else "") + task
                 out.append({"dataset": dataset, "participant": pid, "trial": tid, "response": r["response"],
@@ -159,23 +176,34 @@ def import_files(paths, study: str | None = None) -> list[dict]:
 
 
 def study_of_folder(folder: str | Path) -> str:
-    """The study id in a study folder's study.json."""
+    """The study id in a study folder's study.json (read bounded: a FIFO or
+    /dev/zero there is refused, not waited on or read to the end)."""
     path = Path(folder) / "study.json"
     try:
-        return json.loads(path.read_text())["study"]
-    except (OSError, ValueError, KeyError):
-        raise StudyDataError([f"{path}: not a study folder of stimuli.experiment (no readable study.json)"]) from None
+        data = read_bounded(path, MAX_STUDY_JSON_BYTES, "study.json",
+                            limit_name="analysis.import_study.MAX_STUDY_JSON_BYTES")
+    except InputFileError as e:
+        raise StudyDataError([f"{e}: not a study folder of stimuli.experiment (no readable study.json)"]) from None
+    try:
+        study = json.loads(data)["study"]
+    except (ValueError, KeyError, TypeError):
+        raise StudyDataError([f"{path}: not a study folder of stimuli.experiment (study.json holds no study id)"]) from None
+    if not isinstance(study, str) or not study:
+        raise StudyDataError([f"{path}: not a study folder of stimuli.experiment (its study id {study!r} is not a name)"])
+    return study
 
 
 def write_human_data(rows: list[dict], out: str | Path) -> Path:
-    out = Path(out)
-    tmp = out.with_name(f".{out.name}.tmp")
-    with open(tmp, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=["dataset", "participant", "trial", "response", *EXTRA], lineterminator="\n")
-        w.writeheader()
-        w.writerows(rows)
-    os.replace(tmp, out)
-    return out
+    """Write `rows` as the human-data CSV `out`, whole or not at all, through the
+    project's one writer (unique temporary name, atomic rename, spreadsheet-safe
+    cells, DiskFull naming `out` with nothing partial left)."""
+    import pandas as pd
+
+    from lgp.atomic import write_csv_atomic
+
+    columns = ["dataset", "participant", "trial", "response", *EXTRA]
+    table = pd.DataFrame([[r.get(c, "") for c in columns] for r in rows], columns=columns, dtype=object)
+    return write_csv_atomic(table, out)
 
 
 def main(argv=None) -> int:
@@ -202,4 +230,8 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(cli.run_cli(main, prog=PROG))
+    # Run the module's own copy (analysis.import_study), not this __main__ one, so
+    # that StudyDataError is the class the CLI knows as the project's: one line, exit 1.
+    from analysis.import_study import main as _main
+
+    raise SystemExit(cli.run_cli(_main, prog=PROG))

@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import hashlib
+import io
 import os
 import shutil
 import sys
@@ -232,6 +233,150 @@ def human_cases(tmp: Path):
     yield "one constant participant among others", ("accept", csv(pd.concat([good, _responses(1).assign(participant="c", response=2.0)])))
 
 
+# ----------------------------------------------------------------------------- study downloads (analysis.import_study)
+
+
+def _study_csv(participant: int, study: str = "abc123abc123", simulated: bool = True, edit=None) -> str:
+    """A download as study.js writes it (SIMULATED answers); `edit(rows)` changes the rows."""
+    import csv as csvmod
+    import io
+
+    from stimuli import experiment as ex
+
+    trials = [{"id": t, "pair": int(t[:-1]), "level": t[-1]} for t in TRIAL_IDS]
+    base = {c: "" for c in ex.COLUMNS} | {"study": study, "task": "difficulty", "participant": participant,
+                                         "simulated": "SIMULATED" if simulated else "", "n_trials": 24}
+    rows = [base | {"phase": "anchor", "position": k, "trial": a, "response": 50, "rt_ms": 900}
+            for k, a in enumerate(("ANCHOR-EASY", "ANCHOR-HARD"), start=1)]
+    rows += [base | {"phase": "main", "position": t["position"], "trial": t["id"], "condition": t["condition"],
+                     "first_in_pair": t["first_in_pair"], "response": t["position"] + participant, "rt_ms": 1000}
+             for t in ex.trial_order(trials, participant)]
+    rows = [{k: str(v) for k, v in r.items()} for r in rows]
+    header = list(ex.COLUMNS)
+    if edit is not None:
+        header, rows = edit(header, rows)
+    buf = io.StringIO()
+    w = csvmod.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows([[r.get(c, "") for c in ex.COLUMNS] for r in rows])
+    return buf.getvalue()
+
+
+def import_cases(tmp: Path):
+    from analysis import import_study
+
+    def run_import(files, study=None, check=None):
+        """The command line's checks and work (import_study.main), under run_cli's rules."""
+        def run():
+            folder = Path(tempfile.mkdtemp(dir=tmp))
+            paths = [make(folder) for make in files]
+            args = [str(x) for x in paths] + ["--out", str(folder / "out" / "human.csv")]
+            if study is not None:
+                args += ["--study", str(study(folder))]
+            err = io.StringIO()
+            with open(os.devnull, "w") as null, contextlib.redirect_stdout(null), contextlib.redirect_stderr(err):
+                try:
+                    import_study.main(args)
+                except SystemExit as e:  # argparse's usage check (exit 2): one line
+                    raise UsageRefusal(f"exit {e.code}: {err.getvalue().strip()}") from None
+            out = folder / "out" / "human.csv"
+            return check(out) if check else f"wrote {out.name}"
+        return run
+
+    def text(name, body):
+        def make(folder):
+            path = folder / name
+            path.write_bytes(body if isinstance(body, bytes) else body.encode())
+            return path
+        return make
+
+    def special(name, how):
+        def make(folder):
+            path = folder / name
+            how(path)
+            return path
+        return make
+
+    def edited(row, column, value, participant=0):
+        def edit(header, rows):
+            rows[row][column] = value
+            return header, rows
+        return text(f"p{participant}.csv", _study_csv(participant, edit=edit))
+
+    def study_dir(how):
+        def make(folder):
+            d = folder / "study"
+            d.mkdir()
+            how(d / "study.json")
+            return d
+        return make
+
+    def sparse(n):
+        def how(path):
+            with open(path, "wb") as f:
+                f.truncate(n)
+        return how
+
+    good = text("p0.csv", _study_csv(0))
+    yield "a FIFO as a study CSV", run_import([special("fifo.csv", os.mkfifo)])
+    yield "a study CSV linked to /dev/zero", run_import([special("zero.csv", lambda p: p.symlink_to("/dev/zero"))])
+    yield "a directory as a study CSV", run_import([special("dir.csv", lambda p: p.mkdir())])
+    yield f"a study CSV larger than MAX_FILE_BYTES (sparse, {import_study.MAX_FILE_BYTES + 1} bytes)", \
+        run_import([special("big.csv", sparse(import_study.MAX_FILE_BYTES + 1))])
+    def lowered_total(run):
+        def patched():
+            old = import_study.MAX_TOTAL_BYTES
+            import_study.MAX_TOTAL_BYTES = int(2.5 * len(_study_csv(0)))
+            try:
+                return run()
+            finally:
+                import_study.MAX_TOTAL_BYTES = old
+        return patched
+    yield "3 files past MAX_TOTAL_BYTES together (lowered to 2.5 files' bytes for the probe)", lowered_total(
+        run_import([text(f"p{k}.csv", _study_csv(k)) for k in range(3)]))
+    yield "NUL bytes (a sparse file)", run_import([special("nul.csv", sparse(1000))])
+    yield "study.json a FIFO (--study)", run_import([good], study=study_dir(os.mkfifo))
+    yield "study.json linked to /dev/zero (--study)", run_import([good], study=study_dir(lambda p: p.symlink_to("/dev/zero")))
+    yield "study.json larger than MAX_STUDY_JSON_BYTES (sparse)", run_import(
+        [good], study=study_dir(sparse(import_study.MAX_STUDY_JSON_BYTES + 1)))
+    yield "study.json not JSON", run_import([good], study=study_dir(lambda p: p.write_text("{study: ")))
+    yield "empty file", run_import([text("e.csv", "")])
+    yield "not UTF-8 (Latin-1 byte)", run_import([text("l.csv", _study_csv(0).encode().replace(b"abc123", b"abc\xe923", 1))])
+    yield "not a study CSV (the tidy human-data format)", run_import([text("t.csv", "dataset,participant,trial,response\n")])
+    yield "a file of another study", run_import([good, text("p1.csv", _study_csv(1, study="other0study0"))])
+    yield "one participant twice", run_import([good, text("again.csv", _study_csv(0))])
+    yield "trial 13E", run_import([edited(3, "trial", "13E")])
+    yield "a row cut short", run_import([text("cut.csv", _study_csv(0)[:-30])])
+    yield "response `1_70`", run_import([edited(3, "response", "1_70")])
+    yield "response in Arabic-Indic digits", run_import([edited(3, "response", "\u0661\u0667")])
+    yield "response a 5000-digit integer", run_import([edited(3, "response", "9" * 5000)])
+    yield "response `=HYPERLINK(...)`", run_import([edited(3, "response", '=HYPERLINK("http://x","y")')])
+    yield "response inf", run_import([edited(3, "response", "inf")])
+    yield "SIMULATED mixed with real rows", run_import([good, text("real.csv", _study_csv(1, simulated=False))])
+    yield "a 200 kB field", run_import([edited(3, "condition", "x" * 200_000)])
+    yield "column `response` twice in the header", run_import(
+        [text("twice.csv", _study_csv(0).replace("rt_ms", "response", 1))])
+
+    def no_formula(out):
+        import csv as csvmod
+
+        cells = [c for row in csvmod.reader(out.read_text().splitlines()) for c in row]
+        risky = [c for c in cells if c and c[0] in "=+@\t\r"]
+        if risky:
+            raise AssertionError(f"formula cells written: {risky[:3]}")
+        return "written as text ('@SUM..., '=1+2.csv:4)"
+    yield "`@SUM(A1:A9)` in a field", ("accept", run_import([edited(3, "condition", "@SUM(A1:A9)")], check=no_formula))
+    yield "a file named `=1+2.csv`", ("accept", run_import([text("=1+2.csv", _study_csv(0))], check=no_formula))
+    yield "UTF-8 with byte-order mark", ("accept", run_import([text("bom.csv", b"\xef\xbb\xbf" + _study_csv(0).encode())]))
+
+
+class UsageRefusal(Exception):
+    """argparse refused the command line (exit 2, one line): judged as a refusal."""
+
+
+UsageRefusal.__module__ = "analysis.import_study"  # a refusal of the command, as is_known_error counts them
+
+
 # ----------------------------------------------------------------------------- the API
 
 
@@ -308,7 +453,8 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        groups = [("trial file", trial_cases(tmp)), ("human data", human_cases(tmp)), ("API", api_cases()),
+        groups = [("trial file", trial_cases(tmp)), ("human data", human_cases(tmp)),
+                  ("study import", import_cases(tmp)), ("API", api_cases()),
                   ("cache entry", ((n, _cache_run(d, tmp)) for n, d in cache_cases(tmp)))]
         for group, cases in groups:
             for name, run in cases:
@@ -328,7 +474,7 @@ def main(argv=None) -> int:
              "named line (or, for a cache entry, reported and recomputed), none after a hang or a traceback; "
              f"{len(accepted)} inputs the formats allow were accepted as designed. "
              f"By kind: " + ", ".join(f"{g} {sum(1 for r in refused if r[0] == g)}/{sum(1 for r in bad if r[0] == g)}"
-                                      for g in ("trial file", "human data", "API", "cache entry")) + ".", "",
+                                      for g in ("trial file", "human data", "study import", "API", "cache entry")) + ".", "",
              "| kind | input | verdict | what the project does |", "|---|---|---|---|"]
     bar = "\\|"
     lines += [f"| {g} | {n.replace('|', bar)} | {v} | {w[:220]} |" for g, n, v, w in rows]

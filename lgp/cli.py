@@ -203,9 +203,40 @@ def make_parent(path: str | Path) -> Path:
     return path
 
 
+def path_kind(path: str | Path) -> str | None:
+    """What `path` is when it is not a plain file or folder, in words: "a FIFO
+    (named pipe)", "a character device (a symbolic link to /dev/zero)", "a loop of
+    symbolic links", "a dangling symbolic link (to X)"; None for a regular file, a
+    directory or a path that does not exist. Never opens the path (a FIFO would block)."""
+    import errno
+    import stat
+
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            return "a loop of symbolic links (a link that leads back to itself)"
+        if os.path.islink(path):
+            return f"a dangling symbolic link (to {os.readlink(path)}, which does not exist)"
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    link = f" (a symbolic link to {os.readlink(path)})" if os.path.islink(path) else ""
+    for test, name in ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name + link
+    return "not a regular file" + link
+
+
 def input_file(text: str) -> str:
-    """A file that exists and can be read."""
+    """A regular file that exists and can be read (a FIFO, a device, a loop of
+    symbolic links is named as what it is)."""
     path = Path(text)
+    kind = path_kind(path)
+    if kind is not None:
+        raise argparse.ArgumentTypeError(f"{text!r} is {kind}, not a regular file")
     if not path.exists():
         raise argparse.ArgumentTypeError(f"{text!r} does not exist")
     if not path.is_file():
@@ -216,8 +247,11 @@ def input_file(text: str) -> str:
 
 
 def input_dir(text: str) -> str:
-    """A directory that exists and can be read."""
+    """A directory that exists and can be read (a loop of symbolic links is named as one)."""
     path = Path(text)
+    kind = path_kind(path)
+    if kind is not None:
+        raise argparse.ArgumentTypeError(f"{text!r} is {kind}, not a directory")
     if not path.is_dir():
         raise argparse.ArgumentTypeError(f"{text!r} is not a directory" if path.exists() else f"{text!r} does not exist")
     if not os.access(path, os.R_OK | os.X_OK):
@@ -259,7 +293,11 @@ def is_known_error(exc: BaseException) -> bool:
         return True
     if not isinstance(exc, Exception):
         return False
-    return type(exc).__module__.split(".")[0] in PROJECT_PACKAGES
+    module = type(exc).__module__
+    if module == "__main__":  # a class of a project module run as ``python -m package.module``
+        spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+        module = getattr(spec, "name", None) or module
+    return module.split(".")[0] in PROJECT_PACKAGES
 
 
 def one_line(exc: BaseException) -> str:

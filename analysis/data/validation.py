@@ -26,6 +26,10 @@ MAX_PARTICIPANTS = 5_000
 #: Bytes a human-data file may have per allowed participant (24 rows of up to
 #: 200 bytes): the file is read through the bounded reader, at most this many bytes.
 BYTES_PER_PARTICIPANT = 24 * 200
+#: Most characters one CSV field (cell) may hold, in human data and in the study
+#: CSVs `analysis.import_study` reads: ids, responses and notes are short; a longer
+#: field is a damaged or hostile file (Python's csv module stops at 131072 itself).
+MAX_FIELD_CHARS = 10_000
 
 
 def load_human_data(path: str | Path, *, allow_simulated: bool = False,
@@ -55,20 +59,22 @@ def load_human_data(path: str | Path, *, allow_simulated: bool = False,
     path = Path(path)
     max_participants = int(max_participants)
     text = _read_text(path, max_participants * BYTES_PER_PARTICIPANT)
-    reader = csv.reader(io.StringIO(text, newline=""))
-    header = next(reader, None)
-    if header is None:
+    try:
+        records = csv_records(text, str(path))
+    except CsvShapeError as e:
+        raise HumanDataError(str(e), line=e.line) from None
+    if not records:
         raise HumanDataError(f"{path}: line 1: empty file, expected a header with "
                              f"columns {', '.join(REQUIRED_COLUMNS)}", line=1)
-    header = [name.strip() for name in header]
+    header = records[0][1]
     rows, lines = [], []
-    for record in reader:
-        if not record or all(not field.strip() for field in record):
+    for line_num, record in records[1:]:
+        if all(not field.strip() for field in record):
             continue  # blank line
         # Short rows are padded so the missing field fails its own check below.
         record = record + [""] * (len(header) - len(record))
         rows.append(record[: len(header)])
-        lines.append(reader.line_num)
+        lines.append(line_num)
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     if missing:
         raise HumanDataError(f"{path}: line 1 (header): missing column(s) {', '.join(missing)}; "
@@ -223,15 +229,19 @@ def _is_missing(value) -> bool:
     return value is None or (isinstance(value, float) and math.isnan(value))
 
 
-#: A number as a CSV cell writes it: optional sign, digits with an optional decimal
-#: point, optional exponent. Stricter than Python's float(), which also takes
-#: ``1_000`` and non-ASCII digits.
+#: A number as a CSV cell writes it: optional sign, ASCII digits with an optional
+#: decimal point, optional exponent. Stricter than Python's float(), which also
+#: takes ``1_000`` and non-ASCII digits (``١٧``, ``１７``).
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _NON_FINITE = {"inf", "infinity", "nan"}
 
 
-def _parse_response(raw) -> float | str:
-    """The response as a finite float, or a message saying why it is not one."""
+def parse_response(raw) -> float | str:
+    """The response as a finite float, or a message saying why it is not one: the
+    one number parser of human data (``--human-data``) and of the study CSVs
+    `analysis.import_study` reads. Refuses ``1_70`` (digit separators), non-ASCII
+    digits, text, ``inf``/``nan`` and numbers beyond the float range (a 5000-digit
+    integer)."""
     if isinstance(raw, (int, float, np.integer, np.floating)) and not isinstance(raw, bool):
         value = float(raw)
         text = repr(raw)
@@ -242,12 +252,69 @@ def _parse_response(raw) -> float | str:
         if _NUMBER.fullmatch(text) or text.lower().lstrip("+-") in _NON_FINITE:
             value = float(text)
         elif "_" in text and _NUMBER.fullmatch(text.replace("_", "")):
-            return f"non-numeric response {text!r} (a CSV number has no '_' digit separators)"
+            return f"non-numeric response {_short(text)} (a CSV number has no '_' digit separators)"
+        elif any(ch.isdigit() and not ch.isascii() for ch in text):
+            return f"non-numeric response {_short(text)} (a CSV number is written in the ASCII digits 0-9)"
         else:
-            return f"non-numeric response {text!r}"
+            return f"non-numeric response {_short(text)}"
     if not math.isfinite(value):
+        if len(text) > 40:
+            return f"response {_short(text)} is beyond the range of a float (about 1.8e308)"
         return f"non-finite response {text!r} (expected a finite number)"
     return value
+
+
+_parse_response = parse_response  # the name of old
+
+
+def _short(text: str, n: int = 40) -> str:
+    """repr of `text`, cut to about `n` characters (a 200 kB cell stays one line)."""
+    return repr(text) if len(text) <= n else repr(text[:n]) + f"... ({len(text)} characters)"
+
+
+class CsvShapeError(ValueError):
+    """A CSV whose shape breaks a rule before any cell is looked at: a field
+    longer than MAX_FIELD_CHARS, a column named twice, broken quoting. ``line``
+    is the line of the problem."""
+
+    def __init__(self, message: str, line: int):
+        super().__init__(message)
+        self.line = line
+
+
+def csv_records(text: str, source: str, max_field: int = MAX_FIELD_CHARS) -> list[tuple[int, list[str]]]:
+    """[(line, fields)] of CSV `text`, the header first (its names stripped); empty
+    records left out. Raises CsvShapeError naming `source` and the line for a
+    field longer than `max_field` characters, a header that names a column twice
+    (which of the two would be the response?) or broken quoting. The one CSV
+    reader of human data and of `analysis.import_study`."""
+    reader = csv.reader(io.StringIO(text, newline=""))
+    out: list[tuple[int, list[str]]] = []
+    try:
+        for record in reader:
+            if not record:
+                continue
+            if max(map(len, record)) > max_field:
+                k = max(range(len(record)), key=lambda i: len(record[i]))
+                raise CsvShapeError(f"{source}: line {reader.line_num}: field {k + 1} holds {len(record[k])} characters, "
+                                    f"more than the {max_field} allowed in one field (MAX_FIELD_CHARS)", reader.line_num)
+            out.append((reader.line_num, record))
+    except csv.Error as e:
+        line = reader.line_num
+        if "field larger than field limit" in str(e):
+            raise CsvShapeError(f"{source}: line {line}: a field longer than the {max_field} characters allowed "
+                                "in one field (MAX_FIELD_CHARS)", line) from None
+        raise CsvShapeError(f"{source}: line {line}: broken CSV ({e}): the file is truncated or damaged", line) from None
+    if out:
+        header = [name.strip() for name in out[0][1]]
+        out[0] = (out[0][0], header)
+        seen: dict[str, int] = {}
+        for k, name in enumerate(header, start=1):
+            if name in seen and name:
+                raise CsvShapeError(f"{source}: line {out[0][0]} (header): column {name!r} given twice (columns "
+                                    f"{seen[name]} and {k}); each column once", out[0][0])
+            seen.setdefault(name, k)
+    return out
 
 
 def _parse_responses(raw: pd.Series) -> tuple[np.ndarray, list[tuple[int, str]]]:
@@ -268,7 +335,7 @@ def _parse_responses(raw: pd.Series) -> tuple[np.ndarray, list[tuple[int, str]]]
         ok &= np.isfinite(values)
     bad = []
     for k in np.flatnonzero(~ok):
-        parsed = _parse_response(raw.iat[k])
+        parsed = parse_response(raw.iat[k])
         if isinstance(parsed, str):
             bad.append((k, parsed))
         else:
