@@ -36,6 +36,7 @@ import json
 import sys
 from pathlib import Path
 
+from analysis.data.datasets import StudyDataError  # noqa: F401  (defined beside HumanDataError, not in __main__)
 from analysis.data.validation import MAX_FIELD_CHARS, CsvShapeError, csv_records, parse_response
 from lgp import cli
 from lgp.inputs import InputFileError, read_bounded
@@ -54,14 +55,6 @@ MAX_FILE_BYTES = 8_000_000
 MAX_STUDY_JSON_BYTES = 4_000_000
 #: Most bytes read from all FILES together.
 MAX_TOTAL_BYTES = 64_000_000
-
-
-class StudyDataError(ValueError):
-    """A study CSV cannot be imported; the message names the file and line of each problem."""
-
-    def __init__(self, problems: list[str]):
-        super().__init__("\n".join(problems))
-        self.problems = tuple(problems)
 
 
 def _read(path: Path, budget: int | None = None) -> tuple[list[str], list[tuple[int, list[str]]], int]:
@@ -230,8 +223,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    # Run the module's own copy (analysis.import_study), not this __main__ one, so
-    # that StudyDataError is the class the CLI knows as the project's: one line, exit 1.
-    from analysis.import_study import main as _main
-
-    raise SystemExit(cli.run_cli(_main, prog=PROG))
+    raise SystemExit(cli.run_cli(main, prog=PROG))

@@ -65,7 +65,7 @@ def test_run_as_a_module_a_refusal_is_one_line_with_exit_1(tmp_path):
 def test_the_study_error_is_a_known_error_of_the_project_wherever_it_is_raised():
     from lgp.cli import is_known_error
 
-    assert import_study.StudyDataError.__module__ == "analysis.import_study"
+    assert import_study.StudyDataError.__module__ == "analysis.data.datasets"  # not __main__ when run with -m
     assert is_known_error(import_study.StudyDataError(["x"]))
 
 

@@ -31,6 +31,17 @@ class HumanDataError(ValueError):
         self.problems = tuple(problems) or (message,)
 
 
+class StudyDataError(ValueError):
+    """A study's downloaded CSV cannot be imported (`analysis.import_study`); the
+    message names the file and line of each problem. Defined here, not in the
+    importer, so that the class is the project's (one line, exit 1) even when the
+    importer runs as ``python -m analysis.import_study`` (its module is __main__)."""
+
+    def __init__(self, problems: list[str]):
+        super().__init__("\n".join(problems))
+        self.problems = tuple(problems)
+
+
 def is_simulated_dataset(name: str) -> bool:
     """True if `name` is a dataset of simulated participants (``simulated-...``)."""
     return str(name).startswith(SIMULATED_PREFIX)
