@@ -1,0 +1,159 @@
+"""Mental Jenga scenes (another lab's brick scenes, stimuli/mental_jenga.py) and the
+counterfactual fall measure (models/counterfactual.py), on small scenes written by
+hand in the repository's format (tests/data/mental_jenga/*.json)."""
+import json
+import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from stimuli.mental_jenga import (GROUND_Y_A, SCALE, TABLE_TOP_Y_A, MentalJengaError, parse_scene, read_scene)
+
+HERE = Path(__file__).parent / "data" / "mental_jenga"
+EXP2 = Path("/work/shared/mental-jenga/repo-exp2")
+
+
+def scene(name: str, black_index: int = 0):
+    data = json.loads((HERE / f"{name}.json").read_text())
+    return parse_scene(data, name, 2, 1, black_index=black_index)
+
+
+def fake_repo(tmp_path: Path, scenes: dict, predictions: pd.DataFrame | None = None) -> Path:
+    """A folder laid out like a clone of the repository, with `scenes` ({trial: file name})."""
+    repo = tmp_path / "clone"
+    (repo / "data" / "exp2").mkdir(parents=True)
+    (repo / "code" / "R" / "data").mkdir(parents=True)
+    for trial, name in scenes.items():
+        shutil.copy(HERE / f"{name}.json", repo / "data" / "exp2" / f"{trial}.json")
+    if predictions is not None:
+        import pyreadr
+
+        pyreadr.write_rdata(str(repo / "code" / "R" / "data" / "exp2_prediction.RData"), predictions,
+                            df_name="df.exp2.prediction")
+    return repo
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+def test_extrusion_and_y_flip_put_a_brick_where_the_picture_shows_it():
+    s = scene("picture")
+    flat, standing, tilted = s.bricks
+    # on the table, 0.5 right of its middle: x = 0.1 * 0.5, centre 0.1 * (5.8 - 4.615) above the ground
+    assert np.allclose(flat.p_WB, [0.05, 0.0, SCALE * (GROUND_Y_A - 4.615)])
+    assert np.allclose(flat.size, [0.08, 0.04, 0.04]) and flat.pitch == 0.0
+    # a quarter turn: an axis-aligned box, width and height swapped, standing on the table top
+    assert standing.pitch == 0.0 and np.allclose(standing.size, [0.04, 0.04, 0.08])
+    assert math.isclose(standing.p_WB[2] - standing.size[2] / 2, SCALE * (GROUND_Y_A - TABLE_TOP_Y_A) + 0.0005, abs_tol=1e-9)
+    # higher in the picture (smaller y) is higher in W
+    assert tilted.p_WB[2] > standing.p_WB[2] > flat.p_WB[2]
+    assert s.table.top == pytest.approx(SCALE * (GROUND_Y_A - TABLE_TOP_Y_A))
+
+
+def test_a_positive_box2d_angle_lowers_the_bricks_right_end():
+    """Box2D's angle turns +x towards +y, which points down on the screen: in W, MuJoCo's
+    own rotation of the compiled body must put the brick's +x end below its centre."""
+    import mujoco
+
+    from models.counterfactual import mjcf
+
+    s = scene("picture")
+    m = mujoco.MjModel.from_xml_string(mjcf(s))
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    x_axis = d.xmat[m.body("brick_2").id].reshape(3, 3)[:, 0]
+    assert x_axis[2] == pytest.approx(-math.sin(0.3)) and x_axis[0] == pytest.approx(math.cos(0.3))
+
+
+def test_parked_bricks_are_not_in_the_scene_and_brick_0_is_black():
+    s = scene("lone")
+    assert [b.name for b in s.bricks] == ["brick_0", "brick_1"]
+    assert s.black.name == "brick_0" and [b.name for b in s.red()] == ["brick_1"]
+
+
+@pytest.mark.parametrize("content, problem", [("{not json", "not valid JSON"), ("[]", "names no bricks"),
+                                               ('[{"x": 1}]', "brick 0 is not a mapping")])
+def test_a_bad_scene_file_is_refused_with_its_name(tmp_path, content, problem):
+    p = tmp_path / "3.json"
+    p.write_text(content)
+    with pytest.raises(MentalJengaError, match=problem) as e:
+        read_scene(p, 2, 3)
+    assert str(p) in str(e.value)
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-m", "stimuli.mental_jenga", *args], capture_output=True, text=True)
+
+
+@pytest.mark.slow
+def test_cli_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path):
+    repo = fake_repo(tmp_path, {1: "lone"})
+    (repo / "data" / "exp2" / "2.json").write_text("[]")
+    cases = [(tmp_path / "nowhere", 2, "not a clone"), (repo, 9, "unknown experiment 9"), (repo, 2, "2.json: names no bricks")]
+    for path, exp, problem in cases:
+        out = tmp_path / f"out{exp}"
+        r = _cli("--repo", str(path), "--experiment", str(exp), "--out", str(out))
+        assert r.returncode == 2 and problem in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+        assert not out.exists()
+
+
+@pytest.mark.slow
+def test_cli_writes_bricks_scenes_trials_and_tidy_predictions(tmp_path):
+    pred = pd.DataFrame({"participant": [1, 1, 2, 2], "condition": "prediction", "order": [1, 2, 2, 1],
+                         "trial": [1.0, 2.0, 1.0, 2.0], "response": [0.0, 1.0, 0.0, 2.0]})
+    repo = fake_repo(tmp_path, {1: "lone", 2: "stacked"}, pred)
+    out = tmp_path / "out"
+    r = _cli("--repo", str(repo), "--experiment", "2", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    p = pd.read_csv(out / "predictions.csv")
+    assert list(p.columns) == ["participant", "trial", "response"] and len(p) == 4
+    assert p.groupby("trial").response.mean().to_dict() == {1: 0.0, 2: 1.5}
+    scenes = pd.read_csv(out / "scenes.csv")
+    assert scenes.trial_format.str.startswith("written").all()
+    import stimuli
+
+    trial = stimuli.load_file(out / "trials" / "MJ2_01.yaml")  # the project's own checks accept it
+    assert {b.name for b in trial.target.blocks} == {"black_brick_0", "brick_1"}
+    assert [f.name for f in trial.target.fixed] == ["table"]
+
+
+# ----------------------------------------------------------------------------- the fall measure
+
+
+def test_a_lone_brick_on_the_table_never_falls():
+    from models.counterfactual import counterfactual_runs
+
+    runs = counterfactual_runs(scene("lone"), "authors-x", [0.0, 0.1, 0.3], 5)
+    assert (runs.fallen == 0).all()
+
+
+def test_a_brick_overhanging_past_its_centre_falls_and_one_short_of_it_stands():
+    from models.counterfactual import deterministic_falls
+
+    s = scene("overhang")
+    falls = dict(zip([b.name for b in s.bricks], deterministic_falls(s)))
+    assert falls == {"brick_0": False, "brick_1": True, "brick_2": False}
+
+
+def test_removing_the_only_support_of_a_stacked_brick_makes_it_fall():
+    from models.counterfactual import deterministic_falls
+
+    removed = scene("stacked")  # brick_0 carries brick_1, whose centre is past the table's edge
+    assert deterministic_falls(removed).tolist() == [False, True, False]
+    kept = scene("stacked", black_index=2)  # remove a brick elsewhere instead: brick_1 stays
+    assert not deterministic_falls(kept).any()
+
+
+@pytest.mark.parametrize("rule", ["authors-x", "paper-3d"])
+def test_the_count_at_sigma_zero_is_the_deterministic_simulation(rule):
+    from models.counterfactual import counterfactual_runs, deterministic_falls
+
+    for name in ("stacked", "overhang"):
+        s = scene(name)
+        runs = counterfactual_runs(s, rule, [0.0], 3)
+        assert (runs.fallen == int(deterministic_falls(s).sum())).all()
