@@ -137,22 +137,43 @@
   // ------------------------------------------------------------------ estimation tasks
   function sliderTrial(t, phase, position) {
     var sl = S.slider;
+    var ask = S.task === "time" ? "Move the slider to your estimate." : "Move the slider to answer.";
+    var labels = '<div class="lgp-labels" aria-hidden="true">' +
+      sl.labels.map(function (l) { return "<span>" + esc(l) + "</span>"; }).join("") + "</div>";
     return {
       type: jsPsychHtmlSliderResponse,
-      stimulus: pairHtml(t) + '<p class="lgp-question">' + esc(S.question) + "</p>",
-      labels: sl.labels, min: sl.min, max: sl.max, slider_start: sl.start, step: sl.step,
-      require_movement: true, slider_width: 600, button_label: "Next",
-      prompt: '<p class="lgp-value" id="lgp-value">' + (S.task === "time" ? "Move the slider to your estimate." : "Move the slider to answer.") + "</p>",
+      stimulus: pairHtml(t) + '<p class="lgp-question" id="lgp-question">' + esc(S.question) + "</p>",
+      // The end labels are drawn by us (.lgp-labels, a flex row under the slider): the
+      // plugin's absolutely placed label boxes reach past a narrow window's edge.
+      labels: [], min: sl.min, max: sl.max, slider_start: sl.start, step: sl.step,
+      require_movement: true, slider_width: null, button_label: "Next",
+      prompt: labels + '<p class="lgp-value" id="lgp-value" aria-live="polite">' + ask + "</p>",
       data: { lgp_trial: t.id, lgp_phase: phase },
       on_load: function () {
         var input = document.querySelector("#jspsych-html-slider-response-response");
         var out = document.getElementById("lgp-value");
-        if (input && out && S.task === "time") {
-          input.addEventListener("input", function () {
+        var next = document.querySelector("#jspsych-html-slider-response-next");
+        input.setAttribute("aria-labelledby", "lgp-question");
+        input.setAttribute("aria-valuetext", sl.labels.join(" to "));
+        // Answered: a tap or click on the slider (even on its thumb, keeping the
+        // middle), a drag, or an arrow key (input/change). Next is enabled and
+        // "Move the slider ..." goes away (the time task shows the estimate instead).
+        function answered() {
+          next.disabled = false;
+          if (S.task === "time") {
             var s = parseInt(input.value, 10);
             out.textContent = "about " + (s >= 60 ? Math.floor(s / 60) + " min " + (s % 60) + " s" : s + " s");
-          });
+            out.className = "lgp-value lgp-shown";
+          } else {
+            out.className = "lgp-value lgp-answered";
+          }
         }
+        ["pointerdown", "touchstart", "mousedown", "input", "change"].forEach(function (ev) {
+          input.addEventListener(ev, answered, { passive: true });
+        });
+        input.addEventListener("keydown", function (e) {
+          if (/^(Arrow|Page|Home|End)/.test(e.key)) { answered(); }
+        });
       },
       on_finish: function (data) {
         var row = baseRow(t, phase, position);
