@@ -236,23 +236,106 @@ def test_the_importer_checks_files_against_the_study_folder(capsys, tmp_path):
 # ----------------------------------------------------------------------------- the renderer's camera
 
 
-def test_one_camera_frames_every_block_of_the_24_trials():
-    pictures = render.pictures_of(stimuli.load_paper(), seed=0)
-    corners = np.vstack([render.scene_corners(s) for _, _, s in pictures])
-    cam = render.fit_camera(corners, *render.DEFAULT_SIZE)
-    uv = cam.project(corners)
+def test_each_trial_has_one_oblique_camera_that_frames_its_start_and_its_finish():
     w, h = render.DEFAULT_SIZE
-    assert (uv[:, 0] > 0).all() and (uv[:, 0] < w).all() and (uv[:, 1] > 0).all() and (uv[:, 1] < h).all()
-    # it is tight: the blocks and the table area it frames (WORKSPACE_LO/HI) reach
-    # within two margins of two opposite edges
-    lo, hi = render.WORKSPACE_LO, render.WORKSPACE_HI
-    area = np.array([[x, y, 0.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])])
-    uv = cam.project(np.vstack([corners, area]))
-    span = (uv.max(axis=0) - uv.min(axis=0)) / (w, h)
-    assert span.max() > 1 - 4 * render.MARGIN
-    # a tower at the build site (0.35, 0) appears upright: its top is above its base
-    top, base = cam.project(np.array([[0.35, 0, 0.25], [0.35, 0, 0.0]]))
-    assert top[1] < base[1] and abs(top[0] - base[0]) < 6  # near the central column: hardly leaning
+    scenes: dict[str, list] = {}
+    for tid, _, scene in render.pictures_of(stimuli.load_paper(), seed=0, layout="pair"):
+        scenes.setdefault(tid, []).append(scene)
+    for tid, (A, B) in scenes.items():
+        cam = render.trial_camera([A, B], w, h)
+        corners = np.vstack([render.scene_corners(A), render.scene_corners(B)])
+        uv = cam.project(corners)
+        assert (uv[:, 0] > 0).all() and (uv[:, 0] < w).all() and (uv[:, 1] > 0).all() and (uv[:, 1] < h).all(), tid
+        # tight: the blocks (or the MIN_AREA square around them) reach within two
+        # margins of two opposite edges
+        centre = (corners[:, :2].min(axis=0) + corners[:, :2].max(axis=0)) / 2
+        square = np.array([[*(centre + np.array([sx, sy]) * render.MIN_AREA / 2), 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+        uv = cam.project(np.vstack([corners, square]))
+        assert ((uv.max(axis=0) - uv.min(axis=0)) / (w, h)).max() > 1 - 4 * render.MARGIN, tid
+        # oblique: the eye is ELEVATION_DEG above the table, and a vertical edge of
+        # a block is drawn at least cos(ELEVATION_DEG) - 10 % of its length in pixels
+        # relative to a horizontal edge across the view at the same place
+        d = np.subtract(cam.eye, cam.target)
+        assert np.degrees(np.arcsin(d[2] / np.linalg.norm(d))) == pytest.approx(render.ELEVATION_DEG)
+        top, base = cam.project(np.array([[*centre, 0.0254], [*centre, 0.0]]))
+        across = cam.project(np.array([[*centre, 0.0], [*(centre + 0.0254 * cam.rotation()[:2, 0] / np.linalg.norm(cam.rotation()[:2, 0])), 0.0]]))
+        assert top[1] < base[1] and abs(top[0] - base[0]) < 2
+        assert (base[1] - top[1]) / np.linalg.norm(across[1] - across[0]) > np.cos(np.radians(render.ELEVATION_DEG)) - 0.1
+
+
+def test_the_study_shows_each_pair_its_own_start_and_a_pair_one_start():
+    """The layout of A: sample 0 for every trial (the results page, the replay) puts
+    one identical scatter in front of 1H, 5E, 5H, 9H and 11E; the study's "pair"
+    layout (sample p - 1 for pair p) keeps 5E and 5H together and parts the others."""
+    trials = {t.id: t for t in stimuli.load_paper()}
+    five = ("1H", "5E", "5H", "9H", "11E")
+
+    def starts(layout):
+        return {tid: np.round(np.array([b.p_WB for b in A.blocks]), 9).tobytes()
+                for tid, state, A in render.pictures_of([trials[t] for t in five], 0, layout) if state == "A"}
+
+    assert len(set(starts("sample0").values())) == 1
+    shown = starts("pair")
+    assert shown["5E"] == shown["5H"] and len(set(shown.values())) == 4
+    every = {tid: np.round(np.array([b.p_WB for b in A.blocks]), 9).tobytes()
+             for tid, state, A in render.pictures_of(list(trials.values()), 0, "pair") if state == "A"}
+    for a in every:
+        for b in every:
+            if a != b and trials[a].pair != trials[b].pair:
+                assert every[a] != every[b], (a, b)
+
+
+def _wood(png) -> np.ndarray:
+    """Pixels of the (unpainted, wooden) blocks in a rendered picture: much redder than
+    blue, unlike the grey table and its shadows."""
+    from PIL import Image
+
+    rgb = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    return (rgb[:, :, 0] - rgb[:, :, 2] > 25) & (rgb[:, :, 0] > 60)
+
+
+@pytest.mark.slow
+def test_the_finish_pictures_of_4E_and_4H_and_of_7E_and_7H_are_told_apart(tmp_path):
+    """The pictures show what the pairs contrast. 4H's staircase (each block d/5
+    further in +x than the one below) leans in the picture and 4E's column does not:
+    the top block's outline moves sideways relative to the base by as many pixels as
+    the pinhole model of the two cameras predicts (12 px at 480x320), and more than 6.
+    7H's tower is tall and narrow (width/height under 0.4), 7E's row wide and low
+    (over 2), as the projected corners of their blocks predict."""
+    w, h = 480, 320
+    trials = [stimuli.load_trial(t) for t in ("4E", "4H", "7E", "7H")]
+    scenes: dict[str, list] = {}
+    for tid, _, scene in render.pictures_of(trials, 0, "pair"):
+        scenes.setdefault(tid, []).append(scene)
+    cams = {tid: render.trial_camera(both, w, h) for tid, both in scenes.items()}
+    r = render.Renderer(cams["4E"])
+    masks, lean = {}, {}
+    for tid, (_, B) in scenes.items():
+        r.render(B, tmp_path / f"{tid}.png", cams[tid])
+        masks[tid] = _wood(tmp_path / f"{tid}.png")
+        vs, us = np.nonzero(masks[tid])
+        assert len(us) > 200, tid
+        top = min(B.blocks, key=lambda b: -b.p_WB[2])
+        base = min(B.blocks, key=lambda b: b.p_WB[2])
+        predicted = np.subtract(*cams[tid].project(np.array([top.p_WB, base.p_WB]))[:, 0])
+        # measured: the mean column of the outline's top rows and bottom rows (a block's height each)
+        block_rows = (vs.max() - vs.min()) / len(B.blocks)
+        upper, lower = us[vs < vs.min() + 0.6 * block_rows], us[vs > vs.max() - 0.6 * block_rows]
+        lean[tid] = (predicted, upper.mean() - lower.mean())
+    predicted = lean["4H"][0] - lean["4E"][0]
+    measured = lean["4H"][1] - lean["4E"][1]
+    assert predicted > 10 and abs(measured - predicted) < 0.35 * predicted and measured > 6, lean
+    # 7E and 7H: the outline's extent, width over height, as the projected corners
+    # of the blocks predict (within 20 %): the row lies wide, the tower stands tall
+    def aspect(uv):
+        return (uv[:, 0].max() - uv[:, 0].min()) / (uv[:, 1].max() - uv[:, 1].min())
+
+    shape = {}
+    for tid in ("7E", "7H"):
+        vs, us = np.nonzero(masks[tid])
+        shape[tid] = (aspect(np.column_stack([us, vs])), aspect(cams[tid].project(render.scene_corners(scenes[tid][1]))))
+        assert shape[tid][0] == pytest.approx(shape[tid][1], rel=0.2), shape
+    assert shape["7E"][0] > 2 and shape["7H"][0] < 0.4 and shape["7E"][0] / shape["7H"][0] > 8, shape
 
 
 @pytest.mark.slow

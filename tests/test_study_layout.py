@@ -4,14 +4,15 @@
 A Difficulty Estimation study and a Time Estimation study are built
 (`python -m stimuli.experiment`) and opened in headless Chromium (Debian's, via
 playwright) from the local file with every network request refused. On each screen
-size the test goes to the first trial and checks what docs/experiment.md promises:
+size the test goes through the two anchors and the first trial and checks what docs/experiment.md promises:
 nothing is wider than the window (no horizontal scroll); both pictures and the slider
 lie inside it; Start is above Finish on a phone and beside it on a laptop; every part
 of the trial, Next included, is visible without scrolling; the slider is answered by a
 tap (touch screens) or by the arrow keys (laptops), which enables Next and removes
 "Move the slider to answer.". Skipped, saying why, when the browser or playwright is
-missing. LGP_SCREENSHOTS=DIR keeps a screenshot of each screen size
-(docs/study_trial_<W>x<H>.png are made this way).
+missing. LGP_SCREENSHOTS=DIR keeps a screenshot of each screen size: the docs'
+study_trial_<W>x<H>.png are made with LGP_STUDY_LAYOUT_SIZE=960x640 (the study's
+picture size).
 """
 from __future__ import annotations
 
@@ -46,7 +47,7 @@ _MEASURE = """() => {
 @pytest.fixture(scope="module")
 def studies(tmp_path_factory):
     root = tmp_path_factory.mktemp("studies")
-    env = {**os.environ, "LGP_RENDER_CACHE": str(root / "renders")}
+    env = {"LGP_RENDER_CACHE": str(root / "renders"), **os.environ}  # a render cache given by the caller is used
     out = {}
     for task in ("difficulty", "time"):
         run = subprocess.run([sys.executable, "-m", "stimuli.experiment", "--task", task, "--out", str(root / task),
@@ -62,10 +63,10 @@ def browser():
         yield b
 
 
-def _first_trial(browser, folder, width, height, touch):
+def _first_trial(browser, folder, width, height, touch, participant=0):
     page, errors, refused = offline_page(browser, viewport={"width": width, "height": height},
                                          has_touch=touch, is_mobile=touch)
-    page.goto((folder / "index.html").resolve().as_uri() + "?participant=0&simulated=1")
+    page.goto((folder / "index.html").resolve().as_uri() + f"?participant={participant}&simulated=1")
     page.click("#jspsych-instructions-next")
     page.click("#jspsych-instructions-next")
     page.wait_for_selector("#jspsych-html-slider-response-response")
@@ -79,36 +80,40 @@ def _inside(box, width):
 
 @pytest.mark.parametrize("width,height,touch", SCREENS, ids=[f"{w}x{h}" for w, h, _ in SCREENS])
 def test_a_trial_fits_the_screen_and_its_slider_answers_a_tap_or_a_key(browser, studies, width, height, touch):
-    page, errors, refused = _first_trial(browser, studies["difficulty"], width, height, touch)
-    m = page.evaluate(_MEASURE)
-    keep_screenshot(page, f"study_trial_{width}x{height}.png")
-    assert m["scrollWidth"] <= width, f"the page is {m['scrollWidth']} px wide in a {width} px window"
-    for part in ("start", "finish", "slider", "labels", "next"):
-        assert _inside(m[part], width), f"{part} reaches outside the {width} px window: {m[part]}"
-    assert m["start"]["width"] >= min(0.8 * width, 300) if width < 700 else m["start"]["width"] >= 0.3 * width
-    if width < 700:  # a phone: Start above Finish, each nearly the window's width
-        assert m["start"]["bottom"] <= m["finish"]["top"]
-    else:  # a laptop or a desktop: side by side
-        assert m["start"]["right"] <= m["finish"]["left"] and abs(m["start"]["top"] - m["finish"]["top"]) < 1
-    assert m["next"]["bottom"] <= height, f"Next ends at {m['next']['bottom']:.0f} px, below the {height} px window"
-    assert m["scrollHeight"] <= height
-    assert m["nextDisabled"] and m["messageVisible"] and m["message"] == "Move the slider to answer."
+    """The two anchors and the first trial (participant 3: 5H, a tower beside a pyramid)."""
+    page, errors, refused = _first_trial(browser, studies["difficulty"], width, height, touch, participant=3)
+    for screen, tid in enumerate(("ANCHOR-EASY", "ANCHOR-HARD", "5H")):
+        page.wait_for_function(f"document.querySelector('.lgp-pair').dataset.trial === '{tid}'")
+        page.wait_for_function("Array.from(document.querySelectorAll('.lgp-pair img')).every(i => i.complete && i.naturalWidth > 0)")
+        m = page.evaluate(_MEASURE)
+        if tid == "5H":
+            keep_screenshot(page, f"study_trial_{width}x{height}.png")
+        assert m["scrollWidth"] <= width, f"{tid}: the page is {m['scrollWidth']} px wide in a {width} px window"
+        for part in ("start", "finish", "slider", "labels", "next"):
+            assert _inside(m[part], width), f"{tid}: {part} reaches outside the {width} px window: {m[part]}"
+        if width < 700:  # a phone: Start above Finish, each nearly the window's width
+            assert m["start"]["bottom"] <= m["finish"]["top"] and m["start"]["width"] >= min(0.8 * width, 300)
+        else:  # a laptop or a desktop: side by side, each at least 30 % of the window's width
+            assert m["start"]["right"] <= m["finish"]["left"] and abs(m["start"]["top"] - m["finish"]["top"]) < 1
+            assert m["start"]["width"] >= 0.3 * width
+        assert m["next"]["bottom"] <= height, f"{tid}: Next ends at {m['next']['bottom']:.0f} px, below the {height} px window"
+        assert m["scrollHeight"] <= height
+        assert m["nextDisabled"] and m["messageVisible"] and m["message"] == "Move the slider to answer."
 
-    if touch:  # a tap on the slider's track answers (at the tapped place) and enables Next
-        box = m["slider"]
-        page.touchscreen.tap(box["left"] + 0.8 * box["width"], (box["top"] + box["bottom"]) / 2)
-    else:  # keyboard: the slider takes the focus and an arrow key moves it by one step
-        page.focus(".jspsych-slider")
-        page.keyboard.press("ArrowRight")
-    after = page.evaluate(_MEASURE)
-    assert not after["nextDisabled"]
-    assert not after["messageVisible"], "'Move the slider to answer.' is still shown after an answer"
-    if touch:
-        assert 70 <= after["value"] <= 90
-    else:
-        assert after["value"] == 51
-    page.click("#jspsych-html-slider-response-next")
-    page.wait_for_function("document.querySelector('.lgp-pair').dataset.trial === 'ANCHOR-HARD'")
+        if touch:  # a tap on the slider's track answers (at the tapped place) and enables Next
+            box = m["slider"]
+            page.touchscreen.tap(box["left"] + 0.8 * box["width"], (box["top"] + box["bottom"]) / 2)
+        else:  # keyboard: the slider takes the focus and an arrow key moves it by one step
+            page.focus(".jspsych-slider")
+            page.keyboard.press("ArrowRight")
+        after = page.evaluate(_MEASURE)
+        assert not after["nextDisabled"]
+        assert not after["messageVisible"], "'Move the slider to answer.' is still shown after an answer"
+        if touch:
+            assert 70 <= after["value"] <= 90
+        else:
+            assert after["value"] == 51
+        page.click("#jspsych-html-slider-response-next")
     assert errors == [] and refused == []
     page.context.close()
 

@@ -76,8 +76,8 @@ def _label_font():
 def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | None = None, jobs: int = 2,
                             executor=None) -> dict[str, Path]:
     """Picture of every trial under `out_dir`: A (sample 0 of `seed`) | B rendered like
-    photographs (stimuli.render: one camera for every trial, so a relocated tower looks
-    relocated; B the finished table), kept in the render cache
+    photographs (stimuli.render: an oblique camera per trial, the same for A and B, so
+    a tower's height shows and a relocated tower looks relocated; B the finished table), kept in the render cache
     (stimuli.render.render_cache_dir, shared with stimuli.experiment) between runs.
     Where the renderer cannot run (no OpenGL), the sketches of `trial_pictures`,
     saying why on stderr. `executor`: a running local lgp.executor to render on

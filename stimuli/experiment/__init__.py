@@ -234,7 +234,7 @@ def plan_study(task: str, stimuli_dir=None, anchor_files=DEFAULT_ANCHORS, seed: 
     trials = stimuli.load_all(stimuli_dir)
     ids = {t.id for t in trials}
     # The build console shows no anchors, but its pictures are rendered with them, so
-    # that every task of a study shows the same pictures (one camera fitted to all).
+    # that every task of a study shares one render folder.
     anchors = [load_anchor(f, role, ids) for f, role in zip(anchor_files, ("easy", "hard"))]
     if anchors[0].id == anchors[1].id:
         raise StudyError(f"--anchor-easy and --anchor-hard have the same id {anchors[0].id}")
@@ -251,8 +251,10 @@ def _render(plan: StudyPlan, size, jobs: int, log) -> tuple[Path, dict]:
     from stimuli.render import cache_folder, render_trials
 
     every = [*plan.trials, *plan.anchors]
-    where = cache_folder(every, plan.seed, size)
-    return where, render_trials(every, where, plan.seed, size, jobs, log=log)
+    # A of a trial of pair p is sample p - 1 of the seed: a pair's two trials share
+    # their Start, no two pairs do (docs/experiment.md, section 8).
+    where = cache_folder(every, plan.seed, size, "pair")
+    return where, render_trials(every, where, plan.seed, size, jobs, log=log, layout="pair")
 
 
 def check_output_dir(out: Path) -> None:
@@ -308,6 +310,7 @@ def build_study(plan: StudyPlan, out: str | Path, size=None, jobs: int = 2, jato
         "jatos": jatos,
         "renderer": record["renderer"],
         "camera": record["camera"],
+        "cameras": record["cameras"],
         "picture_size": [record["camera"]["width"], record["camera"]["height"]],
     }
     build = hashlib.sha256(json.dumps(config, sort_keys=True).encode()).hexdigest()[:12]

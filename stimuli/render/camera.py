@@ -1,7 +1,8 @@
-"""The camera of the trials' pictures: one pinhole camera of fixed direction (from
-the agent's side, ELEVATION_DEG above the table), fitted to the union of the paper's
-workspace and every scene of a run (`fit_camera`), and the pictures' size
-(DEFAULT_SIZE, `parse_size` for --size)."""
+"""The camera of the trials' pictures: a pinhole camera of fixed direction, oblique
+as a photograph taken standing at the table (ELEVATION_DEG above the table,
+AZIMUTH_DEG round from the agent's side), fitted to both scenes of a trial, A and B,
+so that Start and Finish are seen from the same place (`fit_camera`,
+`trial_camera`); and the pictures' size (DEFAULT_SIZE, `parse_size` for --size)."""
 from __future__ import annotations
 
 import argparse
@@ -11,14 +12,23 @@ import numpy as np
 
 #: Picture size (pixels) unless --size says otherwise.
 DEFAULT_SIZE = (960, 640)
-#: Vertical field of view of the camera (degrees) and its elevation above the table.
+#: Vertical field of view of the camera (degrees) and its elevation above the table:
+#: low enough that a tower's height shows (a vertical edge is drawn at cos 28 deg =
+#: 0.88 of its length, against 0.67 at the 48 degrees of the first pictures).
 FOV_Y_DEG = 36.0
-ELEVATION_DEG = 48.0
-#: The table area every camera frames at least (x, y in metres, on the table: the
-#: footprint of every scene of the 24 trials lies inside), so the default camera
-#: hardly depends on which trials a run renders (tall structures add their tops).
+ELEVATION_DEG = 28.0
+#: The camera's direction round the vertical, from the agent's side (-x) towards -y
+#: (degrees): offsets in x (the staircase of 4H, the lean of 10H) and in y (the row
+#: of 7E) both show in the picture; seen straight from -x an x offset would not.
+AZIMUTH_DEG = 40.0
+#: The table area the camera of `fit_camera(..., area=WORKSPACE)` frames at least (x, y
+#: in metres: the footprint of every scene of the 24 trials lies inside). The trials'
+#: pictures frame their own scenes (`trial_camera`), with at least MIN_AREA around them.
 WORKSPACE_LO = np.array([0.15, -0.30, 0.0])
 WORKSPACE_HI = np.array([0.70, 0.32, 0.0])
+#: Side (m) of the table square, centred on a trial's blocks, that its camera frames at
+#: least: a trial of one or two blocks is not blown up beyond the others.
+MIN_AREA = 0.24
 #: Fraction of the picture left free at each side.
 MARGIN = 0.04
 
@@ -67,16 +77,22 @@ def scene_corners(scene) -> np.ndarray:
     return np.vstack(out) if out else np.zeros((0, 3))
 
 
-def fit_camera(points: np.ndarray, width: int, height: int) -> Camera:
-    """The camera of fixed direction (from -x, ELEVATION_DEG above the table) that
-    frames `points` and the paper's workspace with MARGIN to spare: the target is
-    moved until the points' projection is centred, the distance until it fills the
-    picture."""
-    box = np.array([[x, y, z] for x in (WORKSPACE_LO[0], WORKSPACE_HI[0]) for y in (WORKSPACE_LO[1], WORKSPACE_HI[1])
-                    for z in (WORKSPACE_LO[2], WORKSPACE_HI[2])])
-    P = np.vstack([box, np.asarray(points, float).reshape(-1, 3)])
-    e = np.radians(ELEVATION_DEG)
-    back = np.array([-np.cos(e), 0.0, np.sin(e)])  # from target towards the eye
+def view_direction() -> np.ndarray:
+    """Unit vector from the camera's target towards its eye (ELEVATION_DEG, AZIMUTH_DEG)."""
+    e, a = np.radians(ELEVATION_DEG), np.radians(AZIMUTH_DEG)
+    return np.array([-np.cos(e) * np.cos(a), -np.cos(e) * np.sin(a), np.sin(e)])
+
+
+def fit_camera(points: np.ndarray, width: int, height: int, area: tuple | None = None) -> Camera:
+    """The camera of fixed direction (`view_direction`) that frames `points` and the
+    table rectangle `area` = (lo, hi) (x, y corners at z = 0; none: the points alone)
+    with MARGIN to spare: the target is moved until the points' projection is
+    centred, the distance until it fills the picture."""
+    P = np.asarray(points, float).reshape(-1, 3)
+    if area is not None:
+        lo, hi = area
+        P = np.vstack([P, [[x, y, 0.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])]])
+    back = view_direction()  # from target towards the eye
     target = np.array([(P[:, 0].min() + P[:, 0].max()) / 2, (P[:, 1].min() + P[:, 1].max()) / 2, 0.0])
     dist = 1.0
     for _ in range(40):
@@ -93,6 +109,14 @@ def fit_camera(points: np.ndarray, width: int, height: int) -> Camera:
         dist *= fill ** 0.8
     cam = Camera(tuple(float(v) for v in target + dist * back), tuple(float(v) for v in target), FOV_Y_DEG, width, height)
     return cam
+
+
+def trial_camera(scenes, width: int, height: int) -> Camera:
+    """The one camera of a trial's pictures (A and B): `fit_camera` to the corners of
+    both scenes and a table square of side MIN_AREA centred on their footprint."""
+    P = np.vstack([scene_corners(s) for s in scenes])
+    centre = (P[:, :2].min(axis=0) + P[:, :2].max(axis=0)) / 2
+    return fit_camera(P, width, height, area=(centre - MIN_AREA / 2, centre + MIN_AREA / 2))
 
 
 def parse_size(text: str) -> tuple[int, int]:

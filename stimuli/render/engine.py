@@ -19,7 +19,12 @@ SEAM = 0.0006
 #: Colour of the fixed boxes (pair 12's bucket): grey-blue plastic.
 FIXED_RGB = (0.45, 0.50, 0.58)
 TABLE_RGB = (0.80, 0.78, 0.74)
-BACKGROUND_RGB = (0.93, 0.93, 0.92)
+#: Behind the table: the colour the lit table takes far from the camera (measured on
+#: a render), so that where the oblique view reaches past the table's edge no edge shows.
+BACKGROUND_RGB = (0.659, 0.639, 0.608)
+#: Side of the table (m): most oblique pictures end on it; a larger one spreads the
+#: shadow maps over more table and blurs the blocks' shadows.
+TABLE_SIZE = 3.0
 
 
 def _texture(colour: str, n: int = 128) -> np.ndarray:
@@ -88,10 +93,10 @@ class Renderer:
                                        ssao=SsaoParameter(radius=0.03, bias=0.002, sample_count=16 if small else 32))
         self.engine = MakeRenderEngineVtk(params)
         self.camera = camera
-        self.engine.RegisterVisual(GeometryId.get_new_id(), Box(1.8, 1.8, 0.02), self._props(rgb=TABLE_RGB),
+        self.engine.RegisterVisual(GeometryId.get_new_id(), Box(TABLE_SIZE, TABLE_SIZE, 0.02), self._props(rgb=TABLE_RGB),
                                    RigidTransform([0.55, 0.0, -0.01]), False)
         core = RenderCameraCore("vtk", CameraInfo(camera.width, camera.height, np.radians(camera.fov_y_deg)),
-                                ClippingRange(0.05, 6.0), RigidTransform())
+                                ClippingRange(0.05, 2 * TABLE_SIZE), RigidTransform())
         self._cam = ColorRenderCamera(core, False)
         self.engine.UpdateViewpoint(RigidTransform(RotationMatrix(camera.rotation()), np.asarray(camera.eye)))
 
@@ -106,10 +111,17 @@ class Renderer:
         p.AddProperty("label", "id", RenderLabel(1))
         return p
 
-    def render(self, scene, path: Path) -> None:
-        """Render `scene` (blocks and fixed boxes) to the PNG `path` (written atomically)."""
+    def render(self, scene, path: Path, camera: Camera | None = None) -> None:
+        """Render `scene` (blocks and fixed boxes) to the PNG `path` (written atomically),
+        seen from `camera` (of this renderer's size and field of view) if given."""
         from pydrake.systems.sensors import ImageRgba8U
 
+        if camera is not None and camera != self.camera:
+            if (camera.width, camera.height, camera.fov_y_deg) != (self.camera.width, self.camera.height, self.camera.fov_y_deg):
+                raise ValueError(f"a camera of {camera.width}x{camera.height} px, fov {camera.fov_y_deg}: this renderer draws "
+                                 f"{self.camera.width}x{self.camera.height} px, fov {self.camera.fov_y_deg}")
+            self.engine.UpdateViewpoint(self._RigidTransform(self._RotationMatrix(camera.rotation()), np.asarray(camera.eye)))
+            self.camera = camera
         ids = []
         try:
             for b in scene.blocks:

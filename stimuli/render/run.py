@@ -1,5 +1,5 @@
-"""A cached render run: A and B of every trial rendered into a folder with one camera
-(`render_trials`), recorded in renders.json with each picture's inputs hash, so a
+"""A cached render run: A and B of every trial rendered into a folder, each trial
+with its own camera shared by A and B (`render_trials`), recorded in renders.json with each picture's inputs hash, so a
 second run renders only what changed; where the pictures are kept between runs
 (`render_cache_dir`, `cache_folder`) and a contact sheet of a run's pictures."""
 from __future__ import annotations
@@ -14,23 +14,38 @@ from pathlib import Path
 
 import numpy as np
 
-from stimuli.render.camera import DEFAULT_SIZE, Camera, fit_camera, scene_corners
+from stimuli.render.camera import AZIMUTH_DEG, DEFAULT_SIZE, ELEVATION_DEG, FOV_Y_DEG, MIN_AREA, Camera, trial_camera
 from stimuli.render.engine import Renderer
 from stimuli.sheet import finished_scene
 
 PROG = "python -m stimuli.render"
 
 
-def pictures_of(trials, seed: int):
-    """(trial id, state, scene) of every picture: A is sample 0 of `seed` (the layout
-    effort reports first, models.effort.sample_rng(seed, 0)), B the finished table
-    (the target and whatever of A it leaves: stimuli.sheet.finished_scene, the same
-    table the sketches draw)."""
+#: Which layout of A the pictures show: "sample0" (sample 0 of the seed for every
+#: trial: the layout effort reports first and the results page's replay plays) or
+#: "pair" (a trial of pair p shows sample p - 1 of the seed, a trial of no pair sample
+#: 0: the two trials of a pair share their Start, no two pairs do; the study's
+#: choice, docs/experiment.md section 8).
+LAYOUTS = ("sample0", "pair")
+
+
+def layout_sample(trial, layout: str = "sample0") -> int:
+    """The sample of the seed whose layout of A the picture of `trial` shows."""
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout {layout!r}: expected one of {', '.join(LAYOUTS)}")
+    return trial.pair - 1 if layout == "pair" and trial.pair is not None else 0
+
+
+def pictures_of(trials, seed: int, layout: str = "sample0"):
+    """(trial id, state, scene) of every picture: A is the layout of sample
+    `layout_sample(trial, layout)` of `seed` (models.effort.sample_rng(seed, k), as
+    effort draws it), B the finished table (the target and whatever of A it leaves:
+    stimuli.sheet.finished_scene, the same table the sketches draw)."""
     from models.effort import sample_rng
 
     out = []
     for t in trials:
-        A = t.sample_initial(sample_rng(seed, 0))
+        A = t.sample_initial(sample_rng(seed, layout_sample(t, layout)))
         out.append((t.id, "A", A))
         out.append((t.id, "B", finished_scene(A, t.target)))
     return out
@@ -65,25 +80,26 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _render_chunk(camera: Camera, jobs: list[tuple[str, str]]) -> list[float]:
-    """Worker: render (scene pickle path, png path) pairs with one engine; seconds each."""
+def _render_chunk(jobs: list[tuple[str, str, Camera]]) -> list[float]:
+    """Worker: render (scene pickle path, png path, camera) triples with one engine; seconds each."""
     import pickle
 
-    renderer = Renderer(camera)
     seconds = []
-    for scene_file, png in jobs:
+    renderer = Renderer(jobs[0][2]) if jobs else None
+    for scene_file, png, camera in jobs:
         with open(scene_file, "rb") as fh:
             scene = pickle.load(fh)
         t0 = time.perf_counter()
-        renderer.render(scene, Path(png))
+        renderer.render(scene, Path(png), camera)
         seconds.append(time.perf_counter() - t0)
     return seconds
 
 
 def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, int] = DEFAULT_SIZE, jobs: int = 2,
-                  log=None, executor=None) -> dict:
-    """Render A and B of every trial into `out_dir`; returns the run's record (the
-    content of renders.json). Pictures whose inputs (scene, camera, code) are
+                  log=None, executor=None, layout: str = "sample0") -> dict:
+    """Render A and B of every trial into `out_dir`, each trial seen by its own camera
+    (`trial_camera`: the same for its A and B); `layout`: which sample's layout A shows
+    (LAYOUTS). Returns the run's record (the content of renders.json). Pictures whose inputs (scene, camera, code) are
     unchanged since the last run into `out_dir` are kept, not rendered again.
 
     `executor`: a running local lgp.executor (ProcessExecutor or SerialExecutor,
@@ -94,8 +110,11 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
 
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
     out = Path(out_dir)
-    pictures = pictures_of(trials, seed)
-    camera = fit_camera(np.vstack([scene_corners(s) for _, _, s in pictures]), *size)
+    pictures = pictures_of(trials, seed, layout)
+    scenes: dict[str, list] = {}
+    for tid, _, scene in pictures:
+        scenes.setdefault(tid, []).append(scene)
+    cameras = {tid: trial_camera(both, *size) for tid, both in scenes.items()}
     code = _code_version()
     record_path = out / "renders.json"
     old = {}
@@ -109,15 +128,17 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
     scratch = tempfile.TemporaryDirectory(prefix="lgp-scenes-")
     for k, (tid, state, scene) in enumerate(pictures):
         name = f"{tid}-{state}.png"
+        camera = cameras[tid]
         key = _picture_key(scene, camera, code)
+        sample = layout_sample(next(t for t in trials if t.id == tid), layout)
         rows.append({"trial": tid, "state": state, "file": name, "key": key,
-                     "blocks": len(scene.blocks), "sample": 0 if state == "A" else None})
+                     "blocks": len(scene.blocks), "sample": sample})
         prev = old.get(name)
         if prev and prev.get("key") == key and (out / name).exists() and prev.get("sha256") == _sha256(out / name):
             continue
         scene_file = Path(scratch.name) / f"{k}.pkl"
         scene_file.write_bytes(pickle.dumps(scene))
-        todo.append((str(scene_file), str(out / name)))
+        todo.append((str(scene_file), str(out / name), camera))
     t0 = time.perf_counter()
     seconds: list[float] = []
     if todo:
@@ -130,24 +151,29 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
         if executor is not None:
             import functools
 
-            for s in executor.map(functools.partial(_render_chunk, camera), chunks):
+            for s in executor.map(_render_chunk, chunks):
                 seconds += s
         elif jobs == 1:
-            seconds = _render_chunk(camera, chunks[0])
+            seconds = _render_chunk(chunks[0])
         else:
             import multiprocessing as mp
             from concurrent.futures import ProcessPoolExecutor
 
             with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
-                for s in pool.map(_render_chunk, [camera] * jobs, chunks):
+                for s in pool.map(_render_chunk, chunks):
                     seconds += s
     else:
         log(f"{PROG}: all {len(rows)} pictures are up to date in {out}")
     scratch.cleanup()
     for r in rows:
         r["sha256"] = _sha256(out / r["file"])
-    record = {"renderer": "drake RenderEngineVtk (VTK OpenGL, offscreen)", "seed": seed,
-              "layout_of_A": "sample 0 of the seed: models.effort.sample_rng(seed, 0)", "camera": camera.as_dict(),
+    record = {"renderer": "drake RenderEngineVtk (VTK OpenGL, offscreen)", "seed": seed, "layout": layout,
+              "layout_of_A": ("sample 0 of the seed for every trial: models.effort.sample_rng(seed, 0)" if layout == "sample0" else
+                              "a trial of pair p: sample p - 1 of the seed (models.effort.sample_rng(seed, p - 1)); no pair: sample 0"),
+              "camera": {"elevation_deg": ELEVATION_DEG, "azimuth_deg": AZIMUTH_DEG, "fov_y_deg": FOV_Y_DEG,
+                         "width": size[0], "height": size[1], "min_area_m": MIN_AREA,
+                         "fit": "one camera per trial, the same for its A and B, framing both scenes (stimuli.render.trial_camera)"},
+              "cameras": {tid: cam.as_dict() for tid, cam in cameras.items()},
               "code": code, "rendered": len(todo), "render_seconds": round(time.perf_counter() - t0, 2),
               "pictures": rows}
     tmp = record_path.with_name(".renders.json.tmp")
@@ -167,10 +193,11 @@ def render_cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lgp-difficulty" / "renders"
 
 
-def cache_folder(trials, seed: int, size) -> Path:
-    """The render cache's folder for one set of trials, seed and picture size (one
-    camera is fitted per set)."""
-    key = hashlib.sha256(json.dumps([[t.id, t.digest] for t in trials] + [seed, list(size)]).encode()).hexdigest()[:16]
+def cache_folder(trials, seed: int, size, layout: str = "sample0") -> Path:
+    """The render cache's folder for one set of trials, seed, picture size and layout
+    of A (LAYOUTS)."""
+    key = [[t.id, t.digest] for t in trials] + [seed, list(size)] + ([layout] if layout != "sample0" else [])
+    key = hashlib.sha256(json.dumps(key).encode()).hexdigest()[:16]
     return render_cache_dir() / key
 
 
