@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     p.add_argument("--results", default="results", type=cli.input_dir, help="output folder of python -m lgp.reproduce")
     p.add_argument("--out", default="results/simulated", type=cli.output_dir)
     p.add_argument("--seed", type=cli.seed, default=0)
-    p.add_argument("--n-boot", type=cli.positive_int, default=1000)
+    p.add_argument("--n-boot", type=cli.bounded_count("MAX_N_BOOT"), default=1000)
     p.add_argument("--n-perm", type=cli.positive_int, default=1000, help="permutations per permutation test")
     p.add_argument("--betas", type=float, nargs=3, metavar=("B0", "B1", "B2"), default=BETAS,
                    help="Eq. 1 of the simulated participants (b1 = b2: effort only) (default %(default)s)")

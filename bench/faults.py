@@ -142,6 +142,10 @@ def trial_cases(tmp: Path):
     yield "id with spaces", text_case(X1.replace("id: X1", "id: 'X 1'"))
     yield "fixed box without size", sub("initial:", "fixed:\n- name: wall\n  boxes:\n  - p_WO: [0.5, 0.3, 0.05]\ninitial:")
     yield "build site outside the workspace", sub("build_site: [0.35, 0.0]", "build_site: [35.0, 0.0]")
+    yield "a 5000-digit integer (count)", sub("count: 3", "count: " + "9" * 5000)
+    yield "10,000 target blocks (refused after 29 s of checking before)", text_case(
+        head + "target:\n  blocks:\n" + "".join(f"  - name: t{i}\n    p_WB: [{-1.9 + (i % 70) * 0.0508:.4f}, "
+                                                 f"{-1.9 + (i // 70) * 0.0254:.4f}, 0.0127]\n" for i in range(10_000)))
     yield "description `</script><script>alert(2)</script>`", ("accept", sub("description: ", "description: '</script><script>alert(2)</script>' #"))
 
 
@@ -223,6 +227,11 @@ def human_cases(tmp: Path):
     yield "a directory", special(lambda p: p.mkdir())
     yield "11 participants, limit 10", csv(_responses(11), max_participants=10)
     yield "240 kB for 2 participants, limit 48 kB", csv(_responses(2).assign(note="x" * 5000), max_participants=10)
+    yield "column `response` twice in the header", csv(text="dataset,participant,trial,response,response\n"
+                                                            + "".join(f"difficulty,p0,{t},1,2\n" for t in TRIAL_IDS))
+    yield "a 200 kB field", edit(0, "participant", "p" * 200_000)
+    yield "response in Arabic-Indic digits", edit(0, "response", "\u0661\u0667")
+    yield "response a 5000-digit integer", edit(0, "response", "9" * 5000)
     yield "lower-case trial ids 1e", ("accept", csv(good.assign(trial=good["trial"].str.lower())))
     yield "UTF-16 with byte-order mark", ("accept", csv(raw=text.encode("utf-16")))
     yield "UTF-8 with byte-order mark", ("accept", csv(raw=b"\xef\xbb\xbf" + text.encode()))
@@ -377,6 +386,47 @@ class UsageRefusal(Exception):
 UsageRefusal.__module__ = "analysis.import_study"  # a refusal of the command, as is_known_error counts them
 
 
+# ----------------------------------------------------------------------------- counts on the command line
+
+
+def command_cases():
+    def argv_case(module, argv):
+        def run():
+            import importlib
+
+            main = importlib.import_module(module).main if module != "lgp.reproduce" else importlib.import_module(module).parse_args
+            err = io.StringIO()
+            with contextlib.redirect_stderr(err):
+                try:
+                    result = main(argv)
+                except SystemExit as e:
+                    raise UsageRefusal(f"exit {e.code}: {err.getvalue().strip()}") from None
+            return f"accepted: {result}"
+        return run
+
+    big = "1000000000000"
+    yield "lgp.reproduce --n-sims 1000000000000 (a MemoryError after minutes before)", argv_case("lgp.reproduce", ["--n-sims", big])
+    yield "lgp.reproduce --n-boot 1000000000000", argv_case("lgp.reproduce", ["--n-boot", big])
+    yield "lgp.reproduce --samples 1000000000", argv_case("lgp.reproduce", ["--samples", "1000000000"])
+    yield "lgp.reproduce --n-perm 1000000000", argv_case("lgp.reproduce", ["--n-perm", "1000000000"])
+    yield "models.risk --n-sims 1000000000000", argv_case("models.risk.__main__", ["--n-sims", big])
+    yield "models.effort --samples 1000000000", argv_case("models.effort.__main__", ["--samples", "1000000000"])
+    yield "analysis.demo --n-boot 1000000000000", argv_case("analysis.demo", ["--n-boot", big])
+    yield "stimuli.generate --count 1000000000000", argv_case("stimuli.generate", ["--out", "/nonexistent/x", "--count", big])
+
+    def jobs():
+        from lgp import cli
+        from lgp.reproduce import parse_args
+
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            got = parse_args(["--jobs", "400"]).jobs
+        if got <= cli.usable_cores() and "--oversubscribe" in err.getvalue():
+            return f"accepted: capped at {got}: {err.getvalue().strip()}"
+        raise AssertionError(f"--jobs 400 gave {got} workers")
+    yield "lgp.reproduce --jobs 400 on 2 cores (started 400 workers)", ("accept", jobs)
+
+
 # ----------------------------------------------------------------------------- the API
 
 
@@ -454,7 +504,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         groups = [("trial file", trial_cases(tmp)), ("human data", human_cases(tmp)),
-                  ("study import", import_cases(tmp)), ("API", api_cases()),
+                  ("study import", import_cases(tmp)), ("command line", command_cases()), ("API", api_cases()),
                   ("cache entry", ((n, _cache_run(d, tmp)) for n, d in cache_cases(tmp)))]
         for group, cases in groups:
             for name, run in cases:
@@ -474,7 +524,7 @@ def main(argv=None) -> int:
              "named line (or, for a cache entry, reported and recomputed), none after a hang or a traceback; "
              f"{len(accepted)} inputs the formats allow were accepted as designed. "
              f"By kind: " + ", ".join(f"{g} {sum(1 for r in refused if r[0] == g)}/{sum(1 for r in bad if r[0] == g)}"
-                                      for g in ("trial file", "human data", "study import", "API", "cache entry")) + ".", "",
+                                      for g in ("trial file", "human data", "study import", "command line", "API", "cache entry")) + ".", "",
              "| kind | input | verdict | what the project does |", "|---|---|---|---|"]
     bar = "\\|"
     lines += [f"| {g} | {n.replace('|', bar)} | {v} | {w[:220]} |" for g, n, v, w in rows]

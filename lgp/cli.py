@@ -66,6 +66,86 @@ def nonnegative_int(text: str) -> int:
 
 seed = nonnegative_int
 
+#: The largest counts a command line takes (issue 30): past them the run needs
+#: more memory or time than any machine it is meant for, and failed with a
+#: MemoryError after minutes of work. Each refusal gives the estimate.
+MAX_SAMPLES = 10_000          # --samples M: layouts of A per trial (the paper: 30)
+MAX_N_SIMS = 1_000_000        # --n-sims N: noisy simulations per trial and sigma (the paper: 100)
+MAX_N_BOOT = 100_000          # --n-boot: bootstrap resamples (the paper: 1000)
+MAX_N_PERM = 100_000          # --n-perm: permutations per permutation test
+MAX_TRIAL_COUNT = 10_000      # stimuli.generate --count: trial files to write
+
+
+def _size(n_bytes: float) -> str:
+    """1.5 GiB, 87 TiB, ...: a byte count in binary units."""
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"):
+        if n_bytes < 1024 or unit == "EiB":
+            return f"{n_bytes:.0f} {unit}" if unit == "bytes" else f"{n_bytes:.3g} {unit}"
+        n_bytes /= 1024
+    return ""
+
+
+def _estimates() -> dict[str, Callable[[int], str]]:
+    from lgp.paper import N_BOOT, N_SIMS, SAMPLES, SIGMA_GRID
+
+    n_trials, n_sigmas = len(TRIAL_IDS), len(SIGMA_GRID)
+    return {
+        "MAX_SAMPLES": lambda v: (f"{v:,} layouts x {n_trials} trials = {v * n_trials:,} KOMO plans, {v / SAMPLES:,.3g} times "
+                                  f"the paper's M = {SAMPLES}"),
+        "MAX_N_SIMS": lambda v: (f"the noise of one 10-block trial alone takes {v:,} x 10 blocks x 3 x 8 bytes = "
+                                 f"{_size(v * 240)} and {n_trials} trials x {n_sigmas} sigmas x {v:,} = "
+                                 f"{v * n_trials * n_sigmas:,} simulations, {v / N_SIMS:,.3g} times the paper's N = {N_SIMS}"),
+        "MAX_N_BOOT": lambda v: (f"{v:,} resamples x {n_trials} trial means x 8 bytes = {_size(v * n_trials * 8)} per "
+                                 f"dataset, {v / N_BOOT:,.3g} times the paper's {N_BOOT} resamples of work"),
+        "MAX_N_PERM": lambda v: f"{v:,} refits of the model per permutation test",
+        "MAX_TRIAL_COUNT": lambda v: (f"{v:,} trials, each sampled and simulated for stability and written as a file of "
+                                      f"about 2 kB: {_size(v * 2048)} on disk"),
+    }
+
+
+def bounded_count(limit_name: str) -> Callable[[str], int]:
+    """A validator for a count (a whole number >= 1) of at most ``lgp.cli.<limit_name>``;
+    a larger one is refused before any work with what it would cost, e.g.
+    ``type=bounded_count("MAX_N_SIMS")`` refuses ``--n-sims 1000000000000`` naming
+    87 TiB of noise."""
+    limit = globals()[limit_name]
+
+    def check(text: str) -> int:
+        value = positive_int(text)
+        if value > limit:
+            raise argparse.ArgumentTypeError(f"{value:,} is more than the {limit:,} allowed (lgp.cli.{limit_name}): "
+                                             f"{_estimates()[limit_name](value)}")
+        return value
+
+    check.__name__ = limit_name.lower().replace("max_", "")
+    return check
+
+
+def usable_cores() -> int:
+    """Cores this process may use (its CPU affinity)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def add_jobs_argument(p: argparse.ArgumentParser, default, help: str) -> None:
+    """``--jobs N`` (a whole number >= 1) and ``--oversubscribe``: see `capped_jobs`."""
+    p.add_argument("--jobs", type=positive_int, default=default, help=help + "; more than the usable cores is capped "
+                   "at them unless --oversubscribe")
+    p.add_argument("--oversubscribe", action="store_true",
+                   help="start every --jobs worker even when there are more than the usable cores")
+
+
+def capped_jobs(jobs: int | None, prog: str, oversubscribe: bool = False) -> int | None:
+    """`jobs` capped at the usable cores, saying so in one line on stderr: 400
+    workers on 2 cores only share them, each with its own memory (a process pool
+    of 400 Python processes). ``--oversubscribe`` keeps them all; None stays None
+    (the command's default)."""
+    cores = usable_cores()
+    if jobs is None or jobs <= cores or oversubscribe:
+        return jobs
+    print(f"{prog}: --jobs {jobs} is more than the {cores} usable core(s): using {cores} "
+          "(--oversubscribe starts them all)", file=sys.stderr, flush=True)
+    return cores
+
 
 def _finite_number(text: str, ok: Callable[[float], bool], expected: str, rule: str) -> float:
     """`text` as a finite float for which `ok` holds: "expected {expected}" when it is

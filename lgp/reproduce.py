@@ -73,8 +73,8 @@ def parse_args(argv=None) -> RunConfig:
                    "names some; pair table only for pairs whose E and H files are both there")
     p.add_argument("--trials", nargs="+", type=cli.trial_id_or_all,
                    help="trial ids (case-insensitive), or 'all' for every trial file (default: the paper's 24)")
-    p.add_argument("--samples", type=cli.positive_int, help=f"M, random layouts of A per trial (default {D('samples')}; --quick {QUICK['samples']})")
-    p.add_argument("--n-sims", type=cli.positive_int, help=f"N, noisy simulations per trial and sigma (default {D('n_sims')}; --quick {QUICK['n_sims']})")
+    p.add_argument("--samples", type=cli.bounded_count("MAX_SAMPLES"), help=f"M, random layouts of A per trial (default {D('samples')}; --quick {QUICK['samples']})")
+    p.add_argument("--n-sims", type=cli.bounded_count("MAX_N_SIMS"), help=f"N, noisy simulations per trial and sigma (default {D('n_sims')}; --quick {QUICK['n_sims']})")
     grid = p.add_mutually_exclusive_group()
     grid.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
     grid.add_argument("--sigma-grid", choices=list(SIGMA_GRIDS),
@@ -99,12 +99,12 @@ def parse_args(argv=None) -> RunConfig:
                    help="--planner search: at most this many KOMO solves per layout (default 3)")
     p.add_argument("--budget-seconds", type=cli.positive_number, default=None,
                    help="--planner search: at most this many seconds per layout (default 120)")
-    p.add_argument("--jobs", type=cli.positive_int, default=D("jobs"),
-                   help="processes, or LocalCluster workers with --scheduler local-dask, >= 1 (default: all cores, %(default)s here)")
+    cli.add_jobs_argument(p, D("jobs"), "processes, or LocalCluster workers with --scheduler local-dask, >= 1 "
+                          "(default: all cores, %(default)s here)")
     p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
                    "(a LocalCluster of --jobs workers); default: a local process pool. Needs the [dask] extra (docs/scaling.md)")
     p.add_argument("--seed", type=cli.seed, default=D("seed"))
-    p.add_argument("--n-boot", type=cli.positive_int, help=f"bootstrap resamples (default {D('n_boot')}; --quick {QUICK['n_boot']})")
+    p.add_argument("--n-boot", type=cli.bounded_count("MAX_N_BOOT"), help=f"bootstrap resamples (default {D('n_boot')}; --quick {QUICK['n_boot']})")
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
     p.add_argument("--max-participants", type=cli.positive_int, default=None,
                    help=f"with --human-data: most participants the file may hold (default {D('max_participants')}; memory grows with "
@@ -124,7 +124,7 @@ def parse_args(argv=None) -> RunConfig:
     p.add_argument("--allow-simulated", action="store_true",
                    help="with --human-data: accept datasets of SIMULATED participants (simulated-*, tests only); "
                         "every table and figure made from them says SIMULATED")
-    p.add_argument("--n-perm", type=cli.positive_int,
+    p.add_argument("--n-perm", type=cli.bounded_count("MAX_N_PERM"),
                    help=f"with --human-data: permutations per permutation test of the risk term (default {D('n_perm')}; "
                         f"--quick {QUICK['n_perm']})")
     p.add_argument("--recovery", action="store_true",
@@ -161,6 +161,8 @@ def parse_args(argv=None) -> RunConfig:
         p.error("--allow-simulated needs --human-data FILE")
     if args.trials and "all" in args.trials and len(set(args.trials)) > 1:
         p.error("--trials all runs every trial file; give it alone")
+    if not (args.scheduler or "").lower().startswith(("tcp://", "tls://", "ws://", "wss://")):  # a cluster has its own cores
+        args.jobs = cli.capped_jobs(args.jobs, p.prog, args.oversubscribe)
     args.command = "python -m lgp.reproduce " + shlex.join(str(a) for a in (argv if argv is not None else sys.argv[1:]))
     return RunConfig.from_args(args)  # every default filled in, once
 

@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from lgp import cli
 from lgp.errors import InputError
 from lgp.paper import BLOCK_SIZE as d
 from lgp.paper import BUILD_SITE
@@ -194,6 +195,8 @@ def generate(directory: str | Path, count: int, seed: int = 0, engine: str | Non
 
     if count < 1:
         raise InputError(f"count must be >= 1, got {count}")
+    if count > cli.MAX_TRIAL_COUNT:
+        raise InputError(f"count {count:,} is more than the {cli.MAX_TRIAL_COUNT:,} allowed (lgp.cli.MAX_TRIAL_COUNT)")
     if kind not in ("scatter", "rearrange"):
         raise InputError(f"kind must be scatter or rearrange, got {kind!r}")
     directory = Path(directory)
@@ -220,10 +223,9 @@ def generate(directory: str | Path, count: int, seed: int = 0, engine: str | Non
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m stimuli.generate", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cli.parser("python -m stimuli.generate", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, help="directory for the trial files (created if missing)")
-    p.add_argument("--count", type=int, required=True, help="number of trials")
+    p.add_argument("--count", type=cli.bounded_count("MAX_TRIAL_COUNT"), required=True, help="number of trials (at most %d)" % cli.MAX_TRIAL_COUNT)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--engine", help="engine of the stability check (default: the risk model's)")
     p.add_argument("--kind", choices=("scatter", "rearrange"), default="scatter",

@@ -2,6 +2,7 @@
 anchors, aliases or duplicate keys, with errors in one line that keeps the position."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import yaml
@@ -10,6 +11,10 @@ from lgp.scene import StimulusError
 
 #: Largest trial file read (bytes): a 10,000-block trial is about 0.6 MB.
 MAX_TRIAL_BYTES = 2_000_000
+#: Most characters of a number in a trial file: coordinates in metres need a few
+#: dozen; a 5000-digit integer would fail inside Python's int conversion.
+MAX_NUMBER_CHARS = 40
+_LONG_NUMBER = re.compile(r"[-+]?[0-9][0-9_]*(\.[0-9_]*)?([eE][-+]?[0-9]+)?|[-+]?\.[0-9_]+([eE][-+]?[0-9]+)?|0[xXoObB][0-9a-fA-F_]+")
 
 
 class _TrialLoader(yaml.SafeLoader):
@@ -34,6 +39,11 @@ def _check_events(where: str, events) -> None:
     stack: list[list] = []  # per open collection: [keys seen (None for a sequence), next node is a key]
     for event in events:
         _refuse_anchors(where, event)
+        if (isinstance(event, yaml.ScalarEvent) and not event.style and len(event.value) > MAX_NUMBER_CHARS
+                and _LONG_NUMBER.fullmatch(event.value)):
+            raise StimulusError(f"{where}: line {event.start_mark.line + 1}: a number of {len(event.value)} characters "
+                                f"({event.value[:20]}...), more than the {MAX_NUMBER_CHARS} a trial file's number may have "
+                                "(stimuli.reading.MAX_NUMBER_CHARS)")
         if isinstance(event, (yaml.ScalarEvent, yaml.MappingStartEvent, yaml.SequenceStartEvent)):
             top = stack[-1] if stack else None
             if top is not None and top[0] is not None:

@@ -24,6 +24,10 @@ _TRIAL_KEYS = {"id", "pair", "level", "dimension", "description", "build_site", 
 _INITIAL_KEYS = {"blocks", "scattered", "recolour"}
 _SCATTER_KEYS = {"count", "colour", "colours", "region", "min_gap", "clearance", "prefix"}
 _BLOCK_KEYS = {"name", "p_WB", "yaw", "colour", "size"}
+#: Most blocks a state (A or B) of a trial may hold: the paper's trials have at most
+#: 26, a generated one a few dozen. A 10,000-block trial took 29 s to validate
+#: before it was refused (and MuJoCo could not allocate it): refused at once now.
+MAX_BLOCKS = 500
 
 
 @dataclass(frozen=True)
@@ -158,13 +162,13 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
 
     target_data = data.get("target") or {}
     _check_keys(f"{tid}-B", target_data, {"blocks"})
-    target = Scene([_block(f"{tid}-B", b) for b in _list(f"{tid}-B blocks", target_data.get("blocks", []))], fixed, f"{tid}-B").validate()
+    target = Scene([_block(f"{tid}-B", b) for b in _blocks(f"{tid}-B", target_data.get("blocks", []))], fixed, f"{tid}-B").validate()
     if not target.blocks:
         raise StimulusError(f"{tid}-B: the target has no blocks")
 
     init = data.get("initial") or {}
     _check_keys(f"{tid}-A", init, _INITIAL_KEYS)
-    fixed_blocks = tuple(_block(f"{tid}-A", b) for b in _list(f"{tid}-A blocks", init.get("blocks", [])))
+    fixed_blocks = tuple(_block(f"{tid}-A", b) for b in _blocks(f"{tid}-A", init.get("blocks", [])))
     Scene(fixed_blocks, fixed, f"{tid}-A").validate()
     scattered, region, kw = (), None, {}
     if "scattered" in init:
@@ -187,12 +191,13 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
             raise StimulusError(f"{tid}-A scattered region: x {region.x}, y {region.y} must be finite ranges "
                                 f"[min, max] inside the workspace |x|, |y| <= {WORKSPACE_XY:g} m")
         if "colours" in s:
-            colours = [_text(f"{where} colours", c) for c in _list(f"{where} colours", s["colours"])]
+            colours = [_text(f"{where} colours", c) for c in _blocks(where, s["colours"], len(fixed_blocks), "colours")]
         else:
             count = _integer(f"{where} count", s.get("count", 0), 0)
             # the room first: a count of 10**12 must not become a list of 10**12 colours
             room_check(f"{tid}-A", count, region, kw.get("min_gap", StartState.min_gap),
                        kw.get("clearance", StartState.clearance))
+            _too_many(where, count + len(fixed_blocks), "count")
             colours = [_text(f"{where} colour", s.get("colour", "natural"))] * count
         prefix = _text(f"{where} prefix", s.get("prefix", "s"))
         scattered = tuple((f"{prefix}{i + 1}", c) for i, c in enumerate(colours))
@@ -222,6 +227,20 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     if colour_shortfall(sample, target):
         raise StimulusError(f"{tid}: a sample of A lacks colours for B: {colour_shortfall(sample, target)}")
     return trial
+
+
+def _too_many(where: str, n: int, what: str = "blocks") -> None:
+    if n > MAX_BLOCKS:
+        raise StimulusError(f"{where} {what}: {n} blocks in one state, more than the {MAX_BLOCKS} allowed "
+                            "(stimuli.trial.MAX_BLOCKS; the paper's trials have at most 26)")
+
+
+def _blocks(where: str, value, already: int = 0, what: str = "blocks") -> list:
+    """A list of blocks (or of their colours) of one state, at most MAX_BLOCKS with
+    the `already` listed: counted before any block is read or checked."""
+    items = _list(f"{where} {what}", value)
+    _too_many(where, len(items) + already, what)
+    return items
 
 
 def _list(where: str, value) -> list:

@@ -84,4 +84,4 @@ def test_a_bad_generated_count_is_refused():
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     r = subprocess.run([sys.executable, "-m", "stimuli.generate", "--out", "/tmp/x", "--count", "0"], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=120)
-    assert r.returncode == 2 and "--count must be >= 1" in r.stderr
+    assert r.returncode == 2 and "argument --count: must be a whole number >= 1" in r.stderr, r.stderr

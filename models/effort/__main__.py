@@ -31,9 +31,9 @@ def main(argv=None) -> int:
     parser.add_argument("trials", nargs="*", type=cli.trial_id,
                         help="trial ids (case-insensitive; default: every trial file in stimuli/trials, "
                              "the paper's 24 and any others there)")
-    parser.add_argument("--samples", type=cli.positive_int, default=SAMPLES, help="layouts per trial (default %(default)s)")
+    parser.add_argument("--samples", type=cli.bounded_count("MAX_SAMPLES"), default=SAMPLES, help="layouts per trial (default %(default)s)")
     parser.add_argument("--seed", type=cli.seed, default=0)
-    parser.add_argument("--jobs", type=cli.positive_int, default=1)
+    cli.add_jobs_argument(parser, 1, "worker processes (default 1)")
     parser.add_argument("--out", type=cli.output_file, help="write the per-sample table (CSV) here")
     parser.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=APPROACH,
                         help="vertical approach/retreat leg (m) at every grasp and place; 0 = clearance constraint "
@@ -47,6 +47,7 @@ def main(argv=None) -> int:
     parser.add_argument("--budget-seconds", type=cli.positive_number, default=None,
                         help=f"search: at most this many seconds per layout (default {Budget().seconds:g})")
     args = parser.parse_args(argv)
+    args.jobs = cli.capped_jobs(args.jobs, parser.prog, args.oversubscribe)
     if args.planner != "search" and (args.budget_solves or args.budget_seconds):
         parser.error("--budget-solves and --budget-seconds apply to --planner search only")
     budget = None

@@ -40,14 +40,14 @@ def main(argv=None) -> int:
     p = cli.parser(PROG, description=__doc__.splitlines()[0])
     p.add_argument("--table", type=cli.output_file, help="CSV to write: trial, sigma, risk, falls, n, engine, fall_rule, fall_threshold")
     p.add_argument("--runs", type=cli.output_file, help="also write the per-run CSV here")
-    p.add_argument("--n-sims", type=cli.positive_int, default=N_SIMS, help="simulations per trial and sigma (default %(default)s)")
+    p.add_argument("--n-sims", type=cli.bounded_count("MAX_N_SIMS"), default=N_SIMS, help="simulations per trial and sigma (default %(default)s)")
     p.add_argument("--seed", type=cli.seed, default=0)
     p.add_argument("--engine", default=DEFAULT_ENGINE, help=f"physics engine: {', '.join(ENGINES)} (default %(default)s)")
     p.add_argument("--profile", help="engine profile: " + "; ".join(f"{e}: {', '.join(v)}" for e, v in PROFILES.items())
                    + " (default: faithful; game-defaults is unfaithful, docs/risk.md)")
     p.add_argument("--fall-rule", type=cli.one_of(FALL_RULES, "fall rule"), default=DEFAULT_FALL_RULE, help=f"{' or '.join(FALL_RULES)} displacement (default %(default)s)")
     p.add_argument("--fall-threshold", type=float, default=FALL_THRESHOLD, help="fall threshold in units of d (default %(default)s)")
-    p.add_argument("--jobs", type=cli.positive_int, default=None, help="worker processes (default: all cores)")
+    cli.add_jobs_argument(p, None, "worker processes (default: all cores)")
     p.add_argument("--noise-rule", choices=NOISE_RULES, default=DEFAULT_NOISE_RULE,
                    help="heights of the noisy blocks: lift (default, blocks may start above their support) or settle "
                         "(every block rests on what lies beneath it; docs/risk.md)")
@@ -64,9 +64,10 @@ def main(argv=None) -> int:
     p.add_argument("--trials", type=cli.trial_id, nargs="+", help="trial ids (default: all 24; case-insensitive)")
     p.add_argument("--build-risk", nargs="+", metavar="TRIAL", type=cli.trial_id_or_all,
                    help="print the stage curve of these trials ('all': the 24)")
-    p.add_argument("--samples", type=cli.positive_int, default=SAMPLES, help="layouts of A per trial for --build-risk (default %(default)s)")
+    p.add_argument("--samples", type=cli.bounded_count("MAX_SAMPLES"), default=SAMPLES, help="layouts of A per trial for --build-risk (default %(default)s)")
     p.add_argument("--out", type=cli.output_file, help="with --build-risk: write the stage table (CSV) here")
     args = p.parse_args(argv)
+    args.jobs = cli.capped_jobs(args.jobs, p.prog, args.oversubscribe)
     args.sigmas = list(SIGMA_GRIDS[args.sigma_grid] if args.sigma_grid else args.sigmas or SIGMA_GRID)
     try:
         args.engine = _engine_name(args.engine, args.profile)
