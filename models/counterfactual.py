@@ -12,7 +12,11 @@ whose centre passes the fall line is taken out of the world, as Box2D's
 `destroyDeadBricks` does. Bricks carry the authors' linear damping (1/s, scaled).
 
 Noise rules (sigma from a grid; standard normals z drawn once per scene, shared by
-every sigma: common random numbers):
+every sigma: common random numbers). The noise moves the bricks the black brick
+carries (directly or through others): the authors shift every brick but then put
+to sleep those outside that set (`doSleepAbove` in brick_world.js), so a brick
+elsewhere stays put until something falls on it. Rules ending in ":all" move
+every remaining brick instead.
 - "authors-x": every remaining brick moves along x only by sigma_A * z, sigma_A an
   absolute SD in the authors' length unit (their level k is sigma_A = 0.03 k).
 - "paper-3d": the paper's rule: every remaining brick moves by sigma * size * z in
@@ -21,9 +25,7 @@ Overlaps the noise creates are removed as the project's noise rule does
 (models/risk/noise.py), on the bricks' x-z outlines (boxes around pitched bricks):
 side neighbours are pushed apart along x, half each, to no more overlap than they
 had; then, bottom-up, a brick is lifted to rest on what lies beneath its new
-outline if the noise pushed it into it (the "lift" rule). Unlike the authors' rule,
-bricks away from the black one are not put to sleep after the shift (their
-`doSleepAbove`): noise can topple any brick.
+outline if the noise pushed it into it (the "lift" rule).
 """
 from __future__ import annotations
 
@@ -38,7 +40,10 @@ from models.risk.engine import DENSITY
 from stimuli.mental_jenga import (FRICTION_A, LINEAR_DAMPING_A, PRESETTLE_STEPS_A, SETTLE_STEPS_A, STEP_A,
                                   JengaScene, time_scale)
 
-NOISE_RULES = ("authors-x", "paper-3d")
+NOISE_RULES = ("authors-x", "paper-3d", "authors-x:all", "paper-3d:all")
+#: Two bricks touch when the gap between their x-z outlines is at most this
+#: (authors' units; Box2D's skin, stimuli.mental_jenga.SKIN_A).
+TOUCH_A = 0.02
 #: Where removed and fallen bricks are parked (x, m): far from the table, on the ground.
 PARK_X = 5.0
 GRAVITY = 9.81
@@ -209,6 +214,33 @@ class Perturbation:
         self.table_top, self.table_x, self.table_hx = t.top, t.p_WO[0], t.size[0] / 2
         self.table_allow = np.maximum(0.0, self.table_top - (xz[:, 1] - half[:, 1]))
         self.order = idx[np.argsort(xz[idx, 1] - half[idx, 1], kind="stable")]
+        self.above = self._above_black(TOUCH_A * scene.scale)
+
+    def _above_black(self, touch: float) -> np.ndarray:
+        """The bricks the black brick carries, directly or through others (the
+        authors' "extended" contacts: "above_local", recursively): j is above i when
+        their outlines overlap in x and j's bottom lies within `touch` of i's top, or
+        (for a pitched brick, whose outline is a box around it) their outlines touch
+        and j's centre is higher."""
+        xz, half, n = self.xz, self.half, self.world.n
+        pitched = np.abs(np.sin(self.pitch)) > 1e-6
+
+        def above(i, j):
+            xgap = abs(xz[i, 0] - xz[j, 0]) - half[i, 0] - half[j, 0]
+            zgap = (xz[j, 1] - half[j, 1]) - (xz[i, 1] + half[i, 1])
+            if pitched[i] or pitched[j]:
+                return xgap <= touch and abs(xz[i, 1] - xz[j, 1]) - half[i, 1] - half[j, 1] <= touch and xz[j, 1] > xz[i, 1]
+            return xgap < 0 and -touch <= zgap <= touch
+
+        found = np.zeros(n, bool)
+        queue = list(np.flatnonzero(self.world.black))
+        while queue:
+            i = queue.pop(0)
+            for j in range(n):
+                if not found[j] and not self.world.black[j] and above(i, j):
+                    found[j] = True
+                    queue.append(j)
+        return found
 
     def positions(self, rule: str, sigma: float, z: np.ndarray) -> np.ndarray:
         """Centres (R, n, 3) for normals z (R, n, 3) at `sigma` (authors' units for
@@ -217,7 +249,10 @@ class Perturbation:
         scene = world.scene
         R, n = z.shape[0], world.n
         p = np.repeat(world.q_settled[None, :, :3], R, axis=0).copy()
-        m = self.movable
+        if rule not in NOISE_RULES:
+            raise ValueError(f"unknown noise rule {rule!r}; known rules: {', '.join(NOISE_RULES)}")
+        rule, _, scope = rule.partition(":")
+        m = self.movable if scope == "all" else self.above
         if rule == "authors-x":
             p[:, m, 0] += scene.scale * sigma * z[:, m, 0]
         elif rule == "paper-3d":

@@ -42,7 +42,7 @@ LAYERS = [
     # caches, report and page writers
     # stimuli.render is a package (camera, engine, run, __main__): the renderer and its cached run
     ("application", [*APP_WING, "stimuli.sheet", "stimuli.generate", "stimuli.render", "stimuli.render.*",
-                     "stimuli.experiment", "stimuli.experiment.*", "analysis.import_study", "*.__main__"], None),
+                     "stimuli.experiment", "stimuli.experiment.*", "analysis.import_study", "analysis.mental_jenga", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]
 RANK = {name: k for k, (name, _, _) in enumerate(LAYERS)}

@@ -1,0 +1,300 @@
+"""The risk engine against another lab's human judgments of what falls (issue 33):
+Mental Jenga (Zhou, Smith, Tenenbaum & Gerstenberg 2023), read from a user's clone
+of `cicl-stanford/mental_jenga` (stimuli/mental_jenga.py).
+
+    python -m analysis.mental_jenga --repo PATH --experiment 2 --out DIR [--runs 100] [--jobs 2]
+
+Per noise rule and sigma on a grid: the model's mean count of red bricks off the
+table per scene (models/counterfactual.py, MuJoCo) against the human mean per
+scene: Pearson r and RMSE of the raw counts (no linear map: the model predicts a
+count in the same unit as the answer). The best sigma is the one of least RMSE
+(ties to the smaller sigma), with a bootstrap interval over participants
+(participants resampled, the human means and the best sigma recomputed; the
+model's means fixed); the held-out r chooses sigma on the other 41 scenes
+(leave-one-scene-out, least RMSE) and correlates each scene's prediction at its
+own held-out sigma with people. Writes DIR/fit.csv, DIR/scenes.csv (per scene and
+sigma), DIR/runs.csv is not written (the per-run tables are the cache,
+DIR/cache/), DIR/summary.json and DIR/scatter.png (model vs people at the best
+sigma, the authors' perceptual-noise model at its best level beside it).
+Nothing here is fitted to Experiment 1: run it once, after Experiment 2.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from stimuli.mental_jenga import BRICK_A, MentalJengaError, read_predictions, read_scenes
+
+#: sigma grids: authors' units for "authors-x" (their level k is 0.03 k), a fraction
+#: of the brick's edge along each axis for "paper-3d".
+DEFAULT_GRID = tuple(round(0.01 * k, 2) for k in range(31))
+RULES = ("authors-x", "paper-3d")
+KIND = "mjruns"
+
+
+# ----------------------------------------------------------------------------- simulation (cached, both cores)
+
+
+def _code_key() -> dict:
+    from lgp.app.cache import library_versions, modules_digest
+
+    return {"code": modules_digest("models.counterfactual"), "libraries": library_versions(("mujoco", "numpy"))}
+
+
+def _simulate(scene, rule, sigmas, n_runs, seed):
+    from models.counterfactual import counterfactual_runs
+
+    t0 = time.process_time()
+    df = counterfactual_runs(scene, rule, sigmas, n_runs, seed)
+    return df, time.process_time() - t0
+
+
+def simulate_all(scenes, rules, sigmas, n_runs: int, seed: int, cache_dir: Path, jobs: int = 2, log=sys.stderr):
+    """Per-run table of every (scene, rule): trial, rule, sigma, run, fallen, ids;
+    each (scene, rule) a cache entry keyed by its inputs, computed on `jobs` processes."""
+    from lgp.app.cache import Cache, input_key
+    from models.counterfactual import FallSettings
+
+    cache = Cache(cache_dir)
+    base = {**_code_key(), "settings": FallSettings().as_dict(), "sigmas": list(map(float, sigmas)), "runs": n_runs, "seed": seed}
+    tables, todo = {}, []
+    for s in scenes:
+        for rule in rules:
+            key = input_key(scene=s.digest, label=s.label, rule=rule, **base)
+            df = cache.get(KIND, key)
+            if df is not None:
+                tables[s.label, rule] = df
+            else:
+                todo.append((s, rule, key))
+    cpu = 0.0
+    if todo:
+        print(f"analysis.mental_jenga: simulating {len(todo)} scene x rule tables "
+              f"({len(todo) * len(sigmas) * n_runs} runs) on {jobs} processes", file=log, flush=True)
+        t0 = time.time()
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = {pool.submit(_simulate, s, rule, list(sigmas), n_runs, seed): (s, rule, key) for s, rule, key in todo}
+            for k, f in enumerate(as_completed(futures), 1):
+                s, rule, key = futures[f]
+                df, c = f.result()
+                cpu += c
+                tables[s.label, rule] = cache.put(KIND, key, df)
+                print(f"  {k}/{len(todo)} {s.label} {rule}: {time.time() - t0:.0f} s", file=log, flush=True)
+    out = pd.concat([tables[s.label, r] for s in scenes for r in rules], ignore_index=True)
+    out["trial"] = out["trial"].astype(str)
+    return out, {"computed": len(todo), "cached": len(scenes) * len(rules) - len(todo), "cpu_s": cpu}
+
+
+# ----------------------------------------------------------------------------- statistics
+
+
+def fit_stats(model: np.ndarray, human: np.ndarray) -> tuple[float, float]:
+    """(Pearson r, RMSE) of model means against human means, no linear map. r is nan
+    when the model is constant over scenes."""
+    rmse = float(np.sqrt(np.mean((model - human) ** 2)))
+    if np.std(model) == 0 or np.std(human) == 0:
+        return float("nan"), rmse
+    return float(np.corrcoef(model, human)[0, 1]), rmse
+
+
+def least(values: np.ndarray) -> int:
+    """Index of the least value; values within 1e-9 (relative) of it go to the first (smaller sigma)."""
+    v = np.asarray(values, float)
+    lo = np.nanmin(v)
+    return int(np.flatnonzero(v <= lo + 1e-9 * max(1.0, abs(lo)))[0])
+
+
+def best_sigma_index(M: np.ndarray, h: np.ndarray) -> int:
+    """M (sigmas, scenes) model means, h (scenes,) human means: sigma of least RMSE."""
+    return least(np.sqrt(np.mean((M - h[None]) ** 2, axis=1)))
+
+
+def held_out_r(M: np.ndarray, h: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """Leave-one-scene-out: for each scene, sigma chosen by RMSE on the others, that
+    scene's prediction at it; (r, RMSE, chosen sigma index per scene)."""
+    n = len(h)
+    pred, chosen = np.empty(n), np.empty(n, int)
+    for i in range(n):
+        keep = np.arange(n) != i
+        k = best_sigma_index(M[:, keep], h[keep])
+        chosen[i], pred[i] = k, M[k, i]
+    r, rmse = fit_stats(pred, h)
+    return r, rmse, chosen
+
+
+def bootstrap_sigma(M: np.ndarray, responses: np.ndarray, sigmas: np.ndarray, n_boot: int = 2000, seed: int = 0):
+    """Percentile 95% interval of the best sigma when participants are resampled
+    (responses: participants x scenes, complete)."""
+    rng = np.random.default_rng(seed)
+    P = responses.shape[0]
+    out = np.empty(n_boot)
+    for b in range(n_boot):
+        h = responses[rng.integers(0, P, P)].mean(axis=0)
+        out[b] = sigmas[best_sigma_index(M, h)]
+    return float(np.percentile(out, 2.5)), float(np.percentile(out, 97.5))
+
+
+def authors_reference(repo: Path, experiment: int, human: pd.Series) -> pd.DataFrame | None:
+    """The authors' perceptual-noise model (levels 0-10) where the clone has it: per
+    level, r and RMSE of their mean count against the human means."""
+    folder = repo / "code" / "R" / "simulations" / f"exp{experiment}"
+    rows = []
+    for level in range(11):
+        p = folder / f"perceptual,impulse-aligned,dynamics_{level},0,0.json"
+        if not p.is_file():
+            return None
+        data = json.loads(p.read_text())
+        m = np.array([np.mean([len(run) for run in data[f"trial_{t}"]]) for t in human.index])
+        r, rmse = fit_stats(m, human.to_numpy())
+        rows.append({"level": level, "sigma_authors": 0.03 * level, "r": r, "rmse": rmse, "means": m})
+    return pd.DataFrame(rows)
+
+
+def sigma_units(rule: str, sigma: float) -> dict:
+    """The sigma in the authors' units and as fractions of the brick's width and height
+    and of the edge along the perturbed axis (the paper's unit)."""
+    w, h = BRICK_A
+    if rule == "authors-x":
+        return {"authors_units": sigma, "brick_widths": sigma / w, "brick_heights": sigma / h,
+                "paper_unit_flat": sigma / w, "paper_unit_standing": sigma / h,
+                "paper_unit_note": "x only: a fraction of the edge along x, which is the width for a flat brick "
+                                   "and the height for a standing one"}
+    return {"authors_units_flat_x": sigma * w, "authors_units_flat_z": sigma * h, "brick_widths_x": sigma,
+            "paper_unit": sigma, "paper_unit_note": "the paper's rule: sigma is already a fraction of each edge"}
+
+
+# ----------------------------------------------------------------------------- the whole check
+
+
+def analyse(repo, experiment: int, out, sigmas=DEFAULT_GRID, n_runs: int = 100, seed: int = 0, jobs: int = 2,
+            rules=RULES, cache_dir=None, log=sys.stderr) -> dict:
+    repo, out = Path(repo), Path(out)
+    scenes = read_scenes(repo, experiment)  # bad input raises here, before anything is written
+    pred = read_predictions(repo, experiment)
+    trials = [s.trial for s in scenes]
+    missing = sorted(set(trials) - set(pred.trial))
+    if missing:
+        raise MentalJengaError(f"{repo}: no human predictions for trial(s) {missing}")
+    wide = pred.pivot_table(index="participant", columns="trial", values="response", aggfunc="mean")[trials]
+    complete = wide.dropna()
+    human = wide.mean(axis=0)  # per scene, over every participant who answered it
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.time()
+    runs, run_info = simulate_all(scenes, rules, sigmas, n_runs, seed, Path(cache_dir or out / "cache"), jobs, log)
+    wall = time.time() - t0
+    label_of = {s.label: s.trial for s in scenes}
+    runs["scene"] = runs["trial"].map(label_of)
+    means = runs.groupby(["rule", "sigma", "scene"]).fallen.agg(["mean", "std"]).reset_index()
+    sig = np.array(sorted(map(float, sigmas)))
+    fit_rows, summary = [], {"experiment": experiment, "scenes_used": len(scenes), "scenes_skipped": 0,
+                             "skipped": [], "participants": int(wide.shape[0]), "runs_per_sigma": n_runs,
+                             "seed": seed, "engine": "mujoco", "linear_map": False, "rules": {}}
+    for rule in rules:
+        M = np.array([[means[(means.rule == rule) & (means.sigma == s) & (means.scene == t)]["mean"].iloc[0]
+                       for t in trials] for s in sig])
+        h = human.to_numpy()
+        for k, s in enumerate(sig):
+            r, rmse = fit_stats(M[k], h)
+            fit_rows.append({"rule": rule, "engine": "mujoco", "sigma": s, "r": r, "rmse": rmse})
+        kb = best_sigma_index(M, h)
+        r_best, rmse_best = fit_stats(M[kb], h)
+        r_ho, rmse_ho, chosen = held_out_r(M, h)
+        lo, hi = bootstrap_sigma(M, complete.to_numpy(), sig, seed=seed)
+        rs = np.array([fit_stats(M[k], h)[0] for k in range(len(sig))])
+        k_r = int(np.nanargmax(rs)) if np.isfinite(rs).any() else 0
+        summary["rules"][rule] = {
+            "best_sigma": float(sig[kb]), "best_sigma_interval_95": [lo, hi], "units": sigma_units(rule, float(sig[kb])),
+            "interval_units": [sigma_units(rule, lo), sigma_units(rule, hi)],
+            "r": r_best, "rmse": rmse_best, "held_out_r": r_ho, "held_out_rmse": rmse_ho,
+            "held_out_sigmas": sorted({float(sig[c]) for c in chosen}),
+            "best_r_sigma": float(sig[k_r]), "best_r": float(rs[k_r]),
+            "deterministic_r_rmse": list(fit_stats(M[0], h)) if sig[0] == 0 else None,
+        }
+        summary["rules"][rule]["model_means"] = {int(t): float(v) for t, v in zip(trials, M[kb])}
+    summary["human_means"] = {int(t): float(v) for t, v in human.items()}
+    ref = authors_reference(repo, experiment, human)
+    if ref is not None:
+        kb = least(ref.rmse.to_numpy())
+        summary["authors_perceptual"] = {"best_rmse_level": int(ref.level[kb]), "r": float(ref.r[kb]), "rmse": float(ref.rmse[kb]),
+                                         "best_r": float(ref.r.max()), "best_r_level": int(ref.level[ref.r.idxmax()])}
+    summary["timing"] = {"wall_s": round(wall, 1), "sim_cpu_s": round(run_info["cpu_s"], 1), **{k: run_info[k] for k in ("computed", "cached")},
+                         "jobs": jobs, "load_before": os.getloadavg()[0]}
+    fit = pd.DataFrame(fit_rows)
+    fit.to_csv(out / "fit.csv", index=False)
+    means.to_csv(out / "scenes.csv", index=False)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+    scatter(out / "scatter.png", trials, human, summary, ref, experiment)
+    return summary
+
+
+def scatter(path: Path, trials, human: pd.Series, summary: dict, ref, experiment: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = [(rule, s) for rule, s in summary["rules"].items()]
+    n = len(panels) + (ref is not None)
+    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 4.2), squeeze=False)
+    top = max(8.0, float(human.max()) + 1)
+    h = human.to_numpy()
+    for ax, (rule, s) in zip(axes[0], panels):
+        m = np.array([s["model_means"][int(t)] for t in trials])
+        ax.scatter(m, h, s=18, color="C0")
+        ax.set_title(f"{rule}: sigma {s['best_sigma']:g}\nr {s['r']:.2f}, RMSE {s['rmse']:.2f}, held-out r {s['held_out_r']:.2f}", fontsize=9)
+    if ref is not None:
+        a = summary["authors_perceptual"]
+        m = ref.means[a["best_rmse_level"]]
+        ax = axes[0][-1]
+        ax.scatter(m, h, s=18, color="C3")
+        ax.set_title(f"authors' perceptual model, level {a['best_rmse_level']}\nr {a['r']:.2f}, RMSE {a['rmse']:.2f}", fontsize=9)
+    for ax in axes[0]:
+        ax.plot([0, top], [0, top], color="0.7", lw=0.8)
+        ax.set_xlim(-0.3, top)
+        ax.set_ylim(-0.3, top)
+        ax.set_xlabel("model: mean red bricks off the table")
+        ax.set_ylabel("people: mean predicted count")
+        ax.set_aspect("equal")
+    fig.suptitle(f"Mental Jenga experiment {experiment}: {len(trials)} scenes, one point per scene", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m analysis.mental_jenga", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repo", required=True)
+    ap.add_argument("--experiment", type=int, required=True)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--runs", type=int, default=100)
+    ap.add_argument("--sigmas", default=None, help="comma-separated grid (default 0, 0.01, ..., 0.30)")
+    ap.add_argument("--rules", default=",".join(RULES))
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--cache", default=None, help="cache folder (default OUT/cache)")
+    args = ap.parse_args(argv)
+    try:
+        sigmas = DEFAULT_GRID if args.sigmas is None else tuple(float(v) for v in args.sigmas.split(","))
+        rules = tuple(args.rules.split(","))
+        bad = [r for r in rules if r not in RULES]
+        if bad or args.runs < 1 or any(not np.isfinite(s) or s < 0 for s in sigmas):
+            raise MentalJengaError(f"--rules must be among {', '.join(RULES)}, --runs >= 1, sigmas finite and >= 0")
+        s = analyse(args.repo, args.experiment, args.out, sigmas, args.runs, args.seed, args.jobs, rules, args.cache)
+    except (MentalJengaError, ValueError) as e:
+        print(f"analysis.mental_jenga: {e}", file=sys.stderr)
+        return 2
+    for rule, v in s["rules"].items():
+        print(f"{rule}: best sigma {v['best_sigma']:g} [{v['best_sigma_interval_95'][0]:g}, {v['best_sigma_interval_95'][1]:g}], "
+              f"r {v['r']:.3f}, RMSE {v['rmse']:.3f}, held-out r {v['held_out_r']:.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
