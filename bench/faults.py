@@ -22,6 +22,7 @@ import argparse
 import contextlib
 import hashlib
 import io
+import itertools
 import os
 import shutil
 import sys
@@ -496,6 +497,51 @@ def cache_cases(tmp: Path):
     yield "a directory", replace_with(lambda p: p.mkdir())
 
 
+def resigned_cases(tmp: Path):
+    """Entries whose checksum holds (re-signed after the edit) but whose values are wrong."""
+    from lgp.app.cache import Cache
+    from lgp.app.manifest import TimedCache
+
+    effort = pd.DataFrame({"trial": ["1E"] * 2, "sample": [0, 1], "effort": [0.5, 0.7], "n_actions": [4, 4],
+                           "solve_time": [1.0, 1.1], "solver": "snopt", "status": "kSolutionFound"})
+    runs = pd.DataFrame({"trial": "7H", "sigma": [0.05, 0.05, 0.1, 0.1], "run": [0, 1, 0, 1], "fell": [True, False] * 2,
+                         "engine": "mujoco", "fall_rule": "horizontal", "fall_threshold": 0.25, "noise_rule": "lift"})
+
+    def case(kind, df, column=None, value=None, rows=None):
+        def run():
+            root = Path(tempfile.mkdtemp(dir=tmp)) / "cache"
+            bad = df.copy()
+            if column is not None:
+                bad[column] = bad[column].astype(object)
+                bad.loc[1, column] = value
+            Cache(root).put(kind, "k", bad)  # written and signed as a sound entry would be
+            fresh = Cache(root)
+            err = io.StringIO()
+            with contextlib.redirect_stderr(err):
+                got = fresh.get(kind, "k", rows=rows)
+            if got is None and fresh.recomputed == 1 and fresh.computed == 1:
+                return f"recomputed: {err.getvalue().strip().split(': ', 2)[-1][:150]}"
+            return f"used: {got.to_dict('list') if got is not None else None}"
+        return run
+
+    yield "re-signed effort entry with effort `abc` (a TypeError before)", case("effort", effort, "effort", "abc")
+    yield "re-signed effort entry with effort -1e308 (published as -3.3e+307,inf)", case("effort", effort, "effort", -1e308)
+    yield "re-signed effort entry with effort inf", case("effort", effort, "effort", float("inf"))
+    yield "re-signed risk runs with fell `maybe`", case("riskruns", runs, "fell", "maybe")
+    yield "re-signed risk runs with sigma 2", case("riskruns", runs, "sigma", 2.0)
+    yield "re-signed risk runs with rows missing", case("riskruns", runs, rows=6)
+
+    def times():
+        root = Path(tempfile.mkdtemp(dir=tmp)) / "cache"
+        root.mkdir()
+        (root / "compute_times.json").write_text('{"x": null, "y": "abc"}')
+        cache = TimedCache(root)
+        with cache.stage():
+            cache.put("effort", "k", effort)
+        return f"recomputed: the bad times dropped, the rerun goes on ({cache.load_times()})"
+    yield "compute_times.json `{\"x\": null}` (crashed every rerun)", times
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "faults.md")
@@ -505,7 +551,8 @@ def main(argv=None) -> int:
         tmp = Path(tmp)
         groups = [("trial file", trial_cases(tmp)), ("human data", human_cases(tmp)),
                   ("study import", import_cases(tmp)), ("command line", command_cases()), ("API", api_cases()),
-                  ("cache entry", ((n, _cache_run(d, tmp)) for n, d in cache_cases(tmp)))]
+                  ("cache entry", itertools.chain(((n, _cache_run(d, tmp)) for n, d in cache_cases(tmp)),
+                                                  resigned_cases(tmp)))]
         for group, cases in groups:
             for name, run in cases:
                 accept = False

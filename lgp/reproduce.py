@@ -385,7 +385,7 @@ def end_of_run(seconds: float, cache, out: Path, n_files: int) -> str:
     where to look ("done in 16 s (120 results computed, 0 reused from the cache);
     open results/index.html")."""
     extra = getattr(cache, "files", {})  # the page's pictures and replays, beside the result tables
-    computed = cache.misses + sum(n for (_, o), n in extra.items() if o == "miss")
+    computed = cache.misses + cache.recomputed + sum(n for (_, o), n in extra.items() if o == "miss")
     reused = cache.hits + sum(n for (_, o), n in extra.items() if o == "hit")
     took = f"{seconds:.0f} s" if seconds >= 10 else f"{seconds:.1f} s"
     if seconds >= 120:

@@ -15,6 +15,10 @@ A run killed half way leaves only whole files behind (each is written to a
 temporary name, then renamed), so the next run resumes where it stopped. An entry
 that is damaged anyway (truncated, emptied, garbled, lines lost, not UTF-8) fails
 its checksum: it is reported in one line on stderr and recomputed, never used.
+An entry whose checksum holds is still checked against its kind's schema
+(`ENTRY_SCHEMAS`: columns, types, finite values in range, and the rows the
+caller expects), so an entry re-signed with wrong contents (``effort: abc``,
+``-1e308``) is recomputed too, whatever its checksum says.
 `Cache.counts` says how many lookups were hits, misses and recomputed entries.
 """
 from __future__ import annotations
@@ -23,6 +27,7 @@ import ast
 import hashlib
 import io
 import json
+import math
 import platform
 import re
 import sys
@@ -251,6 +256,71 @@ def read_entry(path: Path, dtype=None, kind: str | None = None, key: str | None 
     return df
 
 
+#: What each kind of entry must hold, checked on every read after its checksum:
+#: column -> "id" (a trial id), "bool" (True/False), or (kind, low, high): numbers
+#: ("float" or "int"), finite, low <= value <= high (None: no bound). A column
+#: named without "?" must be present; one with "?" is checked when present; others
+#: are not looked at.
+ENTRY_SCHEMAS: dict[str, dict[str, object]] = {
+    # effort in J*s: the paper's trials need 0.1-10; 1e6 is far past any plan
+    "effort": {"trial": "id", "effort": ("float", 0.0, 1e6), "sample?": ("int", 0, None),
+               "n_actions?": ("int", 0, 10_000), "solve_time?": ("float", 0.0, None)},
+    "riskruns": {"trial": "id", "sigma": ("float", 0.0, 1.0), "fell": "bool", "run?": ("int", 0, None),
+                 "fall_threshold?": ("float", 0.0, None)},
+    "sensitivity": {"trial": "id", "sigma?": ("float", 0.0, 1.0), "fell?": "bool"},
+    "stable": {"trial": "id", "stable": "bool"},
+}
+
+
+def check_entry(kind: str, df: pd.DataFrame, rows: int | None = None) -> pd.DataFrame:
+    """`df` with its numeric columns as numbers, if it obeys ENTRY_SCHEMAS[kind]
+    (and has `rows` rows when given); else DamagedEntry naming the column, row
+    and value. Kinds without a schema pass as they are."""
+    if rows is not None and len(df) != rows:
+        raise DamagedEntry(f"{len(df)} rows, this run expects {rows}")
+    schema = ENTRY_SCHEMAS.get(kind)
+    if not schema:
+        return df
+    missing = [c for c in schema if not c.endswith("?") and c not in df.columns]
+    if missing:
+        raise DamagedEntry(f"column(s) {', '.join(missing)} missing (a {kind} entry has "
+                           f"{', '.join(c for c in schema if not c.endswith('?'))})")
+    out = df.copy()
+    for column, rule in schema.items():
+        column = column.rstrip("?")
+        if column not in df.columns:
+            continue
+        col = df[column]
+        if rule == "id":
+            bad = ~col.astype(str).str.fullmatch(r"[A-Za-z0-9_-]{1,64}")
+        elif rule == "bool":
+            values = col.map(lambda v: {"True": True, "False": False, True: True, False: False, 1: True, 0: False}.get(
+                v if not isinstance(v, str) else v.strip(), None))
+            bad = values.isna()
+            if not bad.any():
+                out[column] = values.astype(bool)
+        else:
+            number, low, high = rule
+            values = pd.to_numeric(col, errors="coerce").astype(float)
+            bad = ~values.map(math.isfinite)
+            if low is not None:
+                bad |= values < low
+            if high is not None:
+                bad |= values > high
+            if number == "int":
+                bad |= values.map(lambda v: math.isfinite(v) and v != int(v))
+            if not bad.any():
+                out[column] = values.astype(int) if number == "int" else values
+        if bad.any():
+            k = int(bad.to_numpy().nonzero()[0][0])
+            what = {"id": "a trial id", "bool": "True or False"}.get(rule) if isinstance(rule, str) else (
+                f"a finite {'whole number' if rule[0] == 'int' else 'number'}"
+                + (f" in [{rule[1]:g}, {rule[2]:g}]" if rule[2] is not None else f" >= {rule[1]:g}"))
+            raise DamagedEntry(f"row {k + 1}: {column} {str(col.iloc[k])!r} is not {what} ({int(bad.sum())} such row(s)); "
+                               "its checksum holds, its contents do not")
+    return out
+
+
 class Cache:
     """Directory of cached DataFrames; ``enabled=False`` recomputes everything
     (and rewrites the entries).
@@ -297,14 +367,21 @@ class Cache:
     def path(self, kind: str, key: str) -> Path:
         return self.root / f"{kind}-{key}.csv"
 
-    def get(self, kind: str, key: str) -> pd.DataFrame | None:
-        """The cached table, or None when it must be computed (absent, disabled or damaged)."""
+    @property
+    def computed(self) -> int:
+        """Results computed by this run: misses and damaged entries recomputed."""
+        return self.misses + self.recomputed
+
+    def get(self, kind: str, key: str, rows: int | None = None) -> pd.DataFrame | None:
+        """The cached table, or None when it must be computed (absent, disabled or
+        damaged: a failed checksum, or contents that break ENTRY_SCHEMAS[kind], or
+        not `rows` rows when given)."""
         path = self.path(kind, key)
         if not self.enabled or not (path.exists() or path.is_symlink()):
             self.counts[kind, "miss"] += 1
             return None
         try:
-            df = read_entry(path, dtype=self.dtype, kind=kind, key=key, within=self.root)
+            df = check_entry(kind, read_entry(path, dtype=self.dtype, kind=kind, key=key, within=self.root), rows)
         except (DamagedEntry, OSError, ValueError, UnicodeDecodeError, pd.errors.ParserError) as e:
             print(f"lgp.cache: damaged entry {path}: {e}; recomputing it", file=sys.stderr, flush=True)
             self.counts[kind, "recomputed"] += 1

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import shutil
 import time
@@ -227,9 +228,14 @@ class TimedCache(Cache):
             from lgp.inputs import read_bounded
 
             data = read_bounded(self._times_path, MAX_MANIFEST_BYTES, "compute-times file", within=self.root)
-            return {str(k): float(v) for k, v in json.loads(data).items()}
-        except (OSError, ValueError, AttributeError):
+            times = json.loads(data)
+        except (OSError, ValueError):
             return {}
+        if not isinstance(times, dict):
+            return {}
+        # only finite, non-negative numbers of seconds: {"x": null} or "abc" is dropped, not a crash
+        return {str(k): float(v) for k, v in times.items()
+                if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0}
 
     def stage(self):
         cache = self

@@ -587,7 +587,7 @@ def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFr
         "engine_settings": settings,
         "stages": dict(clock.laps),
         "cache": {"hits": cache.hits + sum(n for (_, o), n in cache.files.items() if o == "hit"),
-                  "misses": cache.misses + sum(n for (_, o), n in cache.files.items() if o == "miss"),
+                  "misses": cache.misses + cache.recomputed + sum(n for (_, o), n in cache.files.items() if o == "miss"),
                   "root": str(cache.root), "words": cache_words(counts)},
         "finished": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": f"{platform.node()}, {os.cpu_count()} cores",

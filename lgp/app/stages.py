@@ -147,7 +147,7 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
 
     depends = risk_key_inputs(engine, fall_rule, fall_threshold, noise_rule)
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
-    tables = {t.id: cache.get("riskruns", keys[t.id]) for t in trials}
+    tables = {t.id: cache.get("riskruns", keys[t.id], rows=len(sigmas) * n_sims) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
     # a trial whose B is identical to another's has the same runs (models.risk.core.geometry_key):
     # simulate one of each, give the others its runs under their own id
