@@ -35,7 +35,9 @@ from lgp.executor import ProcessExecutor, SerialExecutor, WorkerDied, executor_f
 from lgp.app.progress import log as progress_log
 from lgp.app.cache import library_versions, write_csv_atomic
 from lgp.app.config import RunConfig
-from lgp.app.manifest import OutputLock, TimedCache, clear_previous, expand, file_sha256, input_hash, write_manifest
+from lgp import owned
+from lgp.app.manifest import (MANIFEST, OutputLock, TimedCache, check_output_folder, expand, file_sha256, input_hash,
+                              write_manifest)
 from lgp.app.page import write_index
 from lgp.app.pictures import rendered_trial_pictures
 from lgp.app.progress import Stopwatch
@@ -67,7 +69,11 @@ def parse_args(argv=None) -> RunConfig:
     D = RunConfig.default
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default=D("out"), type=cli.output_dir,
-                   help="output directory (default: results/); an earlier run's outputs in it are removed, its cache kept")
+                   help="output directory (default: results/); at the end this run's files replace those of the earlier "
+                        "run listed in its manifest.json (its cache is kept); nothing else there is deleted")
+    p.add_argument("--into-existing", action="store_true",
+                   help="write into an --out that holds other files and no manifest.json of an earlier run, beside "
+                        "those files (none is deleted or overwritten); without it such a folder is refused")
     p.add_argument("--stimuli", metavar="DIR", type=cli.input_dir,
                    help="run on the trial files of DIR (default: stimuli/trials, the paper's): all of them unless --trials "
                    "names some; pair table only for pairs whose E and H files are both there")
@@ -172,6 +178,9 @@ def main(argv=None) -> int:
     with stop_signals() as stop:  # `timeout`, `kill` and schedulers stop a run as Ctrl-C does
         try:
             return run(args, argv)
+        except owned.ForeignFiles as e:  # a folder this run may not write into: one line, exit 2
+            print(f"{PROG}: error: {cli.one_line(e)}", file=sys.stderr)
+            return cli.EXIT_USAGE
         except WorkerDied as e:  # one line that also says what is kept
             print(f"{PROG}: error: {e}; {_resume_note(args)}", file=sys.stderr)
             return cli.EXIT_DATA
@@ -211,17 +220,56 @@ def run(args: RunConfig, argv=None) -> int:
         if not {t.id for t in trials} >= set(TRIAL_IDS):
             raise InputError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
     out = Path(args.out)
+    check_output_folder(out, args.into_existing)  # a folder of foreign files: refused now, before any work
+    created = _missing_folders(out)
+    new_cache = not (out / "cache").exists()
     out.mkdir(parents=True, exist_ok=True)
-    with OutputLock(out, args.command):  # one run per output folder, for the whole run
-        return _run_in(out, args, argv, trials, human, t0, clock)
+    ok = False
+    try:
+        with OutputLock(out, args.command):  # one run per output folder (and none inside or around it), for the whole run
+            earlier = check_output_folder(out, args.into_existing)  # again, now that no other run can change it
+            owned.remove_stale_staging(out)
+            stage = owned.new_staging(out)  # this run's files, moved into `out` when all are written
+            try:
+                code = _run_in(out, stage, earlier, args, argv, trials, human, t0, clock)
+                ok = True
+                return code
+            finally:
+                owned.remove_staging(stage)  # a failed or stopped run: the earlier run's files are untouched
+    finally:
+        if not ok:
+            _remove_if_empty(out, created, new_cache)
 
 
-def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
-    """`run` once the inputs are validated and the output folder is locked."""
-    removed = clear_previous(out, _log)  # this folder describes this run only (lgp/app/manifest.py)
-    if removed:
-        _log(f"removed the outputs of an earlier run from {out}: {', '.join(removed)} (the cache is kept)")
-    cache = TimedCache(out / "cache", enabled=not args.no_cache)
+def _missing_folders(out: Path) -> list[Path]:
+    """The folders `out.mkdir(parents=True)` would create, deepest first."""
+    missing = []
+    while not out.exists() and not out.is_symlink() and out != out.parent:
+        missing.append(out)
+        out = out.parent
+    return missing
+
+
+def _remove_if_empty(out: Path, created: list[Path], new_cache: bool) -> None:
+    """After a failed run: the folders it created that hold nothing (an empty cache
+    included; a cache with results stays, to resume from)."""
+    if new_cache:
+        try:
+            (out / "cache").rmdir()
+        except OSError:
+            pass
+    for folder in created:
+        try:
+            folder.rmdir()
+        except OSError:
+            return
+
+
+def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0: float, clock) -> int:
+    """`run` once the inputs are validated and the output folder is locked: every
+    output is written under `stage` and swapped into `out` at the end (lgp/owned.py)."""
+    final, out = out, stage  # noqa: F841 (out: where this run writes; final: the folder it ends in)
+    cache = TimedCache(final / "cache", enabled=not args.no_cache)
     _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}"
          f"{', scheduler ' + args.scheduler if args.scheduler else ''}; cache {cache.root}")
 
@@ -367,16 +415,22 @@ def _run_in(out: Path, args, argv, trials, human, t0: float, clock) -> int:
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
     files = list(dict.fromkeys(expand(written)))
-    manifest = write_manifest(out, files, command=[PROG, *(sys.argv[1:] if argv is None else argv)],
-                              parameters=parameters, inputs=inputs, input_hash=input_hash(**parameters, **inputs),
-                              engine=engine_description(args.engine, software["engine"]), software=software,
-                              run_time_s=round(time.perf_counter() - t0, 1),
-                              compute_time_s=round(compute[0], 1), compute_time_unknown_results=compute[1])
+    write_manifest(out, files, command=[PROG, *(sys.argv[1:] if argv is None else argv)],
+                   parameters=parameters, inputs=inputs, input_hash=input_hash(**parameters, **inputs),
+                   engine=engine_description(args.engine, software["engine"]), software=software,
+                   run_time_s=round(time.perf_counter() - t0, 1),
+                   compute_time_s=round(compute[0], 1), compute_time_unknown_results=compute[1])
+    # The swap: this run's files replace the earlier run's own (lgp/owned.py); nothing else is touched.
+    removed = owned.swap_in(final, stage, earlier, MANIFEST)
+    if removed:
+        _log(f"removed the outputs of an earlier run from {final} that this run did not write again: "
+             f"{', '.join(owned.summarise(removed))} (the cache is kept)")
+    files = [final / Path(f).relative_to(stage) for f in files]
     if args.verbose:
-        print(f"Outputs of this run in {out.resolve()} (listed in {manifest.name}):")
-        for path in files + [manifest]:
+        print(f"Outputs of this run in {final.resolve()} (listed in {MANIFEST}):")
+        for path in files + [final / MANIFEST]:
             print(f"  {path}")
-    print(end_of_run(time.perf_counter() - t0, cache, out, len(files)))
+    print(end_of_run(time.perf_counter() - t0, cache, final, len(files)))
     return 0
 
 

@@ -1,5 +1,5 @@
-"""One run per output folder, and clearing an earlier run's outputs never reaches
-outside the folder (issue 27, items 3 and 10)."""
+"""One run per output folder, and replacing an earlier run's outputs never reaches
+outside the folder (issue 27, items 3 and 10; issue 30: only a run's own files)."""
 import json
 import os
 import signal
@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from lgp.app.manifest import OutputFolderBusy, OutputLock, clear_previous
+from lgp import owned
+from lgp.app.manifest import OutputFolderBusy, OutputLock, check_output_folder
 from lgp.atomic import write_bytes_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -50,6 +51,8 @@ def test_a_run_in_a_held_folder_says_who_holds_it_and_touches_nothing(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "effort.csv").write_text("the other run's\n")
+    (out / "manifest.json").write_text(json.dumps({"command": ["python -m lgp.reproduce"], "files": [
+        {"path": "effort.csv", "sha256": __import__("hashlib").sha256(b"the other run's\n").hexdigest()}]}))
     with OutputLock(out, "python -m lgp.reproduce --out out (the other run)"):
         t0 = time.monotonic()
         r = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--trials", "1E", "--samples", "1", "--n-sims", "2",
@@ -107,41 +110,43 @@ def test_two_real_runs_in_one_folder_one_runs_the_other_is_refused(tmp_path):
         assert hashlib.sha256((out / f["path"]).read_bytes()).hexdigest() == f["sha256"], f["path"]
 
 
-# ----------------------------------------------------------------------------- item 10: clearing
+# ----------------------------------------------------------------------------- item 10: clearing (issue 30: lgp/owned.py)
 
 
 def _folder(tmp_path, listed):
     out = tmp_path / "out"
     out.mkdir()
-    (out / "manifest.json").write_text(json.dumps({"files": [{"path": p} for p in listed]}))
+    (out / "manifest.json").write_text(json.dumps({"command": ["python -m lgp.reproduce"],
+                                                   "files": [{"path": p, "sha256": "0" * 64} for p in listed]}))
     return out
 
 
-def test_clearing_never_deletes_through_a_symlinked_subfolder(tmp_path):
+def test_a_run_never_deletes_through_a_symlinked_subfolder(tmp_path):
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     (elsewhere / "important.txt").write_text("keep me")
-    out = _folder(tmp_path, ["page/important.txt", "effort.csv"])
+    out = _folder(tmp_path, ["page/important.txt"])
+    entries = owned.manifest_entries(json.loads((out / "manifest.json").read_text()))
+    entries["page/important.txt"].add(__import__("hashlib").sha256(b"keep me").hexdigest())  # even with its hash
     (out / "page").symlink_to(elsewhere)
-    (out / "effort.csv").write_text("old")
-    said = []
-    removed = clear_previous(out, said.append)
-    assert (elsewhere / "important.txt").read_text() == "keep me"
-    assert not (out / "page").exists() and not (out / "page").is_symlink()  # the link went, as a link
-    assert "effort.csv" in removed and not (out / "effort.csv").exists()
-    assert said and "page/important.txt (under the symbolic link page)" in said[0]
+    assert owned.own_files(out, entries) == {}  # behind a link: never the run's own
+    stage = owned.new_staging(out)
+    (stage / "manifest.json").write_text("{}")
+    assert owned.swap_in(out, stage, entries, "manifest.json") == []
+    assert (elsewhere / "important.txt").read_text() == "keep me" and (out / "page").is_symlink()
 
 
-def test_clearing_removes_a_symlinked_file_as_a_link_and_ignores_paths_outside(tmp_path):
+def test_paths_outside_the_folder_and_links_are_never_a_runs_own(tmp_path):
     outside = tmp_path / "outside.csv"
     outside.write_text("keep")
-    out = _folder(tmp_path, ["risk.csv", "../outside.csv", str(outside), "cache/risk-x.csv"])
+    digest = __import__("hashlib").sha256(b"keep").hexdigest()
+    out = _folder(tmp_path, [])
     (out / "risk.csv").symlink_to(outside)
-    (out / "cache").mkdir()
-    (out / "cache" / "risk-x.csv").write_text("entry")
-    clear_previous(out)
-    assert outside.read_text() == "keep" and not (out / "risk.csv").is_symlink()
-    assert (out / "cache" / "risk-x.csv").exists()
+    entries = {p: {digest} for p in ["risk.csv", "../outside.csv", str(outside), "", "."]}
+    assert owned.own_files(out, entries) == {}
+    with pytest.raises(owned.ForeignFiles, match="risk.csv there is not an earlier run's output"):
+        check_output_folder(out)  # a link where a run writes: refused, the link kept
+    assert outside.read_text() == "keep" and (out / "risk.csv").is_symlink()
 
 
 def test_a_manifest_linked_to_dev_zero_is_not_read(tmp_path):
@@ -149,7 +154,10 @@ def test_a_manifest_linked_to_dev_zero_is_not_read(tmp_path):
     out.mkdir()
     (out / "manifest.json").symlink_to("/dev/zero")
     (out / "report.md").write_text("old")
-    assert clear_previous(out) == ["manifest.json", "report.md"]
+    t0 = time.monotonic()
+    with pytest.raises(owned.ForeignFiles, match="manifest.json was not written by python -m lgp.reproduce"):
+        check_output_folder(out)
+    assert time.monotonic() - t0 < 5 and (out / "report.md").read_text() == "old"
 
 
 def test_a_stop_before_any_result_does_not_claim_a_cache(tmp_path):

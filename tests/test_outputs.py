@@ -124,20 +124,19 @@ def test_the_tie_threshold_is_above_the_plan_to_plan_noise_and_pair_6_is_within_
     assert abs(h6 - e6) > 0  # a tie by the rule, not equal numbers
 
 
-def test_a_later_run_removes_every_output_an_earlier_one_may_have_left(tmp_path):
-    """Issue 21: manifest.OUTPUT_NAMES lacked the effort sensitivity tables (and the
-    simulated participant-sigma table), so a folder written before manifests
-    existed kept them beside the next run's outputs."""
-    from lgp.app.manifest import OUTPUT_NAMES, clear_previous
+def test_a_folder_written_before_manifests_existed_is_refused_not_cleared(tmp_path):
+    """Issue 30: outputs were once removed by name (effort.csv, figures/, analysis/, ...)
+    whoever wrote them; a folder without a manifest is now refused, every file kept."""
+    from lgp import owned
+    from lgp.app.manifest import check_output_folder
 
-    names = ["effort_sensitivity.csv", "effort_sensitivity_pairs.csv", "risk_sensitivity.csv",
-             "participant_sigma.csv", "simulated_participant_sigma.csv", "effort.csv"]
-    for name in names:
+    for name in ["effort_sensitivity.csv", "participant_sigma.csv", "effort.csv"]:
         (tmp_path / name).write_text("x\n")
-    (tmp_path / "recovery").mkdir()  # --recovery's folder
+    (tmp_path / "recovery").mkdir()
     (tmp_path / "recovery" / "simulated_recovery_summary.csv").write_text("x\n")
     (tmp_path / "cache").mkdir()
     (tmp_path / "cache" / "effort-k.csv").write_text("kept\n")
-    assert set(names) | {"recovery"} <= set(OUTPUT_NAMES)
-    assert clear_previous(tmp_path) == sorted(names + ["recovery"])
-    assert sorted(p.name for p in tmp_path.rglob("*")) == ["cache", "effort-k.csv"]
+    before = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*"))
+    with pytest.raises(owned.ForeignFiles, match="no manifest.json"):
+        check_output_folder(tmp_path)
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*")) == before

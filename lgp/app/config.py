@@ -67,6 +67,8 @@ class RunConfig:
     no_replays: bool = False
     #: --verbose: a line per trial and stage as it finishes, and every file written at the end
     verbose: bool = False
+    #: --into-existing: write into a folder with foreign content and no manifest, beside that content (issue 30)
+    into_existing: bool = False
     risk_chunk: int = 6
     build_risk: bool = False
     build_sigmas: tuple[float, ...] | None = None

@@ -1,15 +1,17 @@
 """What one run of `python -m lgp.reproduce` wrote, and how long its results took.
 
-An output folder describes one run only. Before the expensive stages a run
-removes what an earlier run left in the folder (the files its manifest lists,
-and the pipeline's own names for a folder written before manifests existed:
-effort_samples.csv, effort.csv, risk.csv, pairs.csv, report.md, index.html,
-build_risk*.csv, [simulated_]participant_sigma.csv, risk_sensitivity*.csv,
-effort_sensitivity*.csv, figures/, analysis/, replays/, page/, recovery/); the cache
-(``<out>/cache``) is kept, so nothing expensive is lost and a rerun of the earlier command rewrites its outputs in seconds. At the end it
-writes ``manifest.json``: the command's parameters, a hash of its inputs, the
-engine, both times (see below) and every file it wrote (path, bytes, sha256).
-The list the command prints is the manifest's.
+An output folder describes one run only, and a run deletes only what it can prove
+an earlier run of its own wrote (lgp/owned.py): the files that run's manifest lists
+whose bytes still have the listed sha256. A run writes its files into a staging
+folder inside ``--out`` and swaps them in at the end; only then does it remove the
+earlier run's own files that it did not write again. A folder with foreign content
+and no manifest is refused (``--into-existing`` writes beside that content, deleting
+nothing); a failed or stopped run leaves the earlier run's files byte-identical. The
+cache (``<out>/cache``) is kept, so nothing expensive is lost and a rerun of the
+earlier command rewrites its outputs in seconds. At the end it writes
+``manifest.json``: the command's parameters, a hash of its inputs, the engine, both
+times (see below) and every file it wrote (path, bytes, sha256). The list the
+command prints is the manifest's.
 
 Times: "this run" is the wall time of this command; "compute time of the
 results" adds up, for every cached result the run used, the wall time spent
@@ -22,10 +24,10 @@ import hashlib
 import json
 import math
 import os
-import shutil
 import time
 from pathlib import Path
 
+from lgp import owned
 from lgp.app.cache import Cache
 from lgp.app.files import write_json_atomic
 
@@ -53,78 +55,51 @@ def input_hash(**inputs) -> str:
     return hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()
 
 
-#: Largest manifest read when clearing a folder (bytes): a full run lists a few hundred files.
-MAX_MANIFEST_BYTES = 16 * 2**20
+#: Largest manifest read (bytes): a full run lists a few hundred files.
+MAX_MANIFEST_BYTES = owned.MAX_MANIFEST_BYTES
+#: The files every run writes at the top of its folder: one of them that is not an
+#: earlier run's own (a user's report.md) refuses the run before any work.
+ALWAYS_WRITTEN = ("effort_samples.csv", "effort.csv", "risk.csv", "risk_precision.csv", "report.md", "index.html")
+PROG = "python -m lgp.reproduce"
 
 
-def _under_a_link(out: Path, name: str) -> Path | None:
-    """The first component of `out/name` (below `out`) that is a symbolic link,
-    the file itself excluded; None when there is none."""
-    path = out
-    for part in Path(name).parts[:-1]:
-        path = path / part
-        if path.is_symlink():
-            return path
-    return None
+def is_run_manifest(data: dict) -> bool:
+    """A manifest.json written by python -m lgp.reproduce (its command and file list)."""
+    command = data.get("command")
+    return isinstance(data.get("files"), list) and isinstance(command, list) and bool(command) and command[0] == PROG
 
 
-def clear_previous(out: Path, log=None) -> list[str]:
-    """Remove the outputs of an earlier run from `out` (never the cache); return what went.
+def check_output_folder(out: Path, into_existing: bool = False) -> dict[str, set[str]]:
+    """The earlier run's listed files in `out` (lgp.owned.manifest_entries; {} for
+    none), once `out` is known to be a folder this run may write into; else
+    ForeignFiles (one line, exit 2), before any work:
 
-    Nothing outside `out` is ever deleted, and nothing through a symbolic link: a
-    listed file under a linked folder (``out/page`` -> elsewhere) is kept and said
-    so (`log`), a link itself is removed as a link (its target untouched), and
-    every path is resolved and checked to lie inside `out` before anything goes."""
-    from lgp.inputs import InputFileError, read_bounded
-
+    - a manifest.json that is not this command's (or is damaged): refused;
+    - no manifest and anything but a cache in the folder: refused, unless
+      `into_existing` (--into-existing), which writes beside the foreign files;
+    - a file this run always writes (ALWAYS_WRITTEN) there and not the earlier run's own.
+    """
     out = Path(out)
-    base = out.resolve()
-    cache = (out / "cache").resolve()
-    listed: list[str] = []
-    manifest = out / MANIFEST
-    if manifest.is_file() or manifest.is_symlink():
-        try:
-            data = read_bounded(manifest, MAX_MANIFEST_BYTES, "manifest", within=base)
-            listed = [str(f["path"]) for f in json.loads(data).get("files", [])]
-        except (InputFileError, ValueError, KeyError, TypeError, AttributeError):
-            listed = []  # a damaged manifest: fall back on the pipeline's names
-    removed, kept = [], []
-    for name in [*listed, *OUTPUT_NAMES, MANIFEST]:
-        path = out / name
-        if Path(name).is_absolute() or ".." in Path(name).parts or not name.strip():
-            continue  # a manifest only ever lists files inside the folder
-        link = _under_a_link(out, name)
-        if link is not None:
-            if path.exists() or path.is_symlink():
-                kept.append(f"{name} (under the symbolic link {link.relative_to(out)})")
-            continue
-        if path.is_symlink():  # the link goes, never what it points to
-            path.unlink()
-            removed.append(name)
-            continue
-        if not path.exists():
-            continue
-        real = path.resolve()
-        if real == cache or cache in real.parents or real == base or base not in real.parents:
-            continue
-        if path.is_dir():
-            if name not in OUTPUT_NAMES:
-                continue
-            shutil.rmtree(path, onerror=_name_the_path)  # rmtree never follows links inside
-        else:
-            path.unlink()
-        removed.append(name)
-    if kept and log is not None:
-        log(f"kept {', '.join(kept)}: an earlier output under a symbolic link is never deleted through it")
-    dirs = {name for name in removed if name in OUTPUT_NAMES and not name.endswith((".csv", ".md", ".html"))}
-    return sorted({name for name in removed if Path(name).parts[0] not in dirs or name in dirs})
-
-
-def _name_the_path(function, path, excinfo):
-    error = excinfo[1]
-    if isinstance(error, OSError) and error.filename is None:
-        raise OSError(error.errno, error.strerror or str(error), path) from error
-    raise error
+    if not out.exists():
+        return {}
+    status, data = owned.read_manifest(out / MANIFEST, is_run_manifest)
+    if status == "foreign":
+        raise owned.ForeignFiles(f"--out {out}: its {MANIFEST} was not written by {PROG} (or is damaged): refusing to "
+                                 "replace it; give another --out")
+    entries = owned.manifest_entries(data) if data else {}
+    if status == "absent":
+        foreign = owned.foreign_entries(out, skip={"cache", OutputLock.NAME})
+        if foreign and not into_existing:
+            raise owned.ForeignFiles(
+                f"--out {out} holds files no run of {PROG} wrote ({owned.describe(foreign)}) and no {MANIFEST}: "
+                "refusing to write into it; give a new or empty folder, or --into-existing to add this run's files "
+                "beside them (nothing there is deleted or overwritten)")
+    bad = owned.collisions(out, list(ALWAYS_WRITTEN), set(owned.own_files(out, entries)))
+    if bad:
+        raise owned.ForeignFiles(f"--out {out}: {owned.describe(bad)} there {'is' if len(bad) == 1 else 'are'} not "
+                                 f"an earlier run's output (not listed in its {MANIFEST} with these contents); this "
+                                 "run would overwrite it: move it away or give another --out")
+    return entries
 
 
 class OutputFolderBusy(RuntimeError):
@@ -138,7 +113,9 @@ class OutputLock:
     folder raises OutputFolderBusy naming that process. The holder removes the
     file on its way out, while still holding the lock; a run that locks a file
     checks that it is still the one at that path (else it retries), so two runs
-    never hold two files. A killed run leaves an unlocked file: it is free."""
+    never hold two files. A killed run leaves an unlocked file: it is free.
+    It also holds lgp.owned.TreeLock: a run in a folder inside this one, or around
+    it, is refused the same way (two runs in rn and rn/figures cannot both proceed)."""
 
     NAME = ".lgp-run.lock"
 
@@ -171,9 +148,19 @@ class OutputLock:
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n{self.command}\n".encode(), 0)
         self._fd = fd
+        self._tree = owned.TreeLock(self.path.parent, self.command)
+        try:  # and no run in a folder inside this one or around it (issue 30)
+            self._tree.__enter__()
+        except owned.OutputTreeBusy as e:
+            self._tree = None
+            self.__exit__()
+            raise OutputFolderBusy(str(e)) from None
         return self
 
     def __exit__(self, *exc):
+        if getattr(self, "_tree", None) is not None:
+            self._tree.__exit__()
+            self._tree = None
         if self._fd is not None:
             try:
                 os.unlink(self.path)  # while still locked, so no one can lock the old file after us

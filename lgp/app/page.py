@@ -183,6 +183,8 @@ def _docs_link(name: str, out: Path, text: str) -> str:
     from lgp.app.cache import ROOT
 
     target = ROOT / "docs" / name
+    if Path(out).name.startswith(".lgp-new-"):  # a run's staging folder (lgp/owned.py): the page will live one up
+        out = Path(out).parent
     if not target.exists():
         return f"{_e(text)} (docs/{_e(name)})"
     return f'<a href="{_e(os.path.relpath(target, out))}">{_e(text)}</a>'
