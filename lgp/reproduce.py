@@ -109,6 +109,9 @@ def parse_args(argv=None) -> RunConfig:
                           "(default: all cores, %(default)s here)")
     p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
                    "(a LocalCluster of --jobs workers); default: a local process pool. Needs the [dask] extra (docs/scaling.md)")
+    p.add_argument("--sigma-from", metavar="FILE", type=cli.input_file,
+                   help="summary.json of python -m analysis.mental_jenga: that sigma (the paper's unit) is simulated too "
+                        "and reported beside this run's, with the pair table at it (docs/mental-jenga.md)")
     p.add_argument("--seed", type=cli.seed, default=D("seed"))
     p.add_argument("--n-boot", type=cli.bounded_count("MAX_N_BOOT"), help=f"bootstrap resamples (default {D('n_boot')}; --quick {QUICK['n_boot']})")
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
@@ -170,7 +173,17 @@ def parse_args(argv=None) -> RunConfig:
     if not (args.scheduler or "").lower().startswith(("tcp://", "tls://", "ws://", "wss://")):  # a cluster has its own cores
         args.jobs = cli.capped_jobs(args.jobs, p.prog, args.oversubscribe)
     args.command = "python -m lgp.reproduce " + shlex.join(str(a) for a in (argv if argv is not None else sys.argv[1:]))
-    return RunConfig.from_args(args)  # every default filled in, once
+    config = RunConfig.from_args(args)  # every default filled in, once
+    if config.sigma_from:  # another lab's sigma joins the grid (lgp/app/sigma_from.py)
+        from dataclasses import replace
+
+        from lgp.app.sigma_from import grid_with, read_sigma_from
+
+        try:
+            config = replace(config, sigmas=grid_with(config.sigmas, read_sigma_from(config.sigma_from)))
+        except InputError as e:
+            p.exit(2, f"{p.prog}: error: {e}\n")
+    return config
 
 
 def main(argv=None) -> int:
@@ -369,6 +382,15 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
             written += paths
             sections.append(section)
             list_files(analysis, paths)
+        if args.sigma_from:
+            from lgp.app.sigma_from import read_sigma_from, report_lines
+            from lgp.app.report import _markdown
+
+            link = read_sigma_from(args.sigma_from)
+            at = pair_orderings(e_mean, r, link.sigma, {t.pair: t.dimension for t in paper}) if link.sigma > 0 else None
+            choice = analysis.get("sigma_choice")
+            fitted = float(choice["sigma"].iloc[0]) if isinstance(choice, pd.DataFrame) and len(choice) and "sigma" in choice else None
+            sections.append("\n".join(report_lines(link, sigma, fitted, None if at is None else _markdown(pairs_csv_table(at)))))
         if args.per_participant_sigma:
             from lgp.app.participant_sigma import participant_sigma_outputs
 

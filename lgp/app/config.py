@@ -82,6 +82,8 @@ class RunConfig:
     participant_betas: str = "shared"
     sensitivity: bool = False
     sensitivity_engines: tuple[str, ...] | None = None
+    #: --sigma-from: summary.json of analysis.mental_jenga (lgp/app/sigma_from.py)
+    sigma_from: str | None = None
     #: --planner search: its lgp.search.Budget (None for the paper's planner)
     budget: Any = None
     #: the command line as typed, for the report and the page
