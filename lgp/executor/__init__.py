@@ -36,7 +36,7 @@ from __future__ import annotations
 
 from lgp.errors import InputError
 from lgp.executor.cluster import CONNECT_TIMEOUT, DaskExecutor, DaskMissing, SchedulerUnreachable  # noqa: F401
-from lgp.executor.processes import (MAX_RESTARTS, MAX_TRIES, ProcessExecutor, WorkerDied,  # noqa: F401
+from lgp.executor.processes import (MAX_RESTARTS, MAX_TRIES, STALL_SECONDS, ProcessExecutor, WorkerDied,  # noqa: F401
                                     describe_unit)
 from lgp.executor.serial import Executor, SerialExecutor, default_jobs  # noqa: F401
 from lgp.executor.signals import Interrupted, stop_signals  # noqa: F401

@@ -1,13 +1,23 @@
 """`ProcessExecutor`: a pool of warm worker processes that die with their parent,
 whose deaths are noticed at once and whose units are resubmitted a bounded number
 of times (`WorkerDied`, MAX_TRIES, MAX_RESTARTS); the workers' initialiser and the
-shared table where each notes the unit it runs."""
+shared table where each notes the unit it runs.
+
+A worker that makes no progress (stopped by SIGSTOP or Ctrl-Z in another shell,
+or stuck without using the CPU) would hang a map forever: the map watches the CPU
+time of every worker that runs a unit (Linux: /proc/<pid>/stat) and kills one
+whose CPU time has not moved for `stall_seconds` (STALL_SECONDS, 300 s, or the
+environment's LGP_STALL_SECONDS); its unit is then retried like a dead worker's,
+and a unit that stalls in each of its tries stops the map in one line. The
+pipeline's units use the CPU all the time, so a loaded machine slows them
+(their CPU time still moves) but never trips the watchdog."""
 from __future__ import annotations
 
 import os
 import signal
 import sys
 import threading
+import time
 
 from lgp.errors import InputError
 from lgp.executor.serial import default_jobs
@@ -64,6 +74,35 @@ class WorkerDied(RuntimeError):
 #: gives up after MAX_RESTARTS broken pools, whoever was at fault.
 MAX_TRIES = 2
 MAX_RESTARTS = 4
+#: Seconds a worker running a unit may go without CPU time before it is taken for
+#: stalled (stopped, or stuck) and killed; LGP_STALL_SECONDS overrides it.
+STALL_SECONDS = 300.0
+STALL_ENV = "LGP_STALL_SECONDS"
+
+
+def stall_seconds_default() -> float:
+    """STALL_SECONDS, or the environment's LGP_STALL_SECONDS when it is a number > 0."""
+    import math
+
+    try:
+        value = float(os.environ.get(STALL_ENV, ""))
+    except ValueError:
+        return STALL_SECONDS
+    return value if math.isfinite(value) and value > 0 else STALL_SECONDS
+
+
+def _cpu_and_state(pid: int) -> tuple[int, str] | None:
+    """(CPU clock ticks used, state letter) of process `pid` from /proc, None if unknown."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            data = f.read()
+    except OSError:
+        return None
+    fields = data.rpartition(b")")[2].split()
+    try:
+        return int(fields[11]) + int(fields[12]), fields[0].decode()
+    except (IndexError, ValueError):
+        return None
 
 
 def _how_it_died(exitcode) -> str:
@@ -75,6 +114,14 @@ def _how_it_died(exitcode) -> str:
         except ValueError:
             return f"signal {-exitcode}"
     return f"exit status {exitcode}"
+
+
+def _worker_fate(pid: int, how: str) -> str:
+    """"worker process N died (SIGKILL)", or for a stalled one "worker process N made
+    no progress for 300 s, stopped (...): killed (...)"."""
+    if how.startswith("made no progress"):
+        return f"worker process {pid} {how}"
+    return f"worker process {pid} died ({how})"
 
 
 def describe_unit(fn, item, limit: int = 100) -> str:
@@ -141,11 +188,16 @@ class ProcessExecutor:
     `WorkerDied` naming the unit and the signal. Results that arrived before are
     kept (``on_result`` has seen each of them exactly once)."""
 
-    def __init__(self, jobs: int | None = None, start_method: str | None = None):
+    def __init__(self, jobs: int | None = None, start_method: str | None = None, stall_seconds: float | None = None):
         self.jobs = default_jobs() if jobs is None else int(jobs)
         if self.jobs < 1:
             raise InputError(f"jobs must be >= 1, got {jobs}")
+        self.stall_seconds = stall_seconds_default() if stall_seconds is None else float(stall_seconds)
+        if not self.stall_seconds > 0:
+            raise InputError(f"stall_seconds must be > 0, got {stall_seconds}")
         self.start_method = start_method
+        self._watch: dict[int, tuple[int, int, float]] = {}  # pid -> (unit, CPU ticks, when they last moved)
+        self._stalled: dict[int, str] = {}  # pid -> why the watchdog killed it
         self._pool = None
         self._procs: list = []
         self._slots = None
@@ -179,6 +231,36 @@ class ProcessExecutor:
                 self._procs.append(p)
         return self._procs
 
+    def _watchdog(self) -> None:
+        """Kill a worker whose CPU time has not moved for `stall_seconds` while it
+        runs a unit (see the module docstring); the pool then breaks and the map
+        retries the unit like a dead worker's, naming the stall."""
+        if self._slots is None or not sys.platform.startswith("linux"):
+            return
+        now = time.monotonic()
+        table = {int(self._slots[i]): int(self._slots[i + 1]) for i in range(0, len(self._slots), 2) if self._slots[i]}
+        for p in self._processes():
+            if p.exitcode is not None or p.pid in self._stalled:
+                continue
+            unit = table.get(p.pid, -1)
+            seen = _cpu_and_state(p.pid)
+            if unit < 0 or seen is None:
+                self._watch.pop(p.pid, None)
+                continue
+            ticks, state = seen
+            last = self._watch.get(p.pid)
+            if last is None or last[0] != unit or last[1] != ticks:
+                self._watch[p.pid] = (unit, ticks, now)
+                continue
+            if now - last[2] >= self.stall_seconds:
+                why = ("stopped (state T: SIGSTOP or Ctrl-Z)" if state in ("T", "t") else f"state {state}")
+                self._stalled[p.pid] = (f"made no progress for {now - last[2]:.0f} s, {why}: killed "
+                                        f"(no CPU time for {self.stall_seconds:g} s; {STALL_ENV} sets the limit)")
+                try:
+                    os.kill(p.pid, signal.SIGKILL)
+                except OSError:
+                    pass
+
     def _post_mortem(self, running: set[int]) -> list[tuple[int, int | None, str]]:
         """(pid, unit it was running or None, how it died) of every dead worker."""
         table = {int(self._slots[i]): int(self._slots[i + 1]) for i in range(0, len(self._slots), 2) if self._slots[i]}
@@ -194,7 +276,8 @@ class ProcessExecutor:
             p.join(timeout=1.0)  # a killed worker is reaped at once
             if p.exitcode not in (None, 0):
                 k = table.get(p.pid, -1)
-                dead.append((p.pid, k if k in running else None, _how_it_died(p.exitcode)))
+                how = self._stalled.pop(p.pid, None) or _how_it_died(p.exitcode)
+                dead.append((p.pid, k if k in running else None, how))
         return dead
 
     def map(self, fn, items, on_result=None) -> list:
@@ -224,6 +307,8 @@ class ProcessExecutor:
                     except BrokenProcessPool:  # a worker died between maps, or just now
                         broken = True
                     self._processes()
+                    if not broken:
+                        self._watchdog()
                     done, _ = wait(list(inflight), timeout=10.0 if broken else 1.0, return_when=ALL_COMPLETED if broken else FIRST_COMPLETED)
                     for f in done:
                         k = inflight.pop(f)
@@ -259,14 +344,15 @@ class ProcessExecutor:
                 culprits = [(pid, k, how) for pid, k, how in dead if k is not None]
                 for _, k, _ in culprits:
                     tries[k] += 1
-                what = "; ".join(f"worker process {pid} died ({how})" + (
+                what = "; ".join(_worker_fate(pid, how) + (
                     f" while running unit {k} of {len(items)}, {describe_unit(fn, items[k])}" if k is not None else "")
                     for pid, k, how in dead) or "a worker process died"
                 worst = max(culprits, key=lambda c: tries[c[1]], default=None)
                 if worst is not None and tries[worst[1]] >= MAX_TRIES:
                     pid, k, how = worst
-                    raise WorkerDied(f"worker process {pid} died ({how}) while running unit {k} of {len(items)}, "
-                                     f"{describe_unit(fn, items[k])}: its worker died in each of its {tries[k]} tries; "
+                    fate = "stalled" if how.startswith("made no progress") else "died"
+                    raise WorkerDied(f"{_worker_fate(pid, how)} while running unit {k} of {len(items)}, "
+                                     f"{describe_unit(fn, items[k])}: its worker {fate} in each of its {tries[k]} tries; "
                                      "stopped (results that arrived are kept)", unit=k, signal=how)
                 if restarts > MAX_RESTARTS:
                     k = worst[1] if worst else None
@@ -290,6 +376,7 @@ class ProcessExecutor:
             return
         procs = self._processes()
         self._pool, self._procs = None, []
+        self._watch = {}
         for p in procs:
             if p.exitcode is None:
                 p.terminate()
