@@ -1,0 +1,174 @@
+"""The stimulus designer (stimuli.design): its candidates pass the project's trial
+checks or are discarded with their reason; its static screen agrees with the
+closed form on simple stacks; the same seed gives the same set; bad input is
+refused in one line before anything is written."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+from lgp.paper import BLOCK_SIZE as d
+from lgp.scene import Block, Scene
+from stimuli.design import objective
+from stimuli.design.checks import Discarded, screen_candidate
+from stimuli.design.grammar import KINDS, STARTS, Candidate, draw
+from stimuli.design.screen import StackModel, screen_normals
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _stack(offsets_x, offsets_y=None) -> Scene:
+    """A column of cubes at S, block k+1 shifted by offsets[k] (units of d) from block k."""
+    offsets_y = offsets_y or [0.0] * len(offsets_x)
+    x = y = 0.0
+    blocks = [Block("b1", np.array([0.35, 0.0, d / 2]))]
+    for k, (ox, oy) in enumerate(zip(offsets_x, offsets_y)):
+        x, y = x + ox * d, y + oy * d
+        blocks.append(Block(f"b{k + 2}", np.array([0.35 + x, y, d / 2 + (k + 1) * d])))
+    return Scene(tuple(blocks), (), "stack")
+
+
+@pytest.mark.parametrize("offset, stands", [(0.30, True), (0.45, True), (0.49, True), (0.51, False), (0.55, False), (0.70, False)])
+def test_a_block_overhanging_its_supports_edge_falls_one_within_stays(offset, stands):
+    # closed form: a block on one block tips when its centre lies past the support's edge (d/2)
+    assert StackModel(_stack([offset])).stands() is stands
+    assert StackModel(_stack([0.0], [offset])).stands() is stands
+
+
+@pytest.mark.parametrize("scale, stands", [(0.9, True), (1.1, False)])
+def test_the_harmonic_overhang_stands_below_its_limit_and_falls_above(scale, stands):
+    # the harmonic stack: block k from the top overhangs the one beneath by d / (2k);
+    # exactly the limit, so 0.9 of it stands and 1.1 falls (the project's engine suite uses the same case)
+    n = 5
+    offsets = [scale * 1 / (2 * k) for k in range(n - 1, 0, -1)]
+    assert StackModel(_stack(offsets)).stands() is stands
+
+
+def test_the_risk_of_a_two_block_stack_matches_its_closed_form():
+    # two aligned cubes, both nudged by N(0, sigma d) per horizontal axis: the top tips when
+    # |x2 - x1| > d/2 on either axis; x2 - x1 ~ N(0, 2 sigma^2 d^2), so
+    # P(stand) = (2 Phi(0.5 / (sqrt(2) sigma)) - 1)^2
+    model = StackModel(_stack([0.0]))
+    sigmas = np.array([0.15, 0.25, 0.4])
+    z = screen_normals(2, 20000, 7)
+    risk = model.risk_curve(sigmas, z)
+    expected = 1 - (2 * norm.cdf(0.5 / (np.sqrt(2) * sigmas)) - 1) ** 2
+    se = np.sqrt(expected * (1 - expected) / 20000)
+    assert np.all(np.abs(risk - expected) < 4 * se + 1e-3), (risk, expected)
+    assert risk[0] < risk[1] < risk[2]
+
+
+def test_a_bridge_lintel_shared_by_two_pillars_stands():
+    # a lintel resting 0.25 d on each pillar: its centre lies between the patches, inside their hull
+    blocks = (Block("p1", np.array([0.35, -0.75 * d, d / 2])), Block("p2", np.array([0.35, 0.75 * d, d / 2])),
+              Block("l", np.array([0.35, 0.0, 1.5 * d])))
+    assert StackModel(Scene(blocks, (), "bridge")).stands()
+    # nudged: pillar 2 moved 0.1 d out still carries a sliver (stands); moved 0.3 d out it no longer
+    # touches the lintel, which then rests on pillar 1 alone with its centre 0.25 d past that pillar's edge
+    model = StackModel(Scene(blocks, (), "bridge"))
+    xy = np.repeat(model.p[None, :, :2], 2, axis=0)
+    xy[0, 1, 1] += 0.1 * d
+    xy[1, 1, 1] += 0.3 * d
+    assert model.falls(xy).tolist() == [False, True]
+
+
+def _candidate(blocks, start="anywhere") -> Candidate:
+    data = {"id": "C99999", "dimension": "test", "description": "test", "build_site": [0.35, 0.0],
+            "initial": {"scattered": {"count": len(blocks), "region": {"x": [0.2, 0.55], "y": [-0.25, 0.25]}}},
+            "target": {"blocks": [{"name": f"b{k + 1}", "p_WB": p} for k, p in enumerate(blocks)]}}
+    return Candidate(99998, "test", start, data)
+
+
+@pytest.mark.parametrize("blocks, reason", [
+    ([[0.35, 0.0, d / 2], [0.35 + 0.6 * d, 0.0, 1.5 * d]], "falls at sigma 0 (static)"),
+    ([[0.35, 0.0, d / 2], [0.35 + 0.5 * d, 0.0, d / 2]], "trial rules: solids overlap"),
+    ([[0.35, 0.0, d / 2], [0.35, 0.0, 2.5 * d]], "trial rules: a block does not rest on anything"),
+    ([[0.35, 0.0, d / 2 + k * d] for k in range(4)], "over block budget"),
+])
+def test_a_candidate_that_fails_a_check_is_discarded_with_its_reason(blocks, reason):
+    with pytest.raises(Discarded) as e:
+        screen_candidate(_candidate(blocks), budget=3)
+    assert e.value.reason == reason
+
+
+def test_a_valid_candidate_passes_the_screen_with_its_numbers():
+    row = screen_candidate(_candidate([[0.35, 0.0, d / 2 + k * d] for k in range(3)]), budget=10)
+    assert row["blocks"] == 3 and row["stacked"] == 2 and row["height"] == pytest.approx(3.0)
+    assert row["screen_risk_0.05"] <= row["screen_risk_0.25"]
+
+
+def test_the_grammar_draws_every_kind_and_start_and_the_same_seed_the_same_candidate():
+    cands = [draw(i, 5) for i in range(400)]
+    assert {c.kind for c in cands} == set(KINDS) and {c.start for c in cands} == set(STARTS)
+    assert all(draw(i, 5).data == cands[i].data for i in (0, 17, 399))
+    assert draw(3, 6).data != cands[3].data
+    assert all(len(c.data["target"]["blocks"]) <= 10 for c in cands)
+
+
+def _pool():
+    import pandas as pd
+
+    rng = np.random.default_rng(0)
+    n = 120
+    H = rng.integers(1, 9, n).astype(float)
+    pool = pd.DataFrame({"effort_proxy": rng.uniform(0.1, 1, n), "height": H, "blocks": H + rng.integers(0, 3, n),
+                         "stacked": H - 1, "screen_risk_0.1": np.clip(0.08 * H + rng.normal(0, 0.3, n), 0, 1)})
+    pool["screen_risk_0.15"] = np.clip(pool["screen_risk_0.1"] + 0.1, 0, 1)
+    pool["screen_risk_rises"] = rng.random(n) < 0.7
+    return pool
+
+
+def test_the_same_seed_chooses_the_same_set():
+    pool = _pool()
+    a = objective.choose(pool, 24, np.random.default_rng([3, 2]), steps=150)
+    assert a == objective.choose(pool, 24, np.random.default_rng([3, 2]), steps=150)
+    assert a[0] != objective.choose(pool, 24, np.random.default_rng([4, 2]), steps=150)[0]
+
+
+@pytest.mark.slow
+def test_the_objective_decorrelates_risk_from_height_on_a_pool_where_they_go_together():
+    pool = _pool()
+    a = objective.choose(pool, 24, np.random.default_rng([3, 2]), steps=1500)
+    c_all = objective.terms(*objective.columns(pool, "effort_proxy", "screen_risk"))["max_abs_r"]
+    assert c_all > 0.3 and a[1]["max_abs_r"] <= objective.TARGET_R  # risk goes with height in the pool, not in the set
+    assert a[1]["rising"] >= objective.RISING
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--trials", "3"], "--trials 3"),
+    (["--trials", "30", "--candidates", "20"], "more than the 20 candidates"),
+    (["--sigma-prior", "0", "0.2"], "--sigma-prior"),
+    (["--sigma-prior", "0.1", "1.5"], "--sigma-prior"),
+    (["--budget", "0"], "--budget 0"),
+])
+def test_bad_input_is_refused_with_exit_2_before_anything_is_written(tmp_path, capsys, args, words):
+    from stimuli.design.__main__ import main
+
+    out = tmp_path / "designed"
+    with pytest.raises(SystemExit) as e:
+        main(["--out", str(out), *args])
+    assert e.value.code == 2 and words in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("args, words", [
+    (["--trials", "3"], "--trials 3"),
+    (["--trials", "30", "--candidates", "20"], "more than the 20 candidates"),
+    (["--sigma-prior", "0", "0.2"], "--sigma-prior"),
+    (["--sigma-prior", "0.1", "1.5"], "--sigma-prior"),
+    (["--budget", "0"], "--budget 0"),
+])
+def test_bad_input_is_refused_in_one_line_by_the_command(tmp_path, args, words):
+    out = tmp_path / "designed"
+    r = subprocess.run([sys.executable, "-m", "stimuli.design", "--out", str(out), *args], cwd=ROOT,
+                       capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0], r.stderr
+    assert not out.exists()
