@@ -303,3 +303,120 @@ def test_a_run_that_fails_at_any_stage_leaves_the_earlier_runs_files_byte_identi
     assert manifest["parameters"]["seed"] == 2
     listed = {f["path"] for f in manifest["files"]}
     assert set(snapshot(out)) == listed | {"manifest.json", "thesis.tex"}
+
+
+# ----------------------------------------------------------------------------- study folders (stimuli.experiment)
+
+
+@pytest.fixture
+def quick_builds(tmp_path, monkeypatch):
+    """build_study without npm or the renderer: jsPsych's files and the pictures are
+    stand-ins (what is tested is which files a build writes, keeps and removes)."""
+    from stimuli import experiment as ex
+
+    nm = tmp_path / "node_modules"
+    for src in ex.JSPSYCH_FILES:
+        (nm / src).parent.mkdir(parents=True, exist_ok=True)
+        (nm / src).write_text(f"// {src}\n")
+    renders = tmp_path / "renders"
+    renders.mkdir()
+
+    def render(plan, size, jobs, log):
+        pictures = []
+        for t in [*plan.trials, *plan.anchors]:
+            for state in ("A", "B"):
+                (renders / f"{t.id}-{state}.png").write_bytes(f"{t.id}-{state}".encode())
+                pictures.append({"trial": t.id, "file": f"{t.id}-{state}.png"})
+        return renders, {"pictures": pictures, "renderer": "stand-in", "camera": {"width": 96, "height": 64}, "cameras": {}}
+
+    monkeypatch.setattr(ex, "ensure_jspsych", lambda log=None: nm)
+    monkeypatch.setattr(ex, "_render", render)
+    return ex
+
+
+def _trials(folder: Path, ids) -> Path:
+    import stimuli
+
+    folder.mkdir(exist_ok=True)
+    for old in folder.glob("*.yaml"):
+        old.unlink()
+    for tid in ids:
+        (folder / f"{tid}.yaml").write_text((stimuli.TRIAL_DIR / f"{tid}.yaml").read_text())
+    return folder
+
+
+def test_a_rebuild_keeps_the_studys_collected_data_and_removes_only_its_own_files(tmp_path, quick_builds):
+    ex = quick_builds
+    study = tmp_path / "study1"
+    trials = _trials(tmp_path / "trials", ["1E", "1H", "7H"])
+    ex.build_study(ex.plan_study("difficulty", trials), study, log=lambda m: None)
+    assert (study / "img" / "7H-A.png").exists() and (study / "study.json").exists()
+    (study / "data").mkdir()
+    (study / "data" / "lgp-difficulty-p1.csv").write_text("study,task,participant\nabc,difficulty,1\n")  # collected
+    (study / "img" / "my-photo.jpg").write_bytes(b"the lab's photo")
+    (study / "notes.md").write_text("participant 1 came late\n")
+    kept = {k: v for k, v in snapshot(study).items() if k in ("data/lgp-difficulty-p1.csv", "img/my-photo.jpg", "notes.md")}
+
+    _trials(trials, ["1E", "1H"])  # a rebuild without 7H
+    ex.build_study(ex.plan_study("difficulty", trials), study, log=lambda m: None)
+    after = snapshot(study)
+    assert {k: after[k] for k in kept} == kept
+    assert not (study / "img" / "7H-A.png").exists() and (study / "img" / "1H-B.png").exists()
+    listed = set(json.loads((study / "study.json").read_text())["files"])
+    assert set(after) == listed | set(kept) | {"study.json"}
+
+
+def test_a_stray_study_json_does_not_license_wiping_the_folder(tmp_path, quick_builds):
+    """A folder with thesis.tex and a study.json copied from elsewhere (listing files
+    that are not there, or not with those contents): the manifest rule deletes nothing."""
+    ex = quick_builds
+    trials = _trials(tmp_path / "trials", ["1E", "1H"])
+    ex.build_study(ex.plan_study("difficulty", trials), tmp_path / "elsewhere", log=lambda m: None)
+    folder = tmp_path / "thesis"
+    folder.mkdir()
+    (folder / "thesis.tex").write_text("\\chapter{mine}\n")
+    (folder / "lib").mkdir()
+    (folder / "lib" / "jspsych.js").write_text("// my own edited copy\n")
+    (folder / "study.json").write_text((tmp_path / "elsewhere" / "study.json").read_text())
+    before = snapshot(folder)
+    with pytest.raises(ex.StudyError, match=r"study would|would replace what this command did not write"):
+        ex.build_study(ex.plan_study("difficulty", trials), folder, log=lambda m: None)
+    assert snapshot(folder) == before and not list(folder.glob(".lgp-*"))
+    (folder / "lib" / "jspsych.js").unlink()
+    (folder / "lib").rmdir()
+    ex.build_study(ex.plan_study("difficulty", trials), folder, log=lambda m: None)
+    assert (folder / "thesis.tex").read_text() == "\\chapter{mine}\n" and (folder / "index.html").exists()
+
+
+def test_a_folder_without_a_study_is_refused_and_into_existing_keeps_its_files(tmp_path, quick_builds):
+    ex = quick_builds
+    trials = _trials(tmp_path / "trials", ["1E", "1H"])
+    folder = tmp_path / "busy"
+    folder.mkdir()
+    (folder / "thesis.tex").write_text("keep me")
+    with pytest.raises(ex.StudyError, match=r"holds no study \(study.json\): refusing to write into it \(thesis.tex\)"):
+        ex.check_output_dir(folder)
+    ex.build_study(ex.plan_study("build", trials), folder, log=lambda m: None, into_existing=True)
+    assert (folder / "thesis.tex").read_text() == "keep me" and (folder / "study.json").exists()
+    (folder / "study.json").write_text('{"name": "another program"}')
+    with pytest.raises(ex.StudyError, match="study.json was not written by python -m stimuli.experiment"):
+        ex.check_output_dir(folder, into_existing=True)
+
+
+def test_a_failed_build_leaves_the_earlier_study_byte_identical(tmp_path, quick_builds, monkeypatch):
+    ex = quick_builds
+    trials = _trials(tmp_path / "trials", ["1E", "1H"])
+    study = tmp_path / "study"
+    ex.build_study(ex.plan_study("time", trials), study, log=lambda m: None)
+    before = snapshot(study)
+
+    def full(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(ex.shutil, "copyfile", full)
+    with pytest.raises(OSError):
+        ex.build_study(ex.plan_study("difficulty", trials), study, log=lambda m: None)
+    assert snapshot(study) == before and not list(study.glob(".lgp-*"))
+    with pytest.raises(OSError):
+        ex.build_study(ex.plan_study("difficulty", trials), tmp_path / "new" / "study", log=lambda m: None)
+    assert not (tmp_path / "new").exists()

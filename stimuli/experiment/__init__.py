@@ -257,27 +257,101 @@ def _render(plan: StudyPlan, size, jobs: int, log) -> tuple[Path, dict]:
     return where, render_trials(every, where, plan.seed, size, jobs, log=log, layout="pair")
 
 
-def check_output_dir(out: Path) -> None:
-    """Refuse to write into a folder that holds anything but an earlier study."""
+#: What every build writes at the top of a study folder (besides study.json, lib/ and img/).
+BUILT = ("index.html", "config.js", "study.js", "style.css")
+MANIFEST = "study.json"
+
+
+def is_study_manifest(data: dict) -> bool:
+    """A study.json written by this builder: the study, its build and its files with their sha256."""
+    return isinstance(data.get("files"), dict) and isinstance(data.get("study"), str) and "build" in data
+
+
+def check_output_dir(out: Path, into_existing: bool = False) -> dict[str, set[str]]:
+    """Refuse a folder this build may not write into; return the earlier build's
+    listed files (lgp.owned.manifest_entries, {} for none). A rebuild deletes only
+    the earlier build's own files (listed in its study.json, same sha256): the
+    study's collected data (data/*.csv, anything it did not build) stay. A folder
+    with other files and no study.json is refused unless `into_existing`; a
+    study.json of something else is never replaced; a file the build writes that is
+    there and not the earlier build's (an index.html edited by hand) refuses it."""
+    from lgp import owned
+
+    out = Path(out)
     if out.exists() and not out.is_dir():
         raise StudyError(f"--out {out}: exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()) and not (out / "study.json").exists():
-        raise StudyError(f"--out {out}: the folder is not empty and holds no study (study.json): refusing to write into it")
+    if not out.exists():
+        return {}
+    status, data = owned.read_manifest(out / MANIFEST, is_study_manifest)
+    if status == "foreign":
+        raise StudyError(f"--out {out}: its {MANIFEST} was not written by python -m stimuli.experiment (or is damaged): "
+                         "refusing to replace it; give another --out")
+    entries = owned.manifest_entries(data) if data else {}
+    if status == "absent":
+        foreign = owned.foreign_entries(out, skip={".lgp-run.lock"})
+        if foreign and not into_existing:
+            raise StudyError(f"--out {out}: the folder is not empty and holds no study ({MANIFEST}): refusing to write "
+                             f"into it ({owned.describe(foreign)}); give an empty or new folder, or --into-existing to "
+                             "add the study beside those files (nothing there is deleted or overwritten)")
+    bad = owned.collisions(out, list(BUILT), set(owned.own_files(out, entries)))
+    if bad:
+        raise StudyError(f"--out {out}: {owned.describe(bad)} there {'is' if len(bad) == 1 else 'are'} not the earlier "
+                         f"build's (not listed in its {MANIFEST} with these contents); a rebuild would overwrite it: "
+                         "move it away or give another --out")
+    return entries
 
 
 def build_study(plan: StudyPlan, out: str | Path, size=None, jobs: int = 2, jatos: bool = False,
-                time_max: int = TIME_MAX_S, log=None) -> dict:
-    """Write the study folder `out` (see docs/experiment.md); returns study.json's content."""
+                time_max: int = TIME_MAX_S, log=None, into_existing: bool = False) -> dict:
+    """Write the study folder `out` (see docs/experiment.md); returns study.json's content.
+
+    The build writes into a staging folder inside `out` and swaps it in at the end
+    (lgp/owned.py): a rebuild replaces only the earlier build's own files, and a
+    failed build leaves the earlier one byte-identical."""
+    from lgp import owned
+    from lgp.app.manifest import OutputLock
     from stimuli.render import DEFAULT_SIZE
 
     log = log or (lambda m: print(m, file=sys.stderr, flush=True))
     out = Path(out)
-    check_output_dir(out)
+    check_output_dir(out, into_existing)
     nm = ensure_jspsych(log)
     renders, record = _render(plan, size or DEFAULT_SIZE, jobs, log)
-    tmp = out.with_name(f".{out.name}.building")
-    if tmp.exists():
-        shutil.rmtree(tmp)
+    created = []
+    folder = out
+    while not folder.exists() and not folder.is_symlink() and folder != folder.parent:
+        created.append(folder)
+        folder = folder.parent
+    out.mkdir(parents=True, exist_ok=True)
+    done = False
+    try:
+        with OutputLock(out, f"python -m stimuli.experiment --task {plan.task} --out {out}"):
+            earlier = check_output_dir(out, into_existing)  # again, under the lock
+            owned.remove_stale_staging(out)
+            tmp = owned.new_staging(out)
+            try:
+                manifest = _write_study(plan, tmp, nm, renders, record, jatos, time_max)
+                try:
+                    owned.swap_in(out, tmp, earlier, MANIFEST)
+                except owned.ForeignFiles as e:  # a file appeared where the build writes: one line, exit 2
+                    raise StudyError(str(e)) from None
+            finally:
+                owned.remove_staging(tmp)
+        done = True
+    finally:
+        if not done:
+            for folder in created:
+                try:
+                    folder.rmdir()
+                except OSError:
+                    break
+    return manifest
+
+
+def _write_study(plan: StudyPlan, tmp: Path, nm: Path, renders: Path, record: dict, jatos: bool, time_max: int) -> dict:
+    """The study's files in the (staging) folder `tmp`, study.json last; its content."""
+    from lgp import owned
+
     (tmp / "lib").mkdir(parents=True)
     (tmp / "img").mkdir()
     for src, dst in JSPSYCH_FILES.items():
@@ -326,12 +400,9 @@ def build_study(plan: StudyPlan, out: str | Path, size=None, jobs: int = 2, jato
              "build": "Build task console"}[plan.task]
     html = (WEB / "index.html").read_text().replace("{{TITLE}}", title).replace("{{SCRIPTS}}\n", scripts)
     (tmp / "index.html").write_text(html)
-    files = sorted(p.relative_to(tmp).as_posix() for p in tmp.rglob("*") if p.is_file())
+    files = owned.staged_files(tmp)
     manifest = {**{k: v for k, v in config.items() if k not in ("trials", "anchors")},
                 "trials": config["trials"], "anchors": config["anchors"],
                 "files": {f: hashlib.sha256((tmp / f).read_bytes()).hexdigest() for f in files}}
-    (tmp / "study.json").write_text(json.dumps(manifest, indent=1) + "\n")
-    if out.exists():
-        shutil.rmtree(out)
-    os.replace(tmp, out)
+    (tmp / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
     return manifest

@@ -16,7 +16,10 @@ def main(argv=None) -> int:
     p = cli.parser(PROG, description=ex.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--task", required=True, choices=ex.TASKS,
                    help="difficulty (Difficulty Estimation), time (Time Estimation) or build (the lab's Build Task console)")
-    p.add_argument("--out", required=True, type=cli.output_dir, help="study folder to write (created; an earlier study there is replaced)")
+    p.add_argument("--out", required=True, type=cli.output_dir, help="study folder to write (created; an earlier build's own files there are replaced, "
+                        "collected data and every other file kept)")
+    p.add_argument("--into-existing", action="store_true",
+                   help="write into an --out that holds other files and no study.json, beside them (none is deleted)")
     p.add_argument("--stimuli", metavar="DIR", type=cli.input_dir, help="folder of trial files (default: stimuli/trials, the paper's 24)")
     p.add_argument("--anchor-easy", metavar="FILE", default=str(ex.DEFAULT_ANCHORS[0]),
                    help="trial file of the easy anchor shown first (default: stimuli/experiment/anchors/ANCHOR-EASY.yaml)")
@@ -31,13 +34,17 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     try:  # every input is checked before anything is written: a bad one is a usage error (exit 2)
         plan = ex.plan_study(args.task, args.stimuli, (args.anchor_easy, args.anchor_hard), args.seed, args.order_seed)
-        ex.check_output_dir(__import__("pathlib").Path(args.out))
+        ex.check_output_dir(__import__("pathlib").Path(args.out), args.into_existing)
     except ex.StudyError as e:
         p.error(str(e))
     if not plan.has_pairs:
         print(f"{PROG}: note: no easy/hard pairs (<n>E and <n>H) among the trials: pair counterbalancing is off, "
               "each participant sees the trials in their own random order", file=sys.stderr)
-    manifest = ex.build_study(plan, args.out, args.size, args.jobs, args.jatos, args.time_max)
+    try:
+        manifest = ex.build_study(plan, args.out, args.size, args.jobs, args.jatos, args.time_max,
+                                  into_existing=args.into_existing)
+    except ex.StudyError as e:  # the folder changed since the check (under the lock): still one line, exit 2
+        p.error(str(e))
     print(f"{args.out}/index.html: {args.task} study {manifest['study']} (build {manifest['build']}), "
           f"{len(manifest['trials'])} trials, {len(manifest['anchors'])} anchors, jsPsych {manifest['jspsych']}")
     return 0
