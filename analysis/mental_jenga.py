@@ -174,7 +174,10 @@ def sigma_units(rule: str, sigma: float) -> dict:
 
 
 def analyse(repo, experiment: int, out, sigmas=DEFAULT_GRID, n_runs: int = 100, seed: int = 0, jobs: int = 2,
-            rules=RULES, cache_dir=None, log=sys.stderr) -> dict:
+            rules=RULES, cache_dir=None, log=sys.stderr, fixed: dict | None = None) -> dict:
+    """The whole check (module docstring). `fixed` ({rule: sigma}, e.g. the best sigmas
+    of another experiment's summary.json): r and RMSE at those sigmas too, the
+    held-out test of a sigma chosen elsewhere."""
     repo, out = Path(repo), Path(out)
     scenes = read_scenes(repo, experiment)  # bad input raises here, before anything is written
     pred = read_predictions(repo, experiment)
@@ -218,6 +221,12 @@ def analyse(repo, experiment: int, out, sigmas=DEFAULT_GRID, n_runs: int = 100, 
             "deterministic_r_rmse": list(fit_stats(M[0], h)) if sig[0] == 0 else None,
         }
         summary["rules"][rule]["model_means"] = {int(t): float(v) for t, v in zip(trials, M[kb])}
+        if fixed and rule in fixed:
+            k = int(np.argmin(np.abs(sig - fixed[rule])))
+            if not np.isclose(sig[k], fixed[rule]):
+                raise MentalJengaError(f"the fixed sigma {fixed[rule]:g} of rule {rule} is not on the grid")
+            r_f, rmse_f = fit_stats(M[k], h)
+            summary["rules"][rule]["at_fixed_sigma"] = {"sigma": float(sig[k]), "r": r_f, "rmse": rmse_f}
     summary["human_means"] = {int(t): float(v) for t, v in human.items()}
     ref = authors_reference(repo, experiment, human)
     if ref is not None:
@@ -279,6 +288,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--cache", default=None, help="cache folder (default OUT/cache)")
+    ap.add_argument("--fixed", default=None, metavar="SUMMARY",
+                    help="summary.json of another experiment: r and RMSE at its best sigmas too (the held-out test)")
     args = ap.parse_args(argv)
     try:
         sigmas = DEFAULT_GRID if args.sigmas is None else tuple(float(v) for v in args.sigmas.split(","))
@@ -286,13 +297,22 @@ def main(argv=None) -> int:
         bad = [r for r in rules if r not in RULES]
         if bad or args.runs < 1 or any(not np.isfinite(s) or s < 0 for s in sigmas):
             raise MentalJengaError(f"--rules must be among {', '.join(RULES)}, --runs >= 1, sigmas finite and >= 0")
-        s = analyse(args.repo, args.experiment, args.out, sigmas, args.runs, args.seed, args.jobs, rules, args.cache)
+        fixed = None
+        if args.fixed:
+            try:
+                other = json.loads(Path(args.fixed).read_text())
+                fixed = {rule: float(v["best_sigma"]) for rule, v in other["rules"].items()}
+            except (OSError, ValueError, KeyError, TypeError) as e:
+                raise MentalJengaError(f"{args.fixed}: not a summary.json of analysis.mental_jenga ({type(e).__name__}: {e})") from None
+        s = analyse(args.repo, args.experiment, args.out, sigmas, args.runs, args.seed, args.jobs, rules, args.cache, fixed=fixed)
     except (MentalJengaError, ValueError) as e:
         print(f"analysis.mental_jenga: {e}", file=sys.stderr)
         return 2
     for rule, v in s["rules"].items():
         print(f"{rule}: best sigma {v['best_sigma']:g} [{v['best_sigma_interval_95'][0]:g}, {v['best_sigma_interval_95'][1]:g}], "
-              f"r {v['r']:.3f}, RMSE {v['rmse']:.3f}, held-out r {v['held_out_r']:.3f}")
+              f"r {v['r']:.3f}, RMSE {v['rmse']:.3f}, held-out r {v['held_out_r']:.3f}"
+              + (f"; at the fixed sigma {v['at_fixed_sigma']['sigma']:g}: r {v['at_fixed_sigma']['r']:.3f}, "
+                 f"RMSE {v['at_fixed_sigma']['rmse']:.3f}" if "at_fixed_sigma" in v else ""))
     return 0
 
 

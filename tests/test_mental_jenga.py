@@ -223,3 +223,26 @@ def test_removing_brick_0_reproduces_the_authors_fall_column_better_than_another
             f = deterministic_falls(s)
             agree[k] = np.mean([int(x) == ref.get(b.index, 0) for b, x in zip(s.bricks, f) if not b.black])
         assert agree[0] >= max(agree.values()) and agree[0] >= 0.9, agree
+
+
+@pytest.mark.slow
+def test_the_whole_check_writes_fit_summary_and_figure_from_a_clone(tmp_path):
+    """analysis.mental_jenga end to end on three hand-written scenes and four
+    SIMULATED participants (made up here for the test, not data)."""
+    from analysis.mental_jenga import analyse
+
+    pred = pd.DataFrame({"participant": np.repeat([1, 2, 3, 4], 3), "condition": "prediction", "order": 1,
+                         "trial": np.tile([1.0, 2.0, 3.0], 4), "response": [0, 1, 1, 0, 1, 2, 1, 1, 1, 0, 2, 1.0]})
+    repo = fake_repo(tmp_path, {1: "lone", 2: "stacked", 3: "overhang"}, pred)
+    out = tmp_path / "fit"
+    s = analyse(repo, 2, out, sigmas=(0.0, 0.1), n_runs=3, jobs=1, log=open("/dev/null", "w"),
+                fixed={"authors-x": 0.1, "paper-3d": 0.0})
+    fit = pd.read_csv(out / "fit.csv")
+    assert len(fit) == 4 and set(fit.rule) == {"authors-x", "paper-3d"}
+    assert s["scenes_used"] == 3 and s["participants"] == 4 and s["linear_map"] is False
+    # at sigma 0 the model says 0, 1, 1 (lone stands; stacked and overhang lose one red brick each)
+    assert fit[(fit.sigma == 0)].rmse.iloc[0] == pytest.approx(np.sqrt(np.mean((np.array([0, 1, 1]) - [0.25, 1.25, 1.25]) ** 2)))
+    assert s["rules"]["paper-3d"]["at_fixed_sigma"]["sigma"] == 0.0
+    assert (out / "scatter.png").stat().st_size > 10_000 and json.loads((out / "summary.json").read_text())["experiment"] == 2
+    again = analyse(repo, 2, out, sigmas=(0.0, 0.1), n_runs=3, jobs=1, log=open("/dev/null", "w"))
+    assert again["timing"]["computed"] == 0 and again["timing"]["cached"] == 6  # second run: every table from the cache
