@@ -542,6 +542,150 @@ def resigned_cases(tmp: Path):
     yield "compute_times.json `{\"x\": null}` (crashed every rerun)", times
 
 
+# ----------------------------------------------------------------------------- output folders (issue 30)
+
+
+def _snapshot(folder: Path) -> dict:
+    """path -> sha256 (or link target) of everything under `folder`."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        if p.is_symlink():
+            out[p.relative_to(folder).as_posix()] = "-> " + os.readlink(p)
+        elif p.is_file():
+            out[p.relative_to(folder).as_posix()] = hashlib.sha256(p.read_bytes()).hexdigest()
+    return out
+
+
+def output_cases(tmp: Path):
+    """What lgp.reproduce and stimuli.experiment do with a folder that holds what they
+    did not write: a refusal must leave it byte-identical; a kept case must keep
+    every foreign file byte-identical while the run's own files are replaced."""
+    import json
+
+    from lgp import owned
+    from lgp.app.manifest import OutputLock, check_output_folder
+
+    def folder(files, manifest=None):
+        root = Path(tempfile.mkdtemp(dir=tmp)) / "out"
+        for rel, data in files.items():
+            (root / rel).parent.mkdir(parents=True, exist_ok=True)
+            (root / rel).write_bytes(data.encode() if isinstance(data, str) else data)
+        root.mkdir(exist_ok=True)
+        if manifest is not None:
+            listed = [{"path": r, "sha256": hashlib.sha256((root / r).read_bytes()).hexdigest()} for r in manifest]
+            (root / "manifest.json").write_text(json.dumps({"command": ["python -m lgp.reproduce"], "files": listed}))
+        return root
+
+    def untouched(make, act):
+        """A refusal case: `act(root)` must raise, the folder byte-identical."""
+        def run():
+            root = make()
+            before = _snapshot(root)
+            try:
+                act(root)
+            except BaseException:
+                if _snapshot(root) != before:
+                    return "FAILURE: refused, but the folder changed"
+                raise
+            return "went ahead"
+        return run
+
+    def kept(make, act, keep):
+        """A case that proceeds: the files in `keep` must stay byte-identical."""
+        def run():
+            root = make()
+            before = {k: v for k, v in _snapshot(root).items() if k in keep}
+            said = act(root)
+            after = _snapshot(root)
+            lost = [k for k in keep if after.get(k) != before.get(k)]
+            if lost:
+                raise AssertionError(f"lost or changed: {lost}")
+            return f"{said}; kept byte-identical: {', '.join(keep)}"
+        return ("accept", run)
+
+    thesis = {"analysis/thesis.R": "library(lme4)\n", "figures/mine.png": b"\x89PNG mine", "report.md": "mine\n",
+              "index.html": "<p>mine</p>"}
+    yield ("lgp.reproduce --out DIR: the user's analysis/thesis.R, figures/mine.png, report.md, index.html, "
+           "no manifest (all deleted before)"), untouched(lambda: folder(thesis), check_output_folder)
+    checkout = {"analysis/__init__.py": "", "lgp/__init__.py": "", "README.md": "# project\n", "docs/faults.md": "x"}
+    yield "lgp.reproduce --out . in a checkout (deleted the analysis/ package before)", \
+        untouched(lambda: folder(checkout), check_output_folder)
+    yield "--into-existing, the user's report.md where a run writes one", \
+        untouched(lambda: folder(thesis), lambda r: check_output_folder(r, into_existing=True))
+    yield "--into-existing beside analysis/thesis.R and figures/mine.png", kept(
+        lambda: folder({k: v for k, v in thesis.items() if "/" in k}),
+        lambda r: f"accepted: {check_output_folder(r, into_existing=True)}", ["analysis/thesis.R", "figures/mine.png"])
+    yield "a manifest.json of another program", untouched(
+        lambda: folder({"manifest.json": '{"name": "web app"}', "app.js": "x"}), check_output_folder)
+    yield "manifest.json linked to /dev/zero", untouched(
+        lambda: (lambda r: ((r / "manifest.json").symlink_to("/dev/zero"), r)[1])(folder({"report.md": "x"})),
+        check_output_folder)
+    yield "an earlier run's report.md edited by hand", untouched(
+        lambda: (lambda r: ((r / "report.md").write_text("edited\n"), r)[1])(folder({"report.md": "run\n"}, ["report.md"])),
+        check_output_folder)
+
+    def swap(root, new, earlier_listed=True):
+        entries = owned.manifest_entries(json.loads((root / "manifest.json").read_text()))
+        stage = owned.new_staging(root)
+        for rel, data in new.items():
+            (stage / rel).parent.mkdir(parents=True, exist_ok=True)
+            (stage / rel).write_text(data)
+        (stage / "manifest.json").write_text(json.dumps({"command": ["python -m lgp.reproduce"], "files": []}))
+        try:
+            removed = owned.swap_in(root, stage, entries, "manifest.json")
+        finally:
+            owned.remove_staging(stage)
+        return f"removed the earlier run's own {removed}"
+
+    yield "a new run's file over the user's figures/orderings.csv (at the swap)", untouched(
+        lambda: folder({"effort.csv": "old", "figures/orderings.csv": "mine"}, ["effort.csv"]),
+        lambda r: swap(r, {"effort.csv": "new", "figures/orderings.csv": "run's"}))
+    yield "a rerun beside the user's figures/mine.png, notes.md and an edited listed risk.csv", kept(
+        lambda: (lambda r: ((r / "risk.csv").write_text("edited"), r)[1])(
+            folder({"effort.csv": "old", "risk.csv": "old", "figures/a.png": "old", "figures/mine.png": "mine",
+                    "notes.md": "mine"}, ["effort.csv", "risk.csv", "figures/a.png"])),
+        lambda r: swap(r, {"effort.csv": "new"}), ["figures/mine.png", "notes.md", "risk.csv"])
+    elsewhere = tmp / "elsewhere"
+
+    def linked(r):
+        elsewhere.mkdir(exist_ok=True)
+        (elsewhere / "important.txt").write_text("keep")
+        (r / "page").symlink_to(elsewhere)
+        (r / "manifest.json").write_text(json.dumps({"command": ["python -m lgp.reproduce"], "files": [
+            {"path": "page/important.txt", "sha256": hashlib.sha256(b"keep").hexdigest()}]}))
+        return r
+
+    yield "the manifest lists page/important.txt, page a link to a folder outside", kept(
+        lambda: linked(folder({})), lambda r: swap(r, {}) + f"; outside: {(elsewhere / 'important.txt').read_text()}",
+        ["page"])
+
+    def nested(first, second):
+        def act(root):
+            (root / first).mkdir(parents=True, exist_ok=True)
+            (root / second).mkdir(parents=True, exist_ok=True)
+            with OutputLock(root / first, f"python -m lgp.reproduce --out {first}"):
+                with OutputLock(root / second):
+                    return "both locked"
+        return act
+
+    yield "two runs: --out rn, then --out rn/figures", untouched(lambda: folder({}), nested("rn", "rn/figures"))
+    yield "two runs: --out rn/figures, then --out rn", untouched(lambda: folder({}), nested("rn/figures", "rn"))
+
+    def study(files):
+        def act(root):
+            from stimuli import experiment as ex
+
+            return f"accepted: {ex.check_output_dir(root)}"
+        return act
+
+    yield "stimuli.experiment --out DIR: thesis.tex, no study.json", untouched(lambda: folder({"thesis.tex": "x"}), study({}))
+    stray = {"study": "abc", "build": "b", "files": {"index.html": hashlib.sha256(b"theirs").hexdigest()}}
+    yield "stimuli.experiment: a stray study.json and the user's index.html (wiped before)", untouched(
+        lambda: folder({"thesis.tex": "x", "index.html": "mine", "study.json": json.dumps(stray)}), study({}))
+    yield "stimuli.experiment: a study.json of another program", untouched(
+        lambda: folder({"study.json": '{"x": 1}'}), study({}))
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "faults.md")
@@ -550,7 +694,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         groups = [("trial file", trial_cases(tmp)), ("human data", human_cases(tmp)),
-                  ("study import", import_cases(tmp)), ("command line", command_cases()), ("API", api_cases()),
+                  ("study import", import_cases(tmp)), ("output folder", output_cases(tmp)), ("command line", command_cases()), ("API", api_cases()),
                   ("cache entry", itertools.chain(((n, _cache_run(d, tmp)) for n, d in cache_cases(tmp)),
                                                   resigned_cases(tmp)))]
         for group, cases in groups:
@@ -571,7 +715,8 @@ def main(argv=None) -> int:
              "named line (or, for a cache entry, reported and recomputed), none after a hang or a traceback; "
              f"{len(accepted)} inputs the formats allow were accepted as designed. "
              f"By kind: " + ", ".join(f"{g} {sum(1 for r in refused if r[0] == g)}/{sum(1 for r in bad if r[0] == g)}"
-                                      for g in ("trial file", "human data", "study import", "command line", "API", "cache entry")) + ".", "",
+                                      for g in ("trial file", "human data", "study import", "output folder", "command line", "API",
+                                                "cache entry")) + ".", "",
              "| kind | input | verdict | what the project does |", "|---|---|---|---|"]
     bar = "\\|"
     lines += [f"| {g} | {n.replace('|', bar)} | {v} | {w[:220]} |" for g, n, v, w in rows]

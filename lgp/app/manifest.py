@@ -98,7 +98,8 @@ def check_output_folder(out: Path, into_existing: bool = False) -> dict[str, set
     if bad:
         raise owned.ForeignFiles(f"--out {out}: {owned.describe(bad)} there {'is' if len(bad) == 1 else 'are'} not "
                                  f"an earlier run's output (not listed in its {MANIFEST} with these contents); this "
-                                 "run would overwrite it: move it away or give another --out")
+                                 f"run would overwrite {'it' if len(bad) == 1 else 'them'}: move "
+                                 f"{'it' if len(bad) == 1 else 'them'} away or give another --out")
     return entries
 
 

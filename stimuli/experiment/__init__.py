@@ -296,8 +296,9 @@ def check_output_dir(out: Path, into_existing: bool = False) -> dict[str, set[st
     bad = owned.collisions(out, list(BUILT), set(owned.own_files(out, entries)))
     if bad:
         raise StudyError(f"--out {out}: {owned.describe(bad)} there {'is' if len(bad) == 1 else 'are'} not the earlier "
-                         f"build's (not listed in its {MANIFEST} with these contents); a rebuild would overwrite it: "
-                         "move it away or give another --out")
+                         f"build's (not listed in its {MANIFEST} with these contents); a rebuild would overwrite "
+                         f"{'it' if len(bad) == 1 else 'them'}: move {'it' if len(bad) == 1 else 'them'} away or give "
+                         "another --out")
     return entries
 
 
