@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.data import TRIAL_IDS
+from analysis.spec import RISK_BASES, ModelSpec, ModelSpecError
 
 #: Model names used in every table: Eq. 1, effort-only, risk-only.
 MODELS: tuple[str, ...] = ("full", "effort", "risk")
@@ -36,10 +37,10 @@ MODEL_TERMS = {"full": ("E(1-R)", "E*R"), "effort": ("E",), "risk": ("R",)}
 #: may stand in for R: final-stage risk, max over stages, expected number of
 #: collapses, probability of at least one, and the care-weighted sum. Only
 #: final, max and any are probabilities; expected and care may exceed 1.
-RISK_MEASURES: tuple[str, ...] = ("final", "max", "expected", "any", "care", "sequential")
+from analysis.spec import RISK_MEASURES  # noqa: E402  (one home: analysis.spec)
 PROBABILITY_MEASURES = ("final", "max", "any", "sequential")
 #: Models whose R is a build-risk aggregate are named like ``full[max]``.
-MEASURE_BASES: tuple[str, ...] = ("full", "risk")
+MEASURE_BASES: tuple[str, ...] = RISK_BASES
 #: Two sigmas closer than this are the same grid value (0.065 vs 0.0650000001).
 SIGMA_ATOL = 1e-9
 
@@ -125,19 +126,24 @@ def risk_at_sigma(risk_table: pd.DataFrame, sigma: float) -> pd.Series:
 
 def measure_model(base: str, measure: str) -> str:
     """Name of model `base` ('full' or 'risk') with build-risk aggregate `measure` as R."""
-    if base not in MEASURE_BASES or measure not in RISK_MEASURES:
-        raise ModelInputError(f"no model {base}[{measure}]: bases {', '.join(MEASURE_BASES)}, "
-                              f"measures {', '.join(RISK_MEASURES)}")
-    return f"{base}[{measure}]"
+    try:
+        return ModelSpec(base, measure).name
+    except ModelSpecError as e:
+        raise ModelInputError(str(e)) from None
 
 
-def split_model(model: str) -> tuple[str, str | None]:
-    """'full[max]' -> ('full', 'max'); 'full' -> ('full', None)."""
-    if model.endswith("]") and "[" in model:
-        base, measure = model[:-1].split("[", 1)
-        measure_model(base, measure)  # validates
-        return base, measure
-    return model, None
+def model_spec(model: "str | ModelSpec") -> ModelSpec:
+    """The ModelSpec a model name means (analysis.spec), ModelInputError if none."""
+    try:
+        return ModelSpec.parse(model)
+    except ModelSpecError as e:
+        raise ModelInputError(str(e)) from None
+
+
+def split_model(model: "str | ModelSpec") -> tuple[str, str | None]:
+    """'full[max]' -> ('full', 'max'); 'full' -> ('full', None) (ModelSpec's two fields)."""
+    spec = model_spec(model)
+    return spec.base, spec.risk
 
 
 def measure_at_sigma(build_table: pd.DataFrame, sigma: float, measure: str) -> pd.Series:
@@ -181,11 +187,20 @@ def risk_inputs(R: pd.Series, build_table: pd.DataFrame | None = None, sigma: fl
     return out
 
 
-def design_matrix(model: str, effort: pd.Series, risk: pd.Series | pd.DataFrame | None = None) -> np.ndarray:
+def design_matrix(model: str, effort: pd.Series, risk: pd.Series | pd.DataFrame | None = None,
+                  features: pd.DataFrame | None = None) -> np.ndarray:
     """The (24, p) regressor matrix of `model`, rows in TRIAL_IDS order, first
     column the intercept. `risk` is a per-trial Series, or a DataFrame from
-    `risk_inputs` (column R for full and risk, column m for full[m] and risk[m])."""
-    model, measure = split_model(model)
+    `risk_inputs` (column R for full and risk, column m for full[m] and risk[m]);
+    `features` the heuristic predictors (analysis.heuristics.trial_features,
+    indexed by trial or with a column trial) for the heuristic models."""
+    spec = model_spec(model)
+    model, measure = spec.base, spec.risk
+    if spec.feature is not None:
+        h = feature_vector(features, spec.feature)
+        E = effort.reindex(list(TRIAL_IDS)).to_numpy(dtype=float)
+        ones = np.ones_like(h)
+        return np.column_stack([ones, E, h]) if spec.reads_effort else np.column_stack([ones, h])
     if isinstance(risk, pd.DataFrame):
         column = measure or "R"
         if column not in risk.columns:
@@ -208,8 +223,27 @@ def design_matrix(model: str, effort: pd.Series, risk: pd.Series | pd.DataFrame 
     raise ModelInputError(f"unknown model {model!r}; expected one of {', '.join(MODELS)}")
 
 
+def feature_vector(features: pd.DataFrame | None, feature: str, trials: Sequence[str] = TRIAL_IDS) -> np.ndarray:
+    """One heuristic predictor in `trials` order from a features table (indexed by
+    trial, or with a column trial). ModelInputError names a missing feature or trial."""
+    if features is None:
+        raise ModelInputError(f"model needs the heuristic predictor {feature!r} per trial "
+                              "(analysis.heuristics.trial_features)")
+    table = features.set_index("trial") if "trial" in features.columns else features
+    if feature not in table.columns:
+        raise ModelInputError(f"the features table lacks {feature!r}; it has {', '.join(map(str, table.columns))}")
+    missing = [t for t in trials if t not in table.index]
+    if missing:
+        raise ModelInputError(f"heuristic predictor {feature!r}: missing trial(s) {', '.join(missing)}")
+    v = table[feature].reindex(list(trials)).to_numpy(dtype=float)
+    if not np.all(np.isfinite(v)):
+        raise ModelInputError(f"heuristic predictor {feature!r} of trial {list(trials)[int(np.argmin(np.isfinite(v)))]} "
+                              "is not a finite number")
+    return v
+
+
 def fit_model(model: str, y: pd.Series | Sequence[float], effort: pd.Series | pd.DataFrame,
-              risk: pd.Series | None = None) -> ModelFit:
+              risk: pd.Series | None = None, features: pd.DataFrame | None = None) -> ModelFit:
     """Least-squares fit of `model` ('full', 'effort' or 'risk') to trial means `y`.
 
     `y` is a Series indexed by trial id or 24 values in TRIAL_IDS order; `effort`
@@ -220,7 +254,7 @@ def fit_model(model: str, y: pd.Series | Sequence[float], effort: pd.Series | pd
     """
     E = effort_per_trial(effort)
     y_vec = _trial_vector(y)
-    X = design_matrix(model, E, risk)
+    X = design_matrix(model, E, risk, features)
     beta, *_ = np.linalg.lstsq(X, y_vec, rcond=None)
     pred = X @ beta
     return ModelFit(
@@ -234,7 +268,7 @@ def fit_model(model: str, y: pd.Series | Sequence[float], effort: pd.Series | pd
 
 def fit_models(means: pd.DataFrame, effort: pd.Series | pd.DataFrame,
                risk: pd.Series | Mapping[str, pd.Series], sigma: float | Mapping[str, float],
-               models: Sequence[str] = MODELS) -> tuple[pd.DataFrame, pd.DataFrame]:
+               models: Sequence[str] = MODELS, features: pd.DataFrame | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Fit each model to each dataset's trial means.
 
     `means` has columns dataset, trial, mean_z (as `analysis.data.trial_means`).
@@ -254,7 +288,7 @@ def fit_models(means: pd.DataFrame, effort: pd.Series | pd.DataFrame,
         s = sigma[dataset] if isinstance(sigma, Mapping) else sigma
         y_vec = _trial_vector(y)
         for model in models:
-            fit = fit_model(model, y, E, R)
+            fit = fit_model(model, y, E, R, features)
             b = list(fit.coefficients) + [np.nan] * (3 - len(fit.coefficients))
             fit_rows.append((dataset, model, s, *b, fit.rmse, fit.r, len(TRIAL_IDS)))
             for trial, obs, pred in zip(TRIAL_IDS, y_vec, fit.predictions.to_numpy()):

@@ -68,8 +68,8 @@ from __future__ import annotations
 
 from analysis.crossval.decisions import N_PARAMETERS, SCORES, comparison_tests, direct_p, verdicts  # noqa: F401
 from analysis.crossval.fits import CHUNK, COLLINEAR_REL, cross_validate, cv_arrays, scores  # noqa: F401
-from analysis.crossval.folds import (CV_SCHEMES, MIN_PAIRS, SCHEMES, CrossValidationError,  # noqa: F401
-                                     make_folds, pairs_of)
+from analysis.crossval.folds import (CV_SCHEMES, MIN_PAIRS, SCHEMES, STRUCTURE_SCHEME, CrossValidationError,  # noqa: F401
+                                     grouping_label, make_folds, pairs_of, structure_folds, structure_groups)
 from analysis.crossval.grids import RISK_DRAW_STREAM, RISK_DRAWS, RiskGrid, measure_grid, redraw_risk, risk_grid  # noqa: F401
 from analysis.crossval.tables import (bootstrap_comparison, gain_over_effort, model_comparison,  # noqa: F401
                                       summarize_comparison)

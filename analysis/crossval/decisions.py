@@ -8,11 +8,12 @@ from typing import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from analysis.models import split_model
+from analysis.models import model_spec
 
 #: Scores of held-out predictions, and whether a higher value is better.
 SCORES: dict[str, bool] = {"rmse": False, "r": True}
-#: Parameters of each model's base form (for the parsimony rule of `verdicts`).
+#: Parameters of each model's base form (for the parsimony rule of `verdicts`;
+#: every model's count is analysis.spec.ModelSpec.n_parameters).
 N_PARAMETERS = {"full": 3, "effort": 2, "risk": 2}
 
 
@@ -68,6 +69,6 @@ def verdicts(score_by_model: Mapping[str, np.ndarray], higher_is_better: bool = 
     s = np.where(np.isnan(s), -np.inf, s)
     best = s.max(axis=0)
     tied = s >= best - tie_rel * np.abs(best)
-    rank = np.array([N_PARAMETERS[split_model(m)[0]] * len(names) + k for k, m in enumerate(names)])
+    rank = np.array([model_spec(m).n_parameters * len(names) + k for k, m in enumerate(names)])
     cost = np.where(tied, rank.reshape((-1,) + (1,) * (S.ndim - 1)), np.iinfo(int).max)
     return np.array(names, dtype=object)[np.argmin(cost, axis=0)]

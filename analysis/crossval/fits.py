@@ -8,9 +8,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from analysis.crossval.folds import make_folds, pairs_of
+from analysis.crossval.folds import STRUCTURE_SCHEME, CrossValidationError, make_folds, pairs_of, structure_folds
 from analysis.data import TRIAL_IDS
-from analysis.models import ModelInputError, rowwise_pearson, split_model
+from analysis.models import ModelInputError, model_spec, rowwise_pearson
 from analysis.pairs import pair_order_codes
 from analysis.sigma import least_sigma_index
 
@@ -43,7 +43,8 @@ def _as_batch(risk: np.ndarray) -> np.ndarray:
 
 def cv_arrays(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray], models: Sequence[str],
               train: np.ndarray, test: np.ndarray, sigma_index: Mapping[str, int] | None = None,
-              pool: bool = True) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+              pool: bool = True, features: Mapping[str, np.ndarray] | None = None
+              ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Held-out predictions of every model, vectorised over resamples, sigmas and folds.
 
     Y: (B, D, T) trial means (B resamples or studies, D datasets analysed together);
@@ -57,6 +58,9 @@ def cv_arrays(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray], mod
     Returns (predictions, chosen): predictions {model: (B, D, T)} at the held-out
     trials of each fold (NaN at trials no fold holds out; in-sample: the fit);
     chosen {source: (B, F, D)} the grid index of sigma used in each fold.
+    `features` {name: (T,)} the heuristic predictors of the heuristic models
+    (analysis.spec: ``h`` is y = b0 + b1 h, ``effort+h`` y = b0 + b1 E + b2 h),
+    fitted on the training trials like effort-only and risk-only (no sigma).
     """
     Y = np.asarray(Y, dtype=float)
     B, D, T = Y.shape
@@ -70,12 +74,36 @@ def cv_arrays(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray], mod
     ymean = ytr.mean(axis=-1)                          # (B, F, D)
     yc = ytr - ymean[..., None]
 
-    bases = {m: split_model(m) for m in models}
+    specs = {m: model_spec(m) for m in models}
     preds = {m: np.full((B, D, T), np.nan) for m in models}
     if "effort" in models:
         _scatter(preds["effort"], gy, test)
+    for m, spec in specs.items():
+        if spec.feature is None:
+            continue
+        if features is None or spec.feature not in features:
+            raise ModelInputError(f"model {m} needs the heuristic predictor {spec.feature!r} per trial")
+        h = np.asarray(features[spec.feature], dtype=float)
+        htr = h[train]                                                   # (F, n_tr)
+        if spec.reads_effort:   # effort + h: the part of h that 1 and E do not explain in training
+            z = np.einsum("fij,fj->fi", M, htr)
+            zz = np.einsum("fi,fi->f", z, z)
+            absent = zz <= COLLINEAR_REL ** 2 * np.einsum("fi,fi->f", htr, htr)
+            zy = np.einsum("fi,bfdi->bfd", z, ey)
+            c = np.where(absent[None, :, None], 0.0, zy / np.where(absent, 1.0, zz)[None, :, None])
+            dh = h[test] - np.einsum("fij,fj->fi", G, htr)               # (F, n_te)
+            _scatter(preds[m], gy + c[..., None] * dh[None, :, None, :], test)
+        else:                   # h alone: y = b0 + b1 h
+            hmean = htr.mean(axis=-1)
+            hc = htr - hmean[:, None]
+            hh = np.einsum("fi,fi->f", hc, hc)
+            flat = hh <= COLLINEAR_REL ** 2 * np.einsum("fi,fi->f", htr, htr)
+            hy = np.einsum("fi,bfdi->bfd", hc, yc)
+            slope = np.where(flat[None, :, None], 0.0, hy / np.where(flat, 1.0, hh)[None, :, None])
+            dh = h[test] - hmean[:, None]
+            _scatter(preds[m], ymean[..., None] + slope[..., None] * dh[None, :, None, :], test)
     chosen = {}
-    for source in dict.fromkeys((measure or "R") for base, measure in bases.values() if base != "effort"):
+    for source in dict.fromkeys(spec.source for spec in specs.values() if spec.source is not None):
         R = _as_batch(risks[source])                   # (Bx, S, T)
         W = R * np.asarray(E, float)                   # E*R
         # Eq. 1 beyond effort: the part of E*R that 1 and E do not explain in training.
@@ -133,12 +161,28 @@ def _scatter(out: np.ndarray, fold_values: np.ndarray, test: np.ndarray) -> None
 
 def cross_validate(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray], models: Sequence[str],
                    scheme: str, sigma_index: Mapping[str, int] | None = None, pool: bool = True,
-                   trials: Sequence[str] = TRIAL_IDS, chunk: int = CHUNK
-                   ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], np.ndarray]:
+                   trials: Sequence[str] = TRIAL_IDS, chunk: int = CHUNK,
+                   features: Mapping[str, np.ndarray] | None = None,
+                   groups: Sequence[Sequence[int]] | None = None
+                   ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], np.ndarray | list[np.ndarray]]:
     """`cv_arrays` for one scheme, in chunks of `chunk` resamples (a fixed size, so the
     result never depends on the split of the work). Risks of shape (B, S, T) are
-    chunked with Y. Returns (predictions, chosen, test) with test from make_folds."""
-    train, test = make_folds(scheme, trials)
+    chunked with Y. Returns (predictions, chosen, test) with test from make_folds
+    (for STRUCTURE_SCHEME, which needs `groups` from crossval.structure_groups, a
+    list of the held-out index arrays, one per group, of unequal lengths; folds of
+    equal size are computed together and chosen keeps the groups' order)."""
+    if scheme == STRUCTURE_SCHEME:
+        if groups is None:
+            raise CrossValidationError(f"{STRUCTURE_SCHEME} needs the structure groups (crossval.structure_groups)")
+        folds = structure_folds(groups, np.asarray(Y).shape[-1])
+        sizes = sorted({len(te) for _, te in folds})
+        sets = [[k for k, (_, te) in enumerate(folds) if len(te) == n] for n in sizes]
+        fold_sets = [(np.stack([folds[k][0] for k in ks]), np.stack([folds[k][1] for k in ks]), ks) for ks in sets]
+        test_out: np.ndarray | list[np.ndarray] = [te for _, te in folds]
+    else:
+        train, test = make_folds(scheme, trials)
+        fold_sets = [(train, test, list(range(len(test))))]
+        test_out = test
     Y = np.asarray(Y, dtype=float)
     B = Y.shape[0]
     batched = {s: np.asarray(r, float).ndim == 3 for s, r in risks.items()}
@@ -147,16 +191,26 @@ def cross_validate(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray]
             raise ModelInputError(f"risk source {s}: {np.asarray(r).shape[0]} risk draws for {B} resamples")
     preds: dict[str, list] = {m: [] for m in models}
     chosen: dict[str, list] = {}
+    n_folds = sum(len(ks) for _, _, ks in fold_sets)
     for lo in range(0, B, chunk):
         hi = min(B, lo + chunk)
         part = {s: (np.asarray(r)[lo:hi] if batched[s] else r) for s, r in risks.items()}
-        p, c = cv_arrays(Y[lo:hi], E, part, models, train, test, sigma_index, pool)
+        p_all: dict[str, np.ndarray] = {}
+        c_all: dict[str, np.ndarray] = {}
+        for train, test, ks in fold_sets:
+            p, c = cv_arrays(Y[lo:hi], E, part, models, train, test, sigma_index, pool, features)
+            for m in models:
+                p_all[m] = p[m] if m not in p_all else np.where(np.isnan(p[m]), p_all[m], p[m])
+            for s, v in c.items():
+                if s not in c_all:
+                    c_all[s] = np.zeros((v.shape[0], n_folds, v.shape[2]), dtype=v.dtype)
+                c_all[s][:, ks] = v
         for m in models:
-            preds[m].append(p[m])
-        for s, v in c.items():
+            preds[m].append(p_all[m])
+        for s, v in c_all.items():
             chosen.setdefault(s, []).append(v)
     return ({m: np.concatenate(v) for m, v in preds.items()},
-            {s: np.concatenate(v) for s, v in chosen.items()}, test)
+            {s: np.concatenate(v) for s, v in chosen.items()}, test_out)
 
 
 def scores(Y: np.ndarray, predictions: np.ndarray, trials: Sequence[str] = TRIAL_IDS) -> dict[str, np.ndarray]:

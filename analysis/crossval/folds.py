@@ -13,6 +13,13 @@ from analysis.data import TRIAL_IDS
 #: scored on held-out pairs or trials.
 SCHEMES: tuple[str, ...] = ("in-sample", "leave-one-pair-out", "leave-one-trial-out")
 CV_SCHEMES: tuple[str, ...] = SCHEMES[1:]
+#: Held-out folds by structure: a fold holds out a group of trials closed under
+#: "same pair" and "identical B (identical risk curve over every sigma)", so a held-out
+#: trial is never a copy of a training one (`structure_groups`). Not in SCHEMES:
+#: its folds need the risk table, so callers ask for it with the groups.
+STRUCTURE_SCHEME = "leave-one-structure-out"
+#: Two risk curves closer than this at every sigma are the same structure.
+SAME_CURVE_ATOL = 1e-12
 #: Fewest easy/hard pairs leave-one-pair-out cross-validation accepts.
 MIN_PAIRS = 3
 
@@ -60,3 +67,72 @@ def make_folds(scheme: str, trials: Sequence[str] = TRIAL_IDS) -> tuple[np.ndarr
     if train.shape[1] < 4:
         raise CrossValidationError(f"{scheme}: folds leave {train.shape[1]} training trials; Eq. 1 needs at least 4")
     return train, test
+
+
+def structure_groups(trials: Sequence[str], risk: np.ndarray | None = None,
+                     same: Sequence[Sequence[str]] = ()) -> list[tuple[int, ...]]:
+    """Groups of trial indices for STRUCTURE_SCHEME: the connected components of
+    "nE and nH are a pair", "identical risk curves" (every column of `risk` (S, T)
+    within SAME_CURVE_ATOL of another at every sigma: the same B, simulated with the
+    same random numbers) and any explicit `same` sets of trial ids (e.g. identical
+    B files). Sorted by first trial; trials in none of these are their own group."""
+    T = len(trials)
+    parent = list(range(T))
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    def join(i: int, j: int) -> None:
+        a, b = find(i), find(j)
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+
+    for e, h in pairs_of(list(trials)):
+        join(e, h)
+    if risk is not None:
+        R = np.asarray(risk, dtype=float)
+        if R.ndim != 2 or R.shape[1] != T:
+            raise CrossValidationError(f"{STRUCTURE_SCHEME}: risk must be (sigmas, {T} trials), got {R.shape}")
+        for i in range(T):
+            for j in range(i + 1, T):
+                if np.all(np.abs(R[:, i] - R[:, j]) <= SAME_CURVE_ATOL):
+                    join(i, j)
+    where = {t: k for k, t in enumerate(trials)}
+    for names in same:
+        idx = [where[n] for n in names if n in where]
+        for k in idx[1:]:
+            join(idx[0], k)
+    groups: dict[int, list[int]] = {}
+    for i in range(T):
+        groups.setdefault(find(i), []).append(i)
+    return sorted((tuple(g) for g in groups.values()), key=lambda g: g[0])
+
+
+def grouping_label(groups: Sequence[Sequence[int]], trials: Sequence[str] = TRIAL_IDS) -> str:
+    """The grouping as text: '1E 1H 9E 9H 11E 11H | 2E 2H | ...'."""
+    return " | ".join(" ".join(str(trials[i]) for i in g) for g in groups)
+
+
+def structure_folds(groups: Sequence[Sequence[int]], n_trials: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """[(train, test)] index arrays, one fold per group. Raises CrossValidationError for
+    fewer than 2 groups, a trial in no group or two, or a fold leaving fewer than 4
+    training trials (Eq. 1 has 3 parameters)."""
+    flat = sorted(i for g in groups for i in g)
+    if flat != list(range(n_trials)):
+        raise CrossValidationError(f"{STRUCTURE_SCHEME}: the groups must hold each of the {n_trials} trials once")
+    if len(groups) < 2:
+        raise CrossValidationError(f"{STRUCTURE_SCHEME}: all {n_trials} trials are one structure group; "
+                                   "nothing can be held out")
+    every = np.arange(n_trials)
+    out = []
+    for g in groups:
+        test = np.array(sorted(g), dtype=int)
+        train = np.setdiff1d(every, test)
+        if len(train) < 4:
+            raise CrossValidationError(f"{STRUCTURE_SCHEME}: holding out {len(test)} trials leaves {len(train)} "
+                                       "training trials; Eq. 1 needs at least 4")
+        out.append((train, test))
+    return out

@@ -13,16 +13,18 @@ from analysis.crossval.fits import cross_validate, scores
 from analysis.crossval.folds import SCHEMES, pairs_of
 from analysis.crossval.grids import RiskGrid
 from analysis.data import TRIAL_IDS, ordered_datasets
-from analysis.models import MODELS, effort_per_trial, split_model
+from analysis.models import MODELS, effort_per_trial, model_spec
 
 
 def _sources(models: Sequence[str]) -> list[str]:
-    return list(dict.fromkeys((split_model(m)[1] or "R") for m in models if split_model(m)[0] != "effort"))
+    return list(dict.fromkeys(model_spec(m).source for m in models if model_spec(m).source is not None))
 
 
 def model_comparison(means: Mapping[str, np.ndarray], effort, grids: Mapping[str, RiskGrid],
                      models: Sequence[str] = MODELS, schemes: Sequence[str] = SCHEMES,
-                     in_sample_sigma: Mapping[str, float] | None = None
+                     in_sample_sigma: Mapping[str, float] | None = None,
+                     features: Mapping[str, np.ndarray] | None = None,
+                     groups: Sequence[Sequence[int]] | None = None
                      ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Scores of every model under every scheme, on the full-sample trial means.
 
@@ -34,7 +36,10 @@ def model_comparison(means: Mapping[str, np.ndarray], effort, grids: Mapping[str
     Returns (scores, predictions): scores one row per (dataset, scheme, model):
     dataset, scheme, model, rmse, r, pairs_E_lt_H, n_pairs, sigma_min, sigma_max
     (over folds); predictions one row per (dataset, scheme, model, trial): fold
-    (the fold that held the trial out), sigma, observed, predicted.
+    (the fold that held the trial out), sigma, observed, predicted. `features`
+    {name: (24,)} the heuristic predictors of heuristic models (analysis.spec);
+    `groups` the structure groups of crossval.STRUCTURE_SCHEME when it is among
+    `schemes`.
     """
     E = effort_per_trial(effort).to_numpy()
     datasets = ordered_datasets(means)
@@ -43,21 +48,21 @@ def model_comparison(means: Mapping[str, np.ndarray], effort, grids: Mapping[str
     rows, pred_rows = [], []
     for scheme in schemes:
         fixed = _fixed_index(grids, risks, in_sample_sigma) if scheme == "in-sample" else None
-        preds, chosen, test = cross_validate(Y, E, risks, models, scheme, fixed)
+        preds, chosen, test = cross_validate(Y, E, risks, models, scheme, fixed, features=features, groups=groups)
         fold_of = np.empty(len(TRIAL_IDS), dtype=int)
         for f, held in enumerate(test):
             fold_of[held] = f
         for model in models:
             sc = scores(Y, preds[model])
-            source = split_model(model)[1] or "R"
+            source = model_spec(model).source
             for k, dataset in enumerate(datasets):
-                if model == "effort":
+                if source is None:
                     sig = np.full(len(TRIAL_IDS), np.nan)
                 else:
                     sig = grids[source].sigmas[chosen[source][0, :, k]][fold_of]
                 rows.append((dataset, scheme, model, sc["rmse"][0, k], sc["r"][0, k], int(sc["pairs"][0, k]),
-                             len(pairs_of(TRIAL_IDS)), np.nanmin(sig) if model != "effort" else np.nan,
-                             np.nanmax(sig) if model != "effort" else np.nan))
+                             len(pairs_of(TRIAL_IDS)), np.nanmin(sig) if source is not None else np.nan,
+                             np.nanmax(sig) if source is not None else np.nan))
                 for i, trial in enumerate(TRIAL_IDS):
                     pred_rows.append((dataset, scheme, model, trial, int(fold_of[i]), sig[i], Y[0, k, i],
                                       preds[model][0, k, i]))
@@ -81,7 +86,8 @@ def _fixed_index(grids, risks, in_sample_sigma) -> dict[str, int] | None:
 def bootstrap_comparison(boot_means: Mapping[str, np.ndarray], effort, grids: Mapping[str, RiskGrid],
                          models: Sequence[str] = MODELS, schemes: Sequence[str] = SCHEMES,
                          in_sample_sigma: Mapping[str, float] | None = None,
-                         risk_draws: np.ndarray | None = None) -> pd.DataFrame:
+                         risk_draws: np.ndarray | None = None, features: Mapping[str, np.ndarray] | None = None,
+                         groups: Sequence[Sequence[int]] | None = None) -> pd.DataFrame:
     """Scores of every model under every scheme in every bootstrap resample, the
     cross-validation (sigma choice included) redone inside each resample.
 
@@ -100,7 +106,7 @@ def bootstrap_comparison(boot_means: Mapping[str, np.ndarray], effort, grids: Ma
     frames = []
     for scheme in schemes:
         fixed = _fixed_index(grids, risks, in_sample_sigma) if scheme == "in-sample" else None
-        preds, _, _ = cross_validate(Y, E, risks, models, scheme, fixed)
+        preds, _, _ = cross_validate(Y, E, risks, models, scheme, fixed, features=features, groups=groups)
         for model in models:
             sc = scores(Y, preds[model])
             for k, dataset in enumerate(datasets):

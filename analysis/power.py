@@ -1,0 +1,715 @@
+"""Power of the comparison: SIMULATED studies through the project's own model
+comparison, on a set of trials' cached effort, risk and heuristic predictors.
+
+    python -m analysis.power --out results/power                    # the paper's 24 trials
+    python -m analysis.power --world effort-only "full:b2b1=3,sigma=0.15" effort+height noise --studies 200
+
+Everything here is SIMULATED: nothing stands in for human data. Every file is
+named ``simulated_*``-free but lives in the --out folder with "SIMULATED" in its
+columns and figure title.
+
+A **world** is the true latent cost y of every trial (`World`):
+
+* ``effort-only``: y = E (physical effort);
+* ``full:b2b1=K,sigma=S``: Eq. 1 with b1 = 1, b2 = K, risk R at sigma S (a grid
+  value of the risk table, units of d): y = E (1 - R) + K E R;
+* ``effort+height`` / ``effort+stacked`` (optionally ``:w=W``): y = E / sd(E) +
+  W h / sd(h), effort plus a no-physics heuristic of analysis.heuristics, equal
+  weight on the standardised scale by default (W = 1);
+* ``noise``: y = 0 on every trial, responses pure noise;
+* ``csv:FILE``: y read from FILE (columns trial and mean, one row per trial).
+
+A **study** has `participants` simulated participants; participant p answers
+trial i with offset_p + scale_p (y_i + noise_sd eps_pi) (analysis.recovery's
+draw: scale_p = exp(0.5 N(0,1)), offset_p ~ N(0, 10)); noise_sd = `noise` x
+the SD of y over the trials (`noise` itself in the pure-noise world). Each
+participant's responses are z-scored and averaged per trial, as the analysis does.
+
+Each study is then analysed as the comparison analyses real data:
+
+* **held-out verdict** (procedure ``held-out``): every model of MODELS (Eq. 1,
+  effort-only, risk-only, each heuristic alone, effort + height, effort +
+  stacked) scored by RMSE on folds by structure (crossval.STRUCTURE_SCHEME:
+  trials whose B is identical, or that form a pair, are held out together),
+  sigma chosen inside every fold; the verdict is the model of least held-out
+  RMSE (ties, relative 1e-9, to the model with fewer parameters). Also each
+  pairwise held-out preference of COMPARISONS (``held-out a vs b``).
+* **tests** of "model a predicts held-out trials better than model b" at alpha,
+  for each (a, b) of COMPARISONS (TESTS):
+  - ``freedman-lane`` (the default, calibrated): the statistic is held-out
+    RMSE(b) - RMSE(a); its null permutes the residuals of b's in-sample fit
+    across trials and adds them back to b's fit (Freedman & Lane 1983), each
+    permuted data set cross-validated whole (sigma inside folds);
+    p = (1 + #{null >= observed}) / (1 + n_perm);
+  - ``sign-flip`` (held-out, paired over folds): the per-fold difference of
+    squared held-out error, SSE_b - SSE_a, its sum against all 2^F sign flips
+    (exact); p = #{flipped sum >= observed} / 2^F;
+  - ``within-pair`` (full vs effort only): each pair's easy and hard trial swap
+    risk curves with probability 1/2 (analysis.permutation);
+  - ``shuffle`` (full vs effort only; NOT CALIBRATED, kept to measure it): risk
+    curves permuted across all trials;
+  - ``direct-bootstrap`` (the paper's direct bootstrap test on held-out RMSE;
+    BIASED toward the simpler model, kept to measure it): participants
+    resampled with replacement, p = fraction of resamples in which the model
+    better on the study is not strictly better; "a beats b" when a is better
+    on the study and p < alpha.
+
+`power()` returns one row per (world, procedure, verdict): count, n_studies,
+rate and its Wilson 95% interval (the Monte Carlo error of the rate).
+Study s of world w draws everything from ``default_rng([seed, w, s])``, so the
+numbers do not depend on how studies are spread over processes.
+"""
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from analysis.crossval import STRUCTURE_SCHEME, RiskGrid, cross_validate, grouping_label, pairs_of, scores, verdicts
+from analysis.crossval.folds import structure_groups
+from analysis.heuristics import FEATURES
+from analysis.spec import ModelSpec
+
+PROG = "python -m analysis.power"
+#: Models of the held-out verdict, in the order ties go (fewest parameters first, then this order).
+MODELS: tuple[str, ...] = ("effort", "full", "risk", *FEATURES, "effort+height", "effort+stacked")
+#: Pairwise comparisons "a beats b" every test decides.
+COMPARISONS: tuple[tuple[str, str], ...] = (("full", "effort"), ("full", "effort+height"), ("effort+height", "full"),
+                                            ("full", "effort+stacked"), ("effort+stacked", "full"))
+#: The tests; DEFAULT_TESTS run unless asked otherwise.
+TESTS: tuple[str, ...] = ("freedman-lane", "sign-flip", "within-pair", "shuffle", "direct-bootstrap")
+DEFAULT_TESTS: tuple[str, ...] = ("freedman-lane", "sign-flip", "within-pair")
+#: What each test is, for tables and docs.
+TEST_LABELS = {"freedman-lane": "Freedman-Lane residual permutation (calibrated, default)",
+               "sign-flip": "held-out sign-flip over folds (paired over folds)",
+               "within-pair": "within-pair risk permutation (full vs effort)",
+               "shuffle": "shuffle risk permutation (NOT CALIBRATED)",
+               "direct-bootstrap": "direct bootstrap on held-out RMSE (paper's method; biased)"}
+#: Tests that only exist for Eq. 1 against effort-only (they move risk between trials).
+RISK_ONLY_TESTS = ("within-pair", "shuffle")
+PARTICIPANTS = 60
+NOISE = 1.0
+N_STUDIES = 200
+N_PERM = 199
+N_BOOT = 200
+ALPHA = 0.05
+#: The default worlds of the CLI.
+DEFAULT_WORLDS: tuple[str, ...] = ("effort-only", "full:b2b1=3,sigma=0.15", "full:b2b1=4,sigma=0.065",
+                                   "effort+height", "effort+stacked", "noise")
+#: Studies per work unit (a fixed number: the unit's studies seed themselves).
+BLOCK = 25
+#: Rows per array operation of the cross-validation (fixed: results never depend on it).
+CHUNK = 512
+#: A statistic within this (relative) of the observed counts as at least as large.
+TIE_REL = 1e-12
+
+
+class PowerInputError(ValueError):
+    """Bad input to the power analysis: `flag` names the command-line flag it came from."""
+
+    def __init__(self, flag: str, message: str):
+        super().__init__(f"{flag}: {message}")
+        self.flag = flag
+
+
+@dataclass(frozen=True)
+class TrialTable:
+    """What a simulated study needs of its trials: ids, effort E (T,), risk over a
+    sigma grid, the heuristic predictors {name: (T,)} and the structure groups of
+    the held-out folds (crossval.structure_groups)."""
+
+    trials: tuple[str, ...]
+    effort: np.ndarray
+    risk: RiskGrid
+    features: Mapping[str, np.ndarray]
+    groups: tuple[tuple[int, ...], ...] = field(default=())
+
+    @property
+    def grouping(self) -> str:
+        return grouping_label(self.groups, self.trials)
+
+
+def trial_table(effort, risk_table: pd.DataFrame, features: pd.DataFrame,
+                trials: Sequence[str] | None = None) -> TrialTable:
+    """A TrialTable from tidy tables: `effort` (columns trial, effort; rows of a trial
+    averaged) or a Series by trial; `risk_table` (trial, sigma, risk, optional
+    n_sims); `features` (trial and FEATURES). `trials` defaults to the effort
+    table's trials in order of appearance. Raises PowerInputError naming the
+    trial and table of a missing or non-finite value."""
+    if isinstance(effort, pd.Series):
+        e = effort.astype(float)
+    else:
+        e = effort.assign(trial=effort["trial"].astype(str)).groupby("trial", sort=False)["effort"].mean()
+    trials = tuple(str(t) for t in (trials if trials is not None else e.index))
+    if len(trials) < 5:
+        raise PowerInputError("--stimuli", f"{len(trials)} trials; the comparison needs at least 5")
+    missing = [t for t in trials if t not in e.index]
+    if missing:
+        raise PowerInputError("--stimuli", f"no effort for trial {missing[0]}")
+    E = e.reindex(list(trials)).to_numpy(float)
+    sig = np.unique(np.round(risk_table["sigma"].to_numpy(float), 9))
+    rt = risk_table.assign(trial=risk_table["trial"].astype(str))
+    risk = np.empty((len(sig), len(trials)))
+    for k, s in enumerate(sig):
+        rows = rt[np.isclose(rt["sigma"].astype(float), s, rtol=0, atol=1e-9)].groupby("trial")["risk"].mean()
+        for i, t in enumerate(trials):
+            if t not in rows.index:
+                raise PowerInputError("--stimuli", f"no risk for trial {t} at sigma {s:g}")
+            risk[k, i] = float(rows[t])
+    f = features.set_index("trial") if "trial" in features.columns else features
+    feats = {}
+    for name in FEATURES:
+        if name not in f.columns:
+            raise PowerInputError("--stimuli", f"the features table lacks {name!r}")
+        v = f[name].reindex(list(trials)).to_numpy(float)
+        if not np.all(np.isfinite(v)):
+            raise PowerInputError("--stimuli", f"heuristic {name!r} of trial {trials[int(np.argmin(np.isfinite(v)))]} "
+                                  "is missing or not finite")
+        feats[name] = v
+    if not np.all(np.isfinite(E)) or not np.all(np.isfinite(risk)):
+        raise PowerInputError("--stimuli", "effort or risk is not finite")
+    grid = RiskGrid(np.asarray(sig, float), risk, None, "R")
+    groups = tuple(structure_groups(trials, risk))
+    return TrialTable(trials, E, grid, feats, groups)
+
+
+# ----------------------------------------------------------------------------- worlds
+
+WORLD_KINDS = ("effort-only", "full", "effort+height", "effort+stacked", "noise", "csv")
+
+
+@dataclass(frozen=True)
+class World:
+    """One true model of the simulated participants (module docstring)."""
+
+    kind: str
+    b2b1: float | None = None
+    sigma: float | None = None
+    weight: float = 1.0
+    means: tuple[tuple[str, float], ...] | None = None
+    source: str = ""
+
+    @property
+    def label(self) -> str:
+        if self.kind == "full":
+            return f"full (b2/b1={self.b2b1:g}, sigma={self.sigma:g})"
+        if self.kind in ("effort+height", "effort+stacked") and self.weight != 1.0:
+            return f"{self.kind} (w={self.weight:g})"
+        if self.kind == "csv":
+            return f"csv:{self.source}"
+        return self.kind
+
+    def cost(self, table: TrialTable) -> np.ndarray:
+        """The latent cost y (T,) of the trials of `table` in this world."""
+        E = table.effort
+        if self.kind == "effort-only":
+            return E.copy()
+        if self.kind == "noise":
+            return np.zeros_like(E)
+        if self.kind == "full":
+            k = _sigma_index(table.risk.sigmas, self.sigma)
+            R = table.risk.risk[k]
+            return E * (1 - R) + self.b2b1 * E * R
+        if self.kind in ("effort+height", "effort+stacked"):
+            h = table.features[self.kind.split("+")[1]]
+            return E / _sd(E) + self.weight * h / _sd(h)
+        if self.kind == "csv":
+            got = dict(self.means)
+            unknown = [t for t in got if t not in table.trials]
+            if unknown:
+                raise PowerInputError("--world", f"csv:{self.source} names unknown trial {unknown[0]}")
+            missing = [t for t in table.trials if t not in got]
+            if missing:
+                raise PowerInputError("--world", f"csv:{self.source} lacks trial {missing[0]}")
+            return np.array([got[t] for t in table.trials], float)
+        raise PowerInputError("--world", f"unknown world {self.kind!r}")
+
+
+def _sd(x: np.ndarray) -> float:
+    s = float(np.std(x))
+    return s if s > 0 else 1.0
+
+
+def _sigma_index(sigmas: np.ndarray, sigma: float) -> int:
+    k = int(np.argmin(np.abs(sigmas - sigma)))
+    if abs(sigmas[k] - sigma) > 1e-9:
+        raise PowerInputError("--world", f"sigma {sigma:g} is not on the risk table's grid "
+                              f"({sigmas.min():g}..{sigmas.max():g}, {len(sigmas)} values)")
+    return k
+
+
+def parse_world(text: str, table: TrialTable | None = None) -> World:
+    """A World from its command-line text (module docstring). Raises PowerInputError
+    naming --world for an unknown world, b2/b1 <= 0, a sigma off `table`'s grid, an
+    unreadable CSV or one naming unknown trials."""
+    text = str(text).strip()
+    kind, _, rest = text.partition(":")
+    kind = kind.strip().lower()
+    if kind == "csv":
+        path = Path(rest)
+        try:
+            df = pd.read_csv(path, dtype={"trial": str})
+        except (OSError, ValueError, UnicodeDecodeError) as e:
+            raise PowerInputError("--world", f"csv:{rest}: cannot read ({type(e).__name__})") from None
+        col = "mean" if "mean" in df.columns else ("mean_z" if "mean_z" in df.columns else None)
+        if "trial" not in df.columns or col is None:
+            raise PowerInputError("--world", f"csv:{rest}: needs columns trial and mean")
+        vals = pd.to_numeric(df[col], errors="coerce")
+        if vals.isna().any() or not np.all(np.isfinite(vals)):
+            raise PowerInputError("--world", f"csv:{rest}: mean of trial {df['trial'][vals.isna() | ~np.isfinite(vals)].iloc[0]} "
+                                  "is not a finite number")
+        if df["trial"].duplicated().any():
+            raise PowerInputError("--world", f"csv:{rest}: trial {df['trial'][df['trial'].duplicated()].iloc[0]} repeated")
+        world = World("csv", means=tuple(zip(df["trial"].astype(str).str.strip().str.upper(), vals.astype(float))),
+                      source=path.name)
+    else:
+        if kind not in WORLD_KINDS:
+            raise PowerInputError("--world", f"unknown world {text!r}; expected one of effort-only, "
+                                  "full:b2b1=K,sigma=S, effort+height, effort+stacked, noise, csv:FILE")
+        params = {}
+        for item in filter(None, (s.strip() for s in rest.split(","))):
+            key, eq, value = item.partition("=")
+            try:
+                params[key.strip().lower()] = float(value)
+            except ValueError:
+                raise PowerInputError("--world", f"{text!r}: {item!r} is not key=number") from None
+            if not eq or not np.isfinite(params[key.strip().lower()]):
+                raise PowerInputError("--world", f"{text!r}: {item!r} is not key=finite number")
+        allowed = {"full": {"b2b1", "sigma"}, "effort+height": {"w"}, "effort+stacked": {"w"}}.get(kind, set())
+        unknown = set(params) - allowed
+        if unknown:
+            raise PowerInputError("--world", f"{text!r}: unknown parameter {sorted(unknown)[0]!r}"
+                                  + (f" (allowed: {', '.join(sorted(allowed))})" if allowed else " (takes none)"))
+        if kind == "full":
+            b = params.get("b2b1", 3.0)
+            if b <= 0:
+                raise PowerInputError("--world", f"{text!r}: b2/b1 must be > 0, got {b:g}")
+            world = World("full", b2b1=b, sigma=params.get("sigma", 0.15))
+        elif kind in ("effort+height", "effort+stacked"):
+            world = World(kind, weight=params.get("w", 1.0))
+        else:
+            world = World(kind)
+    if table is not None:
+        if world.kind == "full":
+            _sigma_index(table.risk.sigmas, world.sigma)
+        if world.kind == "csv":
+            world.cost(table)
+    return world
+
+
+# ----------------------------------------------------------------------------- studies
+
+def simulate_responses(y: np.ndarray, participants: int, noise_sd: float, rng: np.random.Generator,
+                       scale_log_sd: float = 0.5, offset_sd: float = 10.0) -> np.ndarray:
+    """(participants, T) z-scores of one SIMULATED study (analysis.recovery's draw:
+    scales, offsets, noise, in that order)."""
+    y = np.asarray(y, float)
+    scale = np.exp(scale_log_sd * rng.standard_normal(participants))
+    offset = offset_sd * rng.standard_normal(participants)
+    noise = noise_sd * rng.standard_normal((participants, len(y)))
+    responses = offset[:, None] + scale[:, None] * (y + noise)
+    return (responses - responses.mean(axis=1, keepdims=True)) / responses.std(axis=1, keepdims=True)
+
+
+def _cv(Y: np.ndarray, table: TrialTable, models: Sequence[str], scheme: str = STRUCTURE_SCHEME,
+        risk: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Predictions {model: (N, T)} of (N, T) trial means (one dataset)."""
+    preds, _, _ = cross_validate(np.asarray(Y, float)[:, None, :], table.effort,
+                                 {"R": table.risk.risk if risk is None else risk}, list(models), scheme,
+                                 trials=table.trials, chunk=CHUNK, features=table.features, groups=table.groups)
+    return {m: p[:, 0, :] for m, p in preds.items()}
+
+
+def _rmse(Y: np.ndarray, P: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean((Y - P) ** 2, axis=-1))
+
+
+def _needed(comparisons) -> list[str]:
+    return list(dict.fromkeys(m for ab in comparisons for m in ab))
+
+
+def heldout_scores(Y: np.ndarray, table: TrialTable, models: Sequence[str] = MODELS) -> dict[str, np.ndarray]:
+    """Held-out RMSE {model: (N,)} of (N, T) trial means on folds by structure."""
+    P = _cv(Y, table, models)
+    return {m: _rmse(Y, P[m]) for m in models}
+
+
+def freedman_lane_p(Y: np.ndarray, table: TrialTable, a: str, b: str, perms: np.ndarray) -> np.ndarray:
+    """p (N,) of "a predicts held-out trials better than b" by Freedman-Lane:
+    residuals of b's in-sample fit permuted (perms (N, P, T), one set per study)."""
+    Y = np.asarray(Y, float)
+    N, T = Y.shape
+    P = perms.shape[1]
+    fit = _cv(Y, table, [b], "in-sample")[b]
+    res = Y - fit
+    obs = _gain(Y, table, a, b)
+    star = fit[:, None, :] + np.take_along_axis(res[:, None, :].repeat(P, axis=1), perms, axis=2)
+    null = _gain(star.reshape(N * P, T), table, a, b).reshape(N, P)
+    return _p_at_least(null, obs)
+
+
+def _gain(Y: np.ndarray, table: TrialTable, a: str, b: str) -> np.ndarray:
+    P = _cv(Y, table, [a, b])
+    return _rmse(Y, P[b]) - _rmse(Y, P[a])
+
+
+def _p_at_least(null: np.ndarray, obs: np.ndarray) -> np.ndarray:
+    """(1 + #{null >= obs}) / (1 + P), per row; ties within TIE_REL count."""
+    at_least = np.sum(null >= (obs - TIE_REL * np.abs(obs))[:, None], axis=1)
+    return (1 + at_least) / (1 + null.shape[1])
+
+
+def sign_flip_p(Y: np.ndarray, table: TrialTable, a: str, b: str, P: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+    """p (N,) of "a predicts held-out trials better than b", paired over the folds
+    by structure: d_f = SSE_b,f - SSE_a,f, sum(d) against every sign flip (exact)."""
+    Y = np.asarray(Y, float)
+    P = _cv(Y, table, [a, b]) if P is None else P
+    sq_a, sq_b = (Y - P[a]) ** 2, (Y - P[b]) ** 2
+    d = np.stack([sq_b[:, list(g)].sum(axis=1) - sq_a[:, list(g)].sum(axis=1) for g in table.groups], axis=1)
+    signs = np.array(list(itertools.product((1.0, -1.0), repeat=d.shape[1])))    # (2^F, F)
+    obs = d.sum(axis=1)
+    null = d @ signs.T                                                            # (N, 2^F)
+    return np.mean(null >= (obs - TIE_REL * np.abs(obs))[:, None], axis=1)
+
+
+def risk_permutation_p(Y: np.ndarray, table: TrialTable, kind: str, rngs: Sequence[np.random.Generator],
+                       n_perm: int) -> np.ndarray:
+    """p (N,) of Eq. 1 beating effort-only with risk curves permuted (`kind`
+    within-pair or shuffle; analysis.permutation.draw_permutations), per study."""
+    from analysis.permutation import draw_permutations
+
+    Y = np.asarray(Y, float)
+    obs = _gain(Y, table, "full", "effort")
+    out = np.empty(len(Y))
+    for n, rng in enumerate(rngs):
+        perms = draw_permutations(kind, n_perm, rng, table.trials)
+        risks = table.risk.risk[:, perms].transpose(1, 0, 2)                      # (P, S, T)
+        Yp = np.broadcast_to(Y[n], (n_perm, Y.shape[1]))
+        null = _gain_with_risk(Yp, table, risks)
+        out[n] = _p_at_least(null[None], obs[n:n + 1])[0]
+    return out
+
+
+def _gain_with_risk(Y: np.ndarray, table: TrialTable, risks: np.ndarray) -> np.ndarray:
+    P = _cv(Y, table, ["full", "effort"], risk=risks)
+    return _rmse(Y, P["effort"]) - _rmse(Y, P["full"])
+
+
+def direct_bootstrap_p(Z: Sequence[np.ndarray], table: TrialTable, a: str, b: str,
+                       rngs: Sequence[np.random.Generator], n_boot: int) -> tuple[np.ndarray, np.ndarray]:
+    """(a_better (N,), p (N,)): the paper's direct bootstrap test on held-out RMSE,
+    participants of each study (Z[n] (participants, T) z-scores) resampled."""
+    a_better, p = np.zeros(len(Z), bool), np.ones(len(Z))
+    for n, (z, rng) in enumerate(zip(Z, rngs)):
+        y = z.mean(axis=0)[None]
+        s = heldout_scores(y, table, [a, b])
+        if s[a][0] == s[b][0]:
+            continue
+        better, worse = (a, b) if s[a][0] < s[b][0] else (b, a)
+        idx = rng.integers(0, z.shape[0], size=(n_boot, z.shape[0]))
+        yb = z[idx].mean(axis=1)
+        sb = heldout_scores(yb, table, [a, b])
+        a_better[n] = better == a
+        p[n] = float(np.mean(~(sb[better] < sb[worse])))
+    return a_better, p
+
+
+def study_rngs(seed: int, world: int, studies: Sequence[int]) -> list[np.random.Generator]:
+    """The Generator of each study: ``default_rng([seed, world, study])``."""
+    return [np.random.default_rng([int(seed), int(world), int(s)]) for s in studies]
+
+
+def analyse_studies(Z: Sequence[np.ndarray], table: TrialTable, rngs: Sequence[np.random.Generator],
+                    tests: Sequence[str] = DEFAULT_TESTS, comparisons=COMPARISONS, n_perm: int = N_PERM,
+                    n_boot: int = N_BOOT, models: Sequence[str] = MODELS) -> pd.DataFrame:
+    """One row per study: the held-out verdict (column ``held-out``), each model's
+    held-out RMSE (``rmse:<model>``), and per comparison a>b and test the p-value
+    (``p:<test>:<a>><b>``; a_better for direct-bootstrap). Each study's rng draws,
+    after its responses: freedman-lane permutations (one set per comparison, in
+    order), then within-pair, shuffle, direct-bootstrap resamples."""
+    Y = np.stack([z.mean(axis=0) for z in Z])
+    N, T = Y.shape
+    models = list(dict.fromkeys(list(models) + _needed(comparisons)))
+    P = _cv(Y, table, models)
+    rmse = {m: _rmse(Y, P[m]) for m in models}
+    out = {"held-out": verdicts(rmse)}
+    for m in models:
+        out[f"rmse:{m}"] = rmse[m]
+    for test in tests:
+        if test not in TESTS:
+            raise PowerInputError("--tests", f"unknown test {test!r}; expected one of {', '.join(TESTS)}")
+        for a, b in comparisons:
+            if test in RISK_ONLY_TESTS and (a, b) != ("full", "effort"):
+                continue
+            key = f"p:{test}:{a}>{b}"
+            if test == "freedman-lane":
+                perms = np.stack([rng.permuted(np.tile(np.arange(T), (n_perm, 1)), axis=1) for rng in rngs])
+                out[key] = freedman_lane_p(Y, table, a, b, perms)
+            elif test == "sign-flip":
+                out[key] = sign_flip_p(Y, table, a, b, P)
+            elif test in RISK_ONLY_TESTS:
+                out[key] = risk_permutation_p(Y, table, test, rngs, n_perm)
+            elif test == "direct-bootstrap":
+                better, p = direct_bootstrap_p(Z, table, a, b, rngs, n_boot)
+                out[key] = np.where(better, p, 1.0)
+    return pd.DataFrame(out)
+
+
+def _unit(task) -> pd.DataFrame:
+    """One block of studies of one world (what executors map)."""
+    (w, world, table, participants, noise, studies, seed, tests, comparisons, n_perm, n_boot) = task
+    y = world.cost(table)
+    noise_sd = noise if world.kind == "noise" else noise * float(np.std(y))
+    if world.kind != "noise" and noise_sd <= 0:
+        raise PowerInputError("--world", f"{world.label}: the true cost is the same on every trial")
+    rngs = study_rngs(seed, w, studies)
+    Z = [simulate_responses(y, participants, noise_sd, rng) for rng in rngs]
+    df = analyse_studies(Z, table, rngs, tests, comparisons, n_perm, n_boot)
+    df.insert(0, "study", list(studies))
+    df.insert(0, "world", world.label)
+    return df
+
+
+def simulate_studies(table: TrialTable, worlds: Sequence[World | str], participants: int = PARTICIPANTS,
+                     noise: float = NOISE, studies: int = N_STUDIES, seed: int = 0, executor=None, jobs: int = 1,
+                     tests: Sequence[str] = DEFAULT_TESTS, comparisons=COMPARISONS, n_perm: int = N_PERM,
+                     n_boot: int = N_BOOT, progress=None) -> pd.DataFrame:
+    """Every SIMULATED study of every world, one row each (analyse_studies' columns,
+    after world and study). Studies go to `executor` (lgp.executor; or a fresh one
+    of `jobs`) in blocks of BLOCK."""
+    from lgp.executor import borrowed
+
+    worlds = [parse_world(w, table) if isinstance(w, str) else w for w in worlds]
+    check_settings(participants, noise, studies, n_perm)
+    for w in worlds:
+        w.cost(table)
+    tasks = [(k, w, table, int(participants), float(noise), tuple(range(lo, min(studies, lo + BLOCK))), int(seed),
+              tuple(tests), tuple(comparisons), int(n_perm), int(n_boot))
+             for k, w in enumerate(worlds) for lo in range(0, studies, BLOCK)]
+    with borrowed(executor, jobs) as ex:
+        parts = ex.map(_unit, tasks, progress)
+    return pd.concat(parts, ignore_index=True)
+
+
+def check_settings(participants, noise, studies, n_perm) -> None:
+    if not (isinstance(participants, (int, np.integer)) and participants >= 2):
+        raise PowerInputError("--participants", f"must be a whole number >= 2, got {participants!r}")
+    if not (np.isfinite(noise) and noise > 0):
+        raise PowerInputError("--noise", f"must be a finite number > 0, got {noise!r}")
+    if not (isinstance(studies, (int, np.integer)) and studies >= 1):
+        raise PowerInputError("--studies", f"must be a whole number >= 1, got {studies!r}")
+    if not (isinstance(n_perm, (int, np.integer)) and n_perm >= 1):
+        raise PowerInputError("--n-perm", f"must be a whole number >= 1, got {n_perm!r}")
+
+
+def wilson(count, n, z: float = 1.959963984540054) -> tuple[np.ndarray, np.ndarray]:
+    """Wilson score interval of count / n (95% by default)."""
+    count, n = np.asarray(count, float), np.asarray(n, float)
+    p = count / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    # exact at the ends (rounding would leave 1 - 1e-16 below a rate of 1)
+    return np.where(count <= 0, 0.0, np.clip(centre - half, 0, 1)), np.where(count >= n, 1.0, np.clip(centre + half, 0, 1))
+
+
+def summarize(per_study: pd.DataFrame, alpha: float = ALPHA, models: Sequence[str] = MODELS) -> pd.DataFrame:
+    """The power table: one row per (world, procedure, verdict) with count,
+    n_studies, rate, rate_low, rate_high (Wilson 95%), label SIMULATED.
+
+    Procedures: ``held-out`` (verdict: the model picked, every model listed even
+    at 0), ``held-out a vs b`` (verdict "a" or "b": the lower held-out RMSE, ties
+    to b), and each test "<test> a>b" (verdicts "a beats b (p < alpha)" and "not").
+    """
+    rows = []
+    for world, g in per_study.groupby("world", sort=False):
+        n = len(g)
+        picks = g["held-out"].to_numpy()
+        for m in models:
+            rows.append((world, "held-out", m, int(np.sum(picks == m)), n))
+        for a, b in COMPARISONS:
+            if f"rmse:{a}" in g and f"rmse:{b}" in g:
+                wins = int(np.sum(g[f"rmse:{a}"].to_numpy() < g[f"rmse:{b}"].to_numpy()))
+                rows.append((world, f"held-out {a} vs {b}", a, wins, n))
+                rows.append((world, f"held-out {a} vs {b}", b, n - wins, n))
+        for col in [c for c in g.columns if c.startswith("p:")]:
+            _, test, ab = col.split(":", 2)
+            a, b = ab.split(">")
+            k = int(np.sum(g[col].to_numpy() < alpha))
+            rows.append((world, f"{test} {a}>{b}", f"{a} beats {b} (p < {alpha:g})", k, n))
+            rows.append((world, f"{test} {a}>{b}", "not significant", n - k, n))
+    out = pd.DataFrame(rows, columns=["world", "procedure", "verdict", "count", "n_studies"])
+    out["rate"] = out["count"] / out["n_studies"]
+    lo, hi = wilson(out["count"], out["n_studies"])
+    out["rate_low"], out["rate_high"] = lo, hi
+    out["data"] = "SIMULATED"
+    return out
+
+
+def power(table: TrialTable, worlds: Sequence[World | str], participants: int = PARTICIPANTS, noise: float = NOISE,
+          studies: int = N_STUDIES, seed: int = 0, executor=None, jobs: int = 1, tests: Sequence[str] = DEFAULT_TESTS,
+          n_perm: int = N_PERM, n_boot: int = N_BOOT, alpha: float = ALPHA, progress=None) -> pd.DataFrame:
+    """The power table (`summarize`) of SIMULATED studies (`simulate_studies`);
+    the per-study table is kept in ``.attrs["studies"]``. `progress(k, block)` is
+    called as each block of studies arrives."""
+    per = simulate_studies(table, worlds, participants, noise, studies, seed, executor, jobs, tests,
+                           n_perm=n_perm, n_boot=n_boot, progress=progress)
+    out = summarize(per, alpha)
+    out.attrs["studies"] = per
+    out.attrs["grouping"] = table.grouping
+    return out
+
+
+# ----------------------------------------------------------------------------- inputs and CLI
+
+def load_trial_table(stimuli_dir: str | Path | None = None, cache_dir: str | Path = "results/cache",
+                     samples: int | None = None, n_sims: int | None = None, sigmas: Sequence[float] | None = None,
+                     seed: int = 0, executor=None, jobs: int = 1) -> TrialTable:
+    """Effort, risk and heuristics of the trials of `stimuli_dir` (default the
+    paper's 24), through lgp.reproduce's stages and cache in `cache_dir`: cached
+    trials are read, missing ones computed (and cached) as lgp.reproduce would.
+    Defaults: the paper's M and N, the wide sigma grid (0.05..0.30 d)."""
+    import stimuli
+    from lgp.app.cache import Cache
+    from lgp.app.stages import effort_tables, risk_tables
+    from lgp.executor import borrowed
+    from lgp.paper import N_SIMS, SAMPLES, WIDE_SIGMA_GRID
+    from analysis.heuristics import trial_features
+
+    samples = SAMPLES if samples is None else samples
+    n_sims = N_SIMS if n_sims is None else n_sims
+    sigmas = WIDE_SIGMA_GRID if sigmas is None else tuple(sigmas)
+    trials = stimuli.load_paper() if stimuli_dir is None else stimuli.load_all(stimuli_dir)
+    cache = Cache(cache_dir)
+    with borrowed(executor, jobs) as ex:
+        effort = effort_tables(trials, samples, seed, ex, cache, verbose=False)
+        risk = risk_tables(trials, sigmas, n_sims, seed, None, ex, cache, verbose=False)
+    features = trial_features(trials, samples, seed)
+    return trial_table(effort, risk, features, [t.id for t in trials])
+
+
+def plot_confusion(table: pd.DataFrame, path: Path, models: Sequence[str] = MODELS) -> Path:
+    """World x held-out verdict rates as a heatmap (SIMULATED in the title)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    held = table[table["procedure"] == "held-out"]
+    worlds = list(dict.fromkeys(held["world"]))
+    M = held.pivot_table(index="world", columns="verdict", values="rate", sort=False).reindex(index=worlds,
+                                                                                              columns=list(models))
+    n = int(held["n_studies"].iloc[0]) if len(held) else 0
+    fig, ax = plt.subplots(figsize=(1.0 + 0.75 * len(models), 1.2 + 0.55 * len(worlds)))
+    im = ax.imshow(M.to_numpy(float), cmap="Blues", vmin=0, vmax=1, aspect="auto")
+    for i in range(M.shape[0]):
+        for j in range(M.shape[1]):
+            v = M.iat[i, j]
+            ax.text(j, i, f"{100 * v:.0f}", ha="center", va="center", fontsize=8,
+                    color="white" if v > 0.6 else "black")
+    ax.set_xticks(range(len(models)), models, rotation=40, ha="right", fontsize=8)
+    ax.set_yticks(range(len(worlds)), worlds, fontsize=8)
+    ax.set_xlabel("model picked by held-out RMSE (folds by structure)")
+    ax.set_ylabel("true world")
+    ax.set_title(f"SIMULATED studies (not human data): % of {n} studies per world", fontsize=9)
+    fig.colorbar(im, ax=ax, fraction=0.03, label="rate")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+    return path
+
+
+def _precheck(worlds: Sequence[World], stimuli_dir) -> None:
+    """Before any physics: every full world's sigma on the grid load_trial_table uses,
+    every csv world's trials among the trial files."""
+    import stimuli
+    from lgp.paper import WIDE_SIGMA_GRID
+
+    grid = np.asarray(WIDE_SIGMA_GRID, float)
+    ids = [t.id for t in (stimuli.load_paper() if stimuli_dir is None else stimuli.load_all(stimuli_dir))]
+    for w in worlds:
+        if w.kind == "full":
+            _sigma_index(grid, w.sigma)
+        if w.kind == "csv":
+            unknown = [t for t, _ in w.means if t not in ids]
+            if unknown:
+                raise PowerInputError("--world", f"csv:{w.source} names unknown trial {unknown[0]}")
+
+
+def main(argv=None) -> int:
+    import sys
+    import time
+
+    from lgp import cli
+    from lgp.atomic import write_csv_atomic
+    from lgp.executor import executor_for_scheduler
+
+    p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--stimuli", metavar="DIR", type=cli.input_dir, help="trial files (default: the paper's 24)")
+    p.add_argument("--cache", default="results/cache", help="lgp.reproduce's cache folder (default %(default)s)")
+    p.add_argument("--participants", type=int, default=PARTICIPANTS, help="per simulated study (>= 2; default %(default)s)")
+    p.add_argument("--noise", type=float, default=NOISE,
+                   help="per-participant noise SD / SD of the true cost over trials (default %(default)s)")
+    p.add_argument("--world", nargs="+", default=list(DEFAULT_WORLDS),
+                   help="worlds: effort-only, full:b2b1=K,sigma=S, effort+height[:w=W], effort+stacked[:w=W], noise, "
+                        "csv:FILE (default: %(default)s)")
+    p.add_argument("--studies", type=int, default=N_STUDIES, help="simulated studies per world (default %(default)s)")
+    p.add_argument("--tests", nargs="+", default=list(DEFAULT_TESTS), help=f"of {', '.join(TESTS)} (default %(default)s)")
+    p.add_argument("--n-perm", type=int, default=N_PERM, help="permutations per permutation test (default %(default)s)")
+    p.add_argument("--n-boot", type=int, default=N_BOOT, help="resamples of the direct bootstrap (default %(default)s)")
+    p.add_argument("--samples", type=cli.positive_int, help="M layouts of A (default the paper's 30)")
+    p.add_argument("--n-sims", type=cli.positive_int, help="N noisy runs per trial and sigma (default the paper's 100)")
+    p.add_argument("--seed", type=cli.seed, default=0)
+    p.add_argument("--jobs", type=cli.positive_int, default=2)
+    p.add_argument("--scheduler", help="tcp://HOST:8786 or local-dask, as lgp.reproduce (docs/scaling.md)")
+    p.add_argument("--out", default="results/power", type=cli.output_dir)
+    args = p.parse_args(argv)
+    try:
+        check_settings(args.participants, args.noise, args.studies, args.n_perm)
+        if args.n_boot < 1:
+            raise PowerInputError("--n-boot", f"must be a whole number >= 1, got {args.n_boot}")
+        for t in args.tests:
+            if t not in TESTS:
+                raise PowerInputError("--tests", f"unknown test {t!r}; expected one of {', '.join(TESTS)}")
+        worlds = [parse_world(w) for w in args.world]
+        _precheck(worlds, args.stimuli)
+        t0 = time.perf_counter()
+        with executor_for_scheduler(args.scheduler, args.jobs) as ex:
+            table = load_trial_table(args.stimuli, args.cache, args.samples, args.n_sims, seed=args.seed, executor=ex)
+            worlds = [parse_world(w, table) for w in args.world]
+            done = [0]
+            total = len(worlds) * math.ceil(args.studies / BLOCK)
+
+            def progress(k, _):
+                done[0] += 1
+                print(f"\r{PROG}: {done[0]}/{total} blocks of SIMULATED studies", end="", file=sys.stderr, flush=True)
+
+            result = power(table, worlds, args.participants, args.noise, args.studies, args.seed, ex,
+                           tests=args.tests, n_perm=args.n_perm, n_boot=args.n_boot, progress=progress)
+            print(file=sys.stderr)
+    except PowerInputError as e:
+        p.exit(2, f"{PROG}: error: {e}\n")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv_atomic(result, out / "power.csv")
+    write_csv_atomic(result.attrs["studies"], out / "power_studies.csv")
+    plot_confusion(result, out / "power_confusion.png")
+    held = result[result["procedure"] == "held-out"].pivot_table(index="world", columns="verdict", values="rate",
+                                                                  sort=False)
+    print(f"SIMULATED studies: {args.studies} per world, {args.participants} participants, noise {args.noise:g}; "
+          f"folds by structure: {table.grouping}")
+    print((100 * held).round(0).to_string())
+    print(f"written to {out.resolve()} (power.csv, power_studies.csv, power_confusion.png) in "
+          f"{time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    from lgp import cli
+
+    raise SystemExit(cli.run_cli(main, prog=PROG))
