@@ -35,7 +35,7 @@ COMPARISONS: tuple[tuple[str, str], ...] = (("full", "effort"), ("full", "risk")
 def bootstrap_model_correlations(boot_means: Mapping[str, np.ndarray], effort,
                                  risk: pd.Series | Mapping[str, pd.Series],
                                  models: Sequence[str] = MODELS, jobs: int = 1,
-                                 executor=None) -> pd.DataFrame:
+                                 executor=None, features: pd.DataFrame | None = None) -> pd.DataFrame:
     """Correlation of each refit model with each resample's trial means.
 
     `boot_means` is {dataset: (n_boot, 24) array} from `resample_trial_means`;
@@ -54,7 +54,7 @@ def bootstrap_model_correlations(boot_means: Mapping[str, np.ndarray], effort,
     tasks = []
     for dataset in ordered_datasets(boot_means):
         R = risk[dataset] if isinstance(risk, Mapping) else risk
-        designs = [design_matrix(m, E, R) for m in models]
+        designs = [design_matrix(m, E, R, features) for m in models]
         tasks.append((dataset, designs, np.asarray(boot_means[dataset], dtype=float)))
     with borrowed(executor, min(jobs, max(len(tasks), 1))) as ex:
         results = ex.map(_correlations_one_dataset, tasks)
@@ -70,13 +70,35 @@ def bootstrap_model_correlations(boot_means: Mapping[str, np.ndarray], effort,
     return pd.concat(frames, ignore_index=True)
 
 
+def centred_interval(point, boot, level: float = 0.95, bounds: tuple[float, float] = (-np.inf, np.inf)
+                     ) -> tuple[float, float]:
+    """The bootstrap interval shifted to its point estimate: point + the
+    (1-level)/2 and (1+level)/2 quantiles of (boot - median(boot)) (NaN resamples
+    left out). It always contains `point` (the lower quantile of a median-centred
+    sample is <= 0 <= its upper one), unlike the paper's percentile interval,
+    which resampled trial means (carrying extra sampling noise, biased toward 0
+    for r) can leave entirely on one side of the point. Clipped to `bounds`
+    (the score's range, e.g. r in [-1, 1])."""
+    b = np.asarray(boot, dtype=float)
+    b = b[np.isfinite(b)]
+    if not np.isfinite(point) or b.size == 0:
+        return float("nan"), float("nan")
+    d = b - np.median(b)
+    tail = (1 - level) / 2
+    lo, hi = np.quantile(d, [tail, 1 - tail])
+    return (float(max(point + min(lo, 0.0), bounds[0])), float(min(point + max(hi, 0.0), bounds[1])))
+
+
 def summarize_bootstrap(boot: pd.DataFrame, fits: pd.DataFrame | None = None,
                         level: float = 0.95) -> pd.DataFrame:
     """Median and percentile interval of each model's bootstrap correlations.
 
     Returns one row per (dataset, model): dataset, model, r (full-sample fit, if
-    `fits` from `fit_models` is given), r_median, r_low, r_high (the 2.5 and 97.5
-    percentiles for level 0.95, numpy's linear interpolation), n_boot.
+    `fits` from `fit_models` is given), r_median, r_low, r_high (the paper's
+    method: the 2.5 and 97.5 percentiles for level 0.95, numpy's linear
+    interpolation; it need not contain r), n_boot; with `fits` also
+    r_low_centred, r_high_centred (`centred_interval`: the same resamples
+    shifted to r, always containing it).
     """
     tail = 100 * (1 - level) / 2
     summary = (boot.groupby(["dataset", "model"], sort=False)["r"]
@@ -87,7 +109,13 @@ def summarize_bootstrap(boot: pd.DataFrame, fits: pd.DataFrame | None = None,
                .reset_index())
     if fits is not None:
         summary = summary.merge(fits[["dataset", "model", "r"]], on=["dataset", "model"], how="left")
-        summary = summary[["dataset", "model", "r", "r_median", "r_low", "r_high", "n_boot"]]
+        groups = {k: g["r"].to_numpy() for k, g in boot.groupby(["dataset", "model"], sort=False)}
+        centred = [centred_interval(r, groups[(d, m)], level, (-1.0, 1.0)) for d, m, r in
+                   zip(summary["dataset"], summary["model"], summary["r"])]
+        summary["r_low_centred"] = [c[0] for c in centred]
+        summary["r_high_centred"] = [c[1] for c in centred]
+        summary = summary[["dataset", "model", "r", "r_median", "r_low", "r_high", "r_low_centred", "r_high_centred",
+                           "n_boot"]]
     return summary
 
 

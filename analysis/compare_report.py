@@ -69,9 +69,12 @@ def tests_table(tests: pd.DataFrame) -> pd.DataFrame:
 
 
 def permutation_table(perm: pd.DataFrame) -> pd.DataFrame:
-    cols = ["kind", "dataset", "observed_gain", "null_mean", "null_q95", "p_value", "n_perm", "distinct_assignments"]
+    cols = ["kind", "calibration", "dataset", "observed_gain", "null_mean", "null_q95", "p_value", "n_perm",
+            "distinct_assignments"]
     out = perm[[c for c in cols if c in perm]].copy()
-    out["kind"] = out["kind"].map({"shuffle": "R shuffled across trials", "within-pair": "R swapped within pairs"})
+    out["kind"] = out["kind"].map({"shuffle": "R shuffled across trials (NOT CALIBRATED)",
+                                   "within-pair": "R swapped within pairs",
+                                   "freedman-lane": "effort-only residuals permuted (Freedman-Lane)"})
     for c in ("observed_gain", "null_mean", "null_q95"):
         out[c] = out[c].round(4)
     out["p_value"] = out["p_value"].round(4)

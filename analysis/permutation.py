@@ -2,19 +2,28 @@
 let Eq. 1 predict held-out trials better than effort alone?
 
 Statistic: the full model's cross-validated gain over effort-only, gain = RMSE
-(effort-only) - RMSE(Eq. 1), both leave-one-pair-out (analysis.crossval; sigma
-chosen inside every fold). Positive: risk helps predict unseen pairs.
+(effort-only) - RMSE(Eq. 1), both on held-out folds by structure (SCHEME:
+analysis.crossval.STRUCTURE_SCHEME, a pair and every trial whose B is identical
+held out together; sigma chosen inside every fold). Positive: risk helps
+predict unseen structures.
 
-Null distributions, E fixed, everything refit (sigma included) for each
-permutation:
+Null distributions, everything refit (sigma included) for each permutation
+(CALIBRATION says which are calibrated; docs/results.md has their measured
+false-positive rates):
 
-* ``shuffle``: the trials' risks permuted across all 24 trials (one permutation
-  for every sigma, so each trial's risk curve moves whole). Exact when, under
-  the null, which trial carries which risk curve is exchangeable: risk says
-  nothing about the responses beyond effort.
+* ``freedman-lane`` (the default): the residuals of the effort-only fit on all
+  trials are permuted across trials and added back to that fit (Freedman & Lane
+  1983), y* = X b_E + P e_E; E and risk stay with their trials. Under the null
+  (responses are effort-only plus exchangeable noise) y* has the data's law.
 * ``within-pair``: each pair's easy and hard trial swap their risks with
   probability 1/2, independently per pair. It asks whether risk's contribution
   is the easy/hard contrast within pairs, keeping which pairs are risky.
+* ``shuffle`` (NOT CALIBRATED): the trials' risks permuted across all trials
+  (one permutation for every sigma, so each trial's risk curve moves whole),
+  while E, the responses and the folds stay. Not exchangeable: a moved risk
+  curve breaks the link of risk with the trial's structure (and its identical
+  twins) that the folds keep; it rejects too often under the null. Kept to
+  measure, labelled.
 
 p = (1 + #{null gain >= observed gain}) / (1 + n_perm), per dataset (datasets
 share the permutations; each p is valid on its own).
@@ -27,18 +36,21 @@ from typing import Mapping
 import numpy as np
 import pandas as pd
 
-from analysis.crossval import RiskGrid, cross_validate, pairs_of, scores
+from analysis.crossval import STRUCTURE_SCHEME, RiskGrid, cross_validate, grouping_label, pairs_of, scores, structure_groups
 from analysis.data import TRIAL_IDS, ordered_datasets
 from analysis.models import effort_per_trial
 from lgp.errors import InputError
 
-KINDS: tuple[str, ...] = ("shuffle", "within-pair")
+KINDS: tuple[str, ...] = ("freedman-lane", "within-pair", "shuffle")
+#: Whether each null is calibrated (false-positive rates measured in bench/analysis_fpr.py, docs/results.md).
+CALIBRATION = {"freedman-lane": "calibrated (default)", "within-pair": "calibrated",
+               "shuffle": "NOT CALIBRATED (risk moved across trials while E and the folds stay)"}
 #: Default permutations per test.
 N_PERM = 1000
 #: Seed stream of the permutations in run_analysis: ``default_rng([seed, PERMUTATION_STREAM])``.
 PERMUTATION_STREAM = 2302
-#: The cross-validation scheme of the statistic.
-SCHEME = "leave-one-pair-out"
+#: The cross-validation scheme of the statistic: folds by structure.
+SCHEME = STRUCTURE_SCHEME
 
 
 def check_count(value, what: str) -> int:
@@ -50,13 +62,13 @@ def check_count(value, what: str) -> int:
 
 
 def draw_permutations(kind: str, n_perm: int, rng: np.random.Generator, trials=TRIAL_IDS) -> np.ndarray:
-    """(n_perm, T) trial index permutations: ``shuffle`` draws
-    ``rng.permuted`` of every row; ``within-pair`` ``rng.random((n_perm, pairs)) < 0.5``
-    swaps."""
+    """(n_perm, T) trial index permutations: ``shuffle`` and ``freedman-lane`` draw
+    ``rng.permuted`` of every row (of risks, of residuals); ``within-pair``
+    ``rng.random((n_perm, pairs)) < 0.5`` swaps."""
     n_perm = check_count(n_perm, "the number of permutations")
     T = len(trials)
     base = np.tile(np.arange(T), (n_perm, 1))
-    if kind == "shuffle":
+    if kind in ("shuffle", "freedman-lane"):
         return rng.permuted(base, axis=1)
     if kind == "within-pair":
         pairs = np.array(pairs_of(list(trials)), dtype=int)
@@ -74,6 +86,8 @@ def distinct_assignments(kind: str, risk: np.ndarray, trials=TRIAL_IDS) -> float
     float; may be huge); within-pair 2^k, k the pairs whose E and H curves differ."""
     from math import lgamma
 
+    if kind == "freedman-lane":
+        return float("nan")  # permutes residuals, not risk tables
     if kind == "within-pair":
         pairs = pairs_of(list(trials))
         return float(2 ** sum(not np.array_equal(risk[:, e], risk[:, h]) for e, h in pairs))
@@ -82,22 +96,27 @@ def distinct_assignments(kind: str, risk: np.ndarray, trials=TRIAL_IDS) -> float
     return float(round(n)) if n < 1e15 else n
 
 
-def cv_gain(Y: np.ndarray, E: np.ndarray, risk: np.ndarray, scheme: str = SCHEME, pool: bool = True) -> np.ndarray:
+def cv_gain(Y: np.ndarray, E: np.ndarray, risk: np.ndarray, scheme: str = SCHEME, pool: bool = True,
+            groups=None) -> np.ndarray:
     """Cross-validated RMSE of effort-only minus Eq. 1's: Y (B, D, T), risk
-    (S, T) or (B, S, T); returns (B, D)."""
-    preds, _, _ = cross_validate(Y, E, {"R": risk}, ["full", "effort"], scheme, pool=pool)
+    (S, T) or (B, S, T); returns (B, D). `groups` the structure groups (default:
+    from `risk` when it is one (S, T) table)."""
+    if scheme == STRUCTURE_SCHEME and groups is None:
+        groups = structure_groups(TRIAL_IDS, np.asarray(risk))
+    preds, _, _ = cross_validate(Y, E, {"R": risk}, ["full", "effort"], scheme, pool=pool, groups=groups)
     return scores(Y, preds["effort"])["rmse"] - scores(Y, preds["full"])["rmse"]
 
 
 def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_perm: int = N_PERM,
                      rng: np.random.Generator | None = None, kinds=KINDS, scheme: str = SCHEME
                      ) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Both permutation tests (module docstring) on the full-sample trial means.
+    """The permutation tests of `kinds` (module docstring) on the full-sample trial means.
 
     `means` {dataset: (24,)}; `grid` the risk over sigma (crossval.risk_grid).
     Permutations are drawn from `rng` kind by kind, in the order of `kinds`.
-    Returns (summary, null): summary one row per (kind, dataset): kind, dataset,
-    scheme, observed_gain, null_mean, null_q95, n_at_least, n_perm, p_value;
+    Returns (summary, null): summary one row per (kind, dataset): kind,
+    calibration (CALIBRATION), dataset, scheme, folds (the structure groups used),
+    observed_gain, null_mean, null_q95, n_at_least, n_perm, p_value;
     null one row per (kind, dataset, permutation) with its gain.
     distinct_assignments is how many different risk tables the permutations can
     make (trials with identical risk curves swap to the same table): the
@@ -109,20 +128,29 @@ def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_
     E = effort_per_trial(effort).to_numpy()
     datasets = ordered_datasets(means)
     Y = np.stack([np.asarray(means[d], float) for d in datasets])[None]     # (1, D, T)
-    observed = cv_gain(Y, E, grid.risk, scheme)[0]                           # (D,)
+    groups = structure_groups(TRIAL_IDS, grid.risk) if scheme == STRUCTURE_SCHEME else None
+    observed = cv_gain(Y, E, grid.risk, scheme, groups=groups)[0]            # (D,)
+    X = np.column_stack([np.ones(len(E)), E])
+    fit = (X @ np.linalg.lstsq(X, Y[0].T, rcond=None)[0]).T                  # (D, T) effort-only fit
+    grouping = grouping_label(groups, TRIAL_IDS) if groups is not None else scheme
     rows, nulls = [], []
     for kind in kinds:
         perms = draw_permutations(kind, n_perm, rng)
-        risks = grid.risk[:, perms].transpose(1, 0, 2)                     # (P, S, T)
-        null = cv_gain(np.broadcast_to(Y, (n_perm,) + Y.shape[1:]), E, risks, scheme)   # (P, D)
+        if kind == "freedman-lane":
+            Ystar = fit[None] + (Y[0] - fit)[:, perms].transpose(1, 0, 2)     # (P, D, T)
+            null = cv_gain(Ystar, E, grid.risk, scheme, groups=groups)
+        else:
+            risks = grid.risk[:, perms].transpose(1, 0, 2)                     # (P, S, T)
+            null = cv_gain(np.broadcast_to(Y, (n_perm,) + Y.shape[1:]), E, risks, scheme, groups=groups)   # (P, D)
         distinct = distinct_assignments(kind, grid.risk)
         for k, dataset in enumerate(datasets):
             g = null[:, k]
             at_least = int(np.sum(g >= observed[k] - 1e-12 * abs(observed[k])))
-            rows.append((kind, dataset, scheme, observed[k], float(np.mean(g)), float(np.quantile(g, 0.95)),
-                         at_least, n_perm, (1 + at_least) / (1 + n_perm), distinct))
+            rows.append((kind, CALIBRATION[kind], dataset, scheme, grouping, observed[k], float(np.mean(g)),
+                         float(np.quantile(g, 0.95)), at_least, n_perm, (1 + at_least) / (1 + n_perm), distinct))
             nulls.append(pd.DataFrame({"kind": kind, "dataset": dataset, "permutation": np.arange(n_perm),
                                        "gain": g}))
-    summary = pd.DataFrame(rows, columns=["kind", "dataset", "scheme", "observed_gain", "null_mean", "null_q95",
-                                          "n_at_least", "n_perm", "p_value", "distinct_assignments"])
+    summary = pd.DataFrame(rows, columns=["kind", "calibration", "dataset", "scheme", "folds", "observed_gain",
+                                          "null_mean", "null_q95", "n_at_least", "n_perm", "p_value",
+                                          "distinct_assignments"])
     return summary, pd.concat(nulls, ignore_index=True)

@@ -62,7 +62,6 @@ numbers do not depend on how studies are spread over processes.
 from __future__ import annotations
 
 import argparse
-import itertools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,6 +71,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.crossval import STRUCTURE_SCHEME, RiskGrid, cross_validate, grouping_label, pairs_of, scores, verdicts
+from analysis.crossval.decisions import sign_flip_p as crossval_sign_flip_p
 from analysis.crossval.folds import structure_groups
 from analysis.heuristics import FEATURES
 from analysis.spec import ModelSpec
@@ -372,10 +372,7 @@ def sign_flip_p(Y: np.ndarray, table: TrialTable, a: str, b: str, P: Mapping[str
     P = _cv(Y, table, [a, b]) if P is None else P
     sq_a, sq_b = (Y - P[a]) ** 2, (Y - P[b]) ** 2
     d = np.stack([sq_b[:, list(g)].sum(axis=1) - sq_a[:, list(g)].sum(axis=1) for g in table.groups], axis=1)
-    signs = np.array(list(itertools.product((1.0, -1.0), repeat=d.shape[1])))    # (2^F, F)
-    obs = d.sum(axis=1)
-    null = d @ signs.T                                                            # (N, 2^F)
-    return np.mean(null >= (obs - TIE_REL * np.abs(obs))[:, None], axis=1)
+    return crossval_sign_flip_p(d)
 
 
 def risk_permutation_p(Y: np.ndarray, table: TrialTable, kind: str, rngs: Sequence[np.random.Generator],

@@ -9,8 +9,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.crossval import (RISK_DRAW_STREAM, RISK_DRAWS, SCHEMES, bootstrap_comparison, comparison_tests, gain_over_effort,
-                               measure_grid, model_comparison, redraw_risk, risk_grid, summarize_comparison)
+from analysis.crossval import (RISK_DRAW_STREAM, RISK_DRAWS, SCHEMES, STRUCTURE_SCHEME, bootstrap_comparison, comparison_tests,
+                               gain_over_effort, grouping_label, held_out_tests, measure_grid, model_comparison, redraw_risk,
+                               risk_grid, structure_groups, summarize_comparison)
+from analysis.spec import HEURISTIC_MODELS
 from analysis.permutation import N_PERM, PERMUTATION_STREAM, check_count, permutation_test
 from analysis.bootstrap import COMPARISONS, bootstrap_model_correlations, bootstrap_tests, summarize_bootstrap
 from analysis.data import (TRIAL_IDS, exclude_constant_participants, is_simulated, load_human_data, ordered_datasets,
@@ -30,7 +32,8 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
                  n_boot: int = 1000, jobs: int = 2, sigma: float | None = None,
                  sigmas=None, figures: bool = True, build_risk: pd.DataFrame | None = None,
                  risk_measure: str | None = None, compare: bool = True, n_perm: int = N_PERM,
-                 risk_draw: str = "binomial", pair_names: dict | None = None) -> dict[str, pd.DataFrame]:
+                 risk_draw: str = "binomial", pair_names: dict | None = None,
+                 features: pd.DataFrame | None = None) -> dict[str, pd.DataFrame]:
     """Run the paper's analysis and write tidy CSVs and figures into `out_dir`.
 
     Parameters
@@ -69,6 +72,11 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         resample) and the permutation tests of the risk term
         (analysis.permutation).
     n_perm : permutations per permutation test (default 1000), a whole number >= 1.
+    features : the heuristic predictors per trial (analysis.heuristics.trial_features).
+        Given, every heuristic model of analysis.spec.HEURISTIC_MODELS (each
+        predictor alone, effort + height, effort + stacked) joins the fits, the
+        bootstrap, the comparison and its tests (full against effort + height and
+        effort + stacked), fitted exactly like effort-only.
     risk_draw : "binomial" (default): every bootstrap resample of the comparison
         also redraws each trial's risk from its runs (run counts from the risk
         table's n_sims or n column); "none": risk fixed at the table. The
@@ -86,7 +94,10 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     bootstrap_tests (these in-sample, column scheme "in-sample"); with
     `compare`, model_comparison (in-sample and out-of-sample scores of every
     model side by side, with bootstrap intervals), model_comparison_gain (RMSE
-    below effort-only's, with intervals), model_comparison_tests,
+    below effort-only's, with intervals; the paper's percentile intervals and,
+    beside them, the same resamples centred on the point: *_centred),
+    model_comparison_tests (direct bootstrap, the paper's method, labelled
+    biased), model_comparison_held_out_tests (sign-flip over folds, calibrated),
     cv_predictions, cv_bootstrap, permutation_test and permutation_null; plus
     files (kind, path) listing everything written.
     """
@@ -153,8 +164,11 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         raise InputError(f"risk measure {risk_measure!r} needs the build-risk table (build_risk=...)")
     else:
         inputs = R
-    fits, predictions = fit_models(means, E, inputs, sigma, models=models)
-    boot = bootstrap_model_correlations(boot_means, E, inputs, models=models, jobs=jobs)
+    if features is not None:
+        models += list(HEURISTIC_MODELS)
+        comparisons += [("full", "effort+height"), ("full", "effort+stacked")]
+    fits, predictions = fit_models(means, E, inputs, sigma, models=models, features=features)
+    boot = bootstrap_model_correlations(boot_means, E, inputs, models=models, jobs=jobs, features=features)
 
     pairs = [_model_pairs(E, R)]
     for dataset, group in means.groupby("dataset", sort=True):
@@ -195,9 +209,18 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         in_sample = {"R": sigma if risk_measure is None else build_sigma}
         in_sample.update({m: build_sigma for m in RISK_MEASURES if build_sigma is not None})
         draw = risk_draw if source_R.runs is not None else "none"
-        results.update(_comparison(means, boot_means, E, grids, models, comparisons, in_sample, seed, n_perm, draw))
+        feats = None
+        if features is not None:
+            from analysis.models import feature_vector
+            from analysis.heuristics import FEATURES
+
+            feats = {f: feature_vector(features, f) for f in FEATURES}
+        groups = structure_groups(TRIAL_IDS, source_R.risk)
+        results.update(_comparison(means, boot_means, E, grids, models, comparisons, in_sample, seed, n_perm, draw,
+                                   feats, groups))
         results["settings"] = results["settings"].assign(
-            n_perm=n_perm, risk_draw=draw, cv_sigma_rule="chosen inside each fold: least mean training RMSE of Eq. 1")
+            n_perm=n_perm, risk_draw=draw, cv_sigma_rule="chosen inside each fold: least mean training RMSE of Eq. 1",
+            folds_by_structure=grouping_label(groups, TRIAL_IDS))
     if figures:
         full = fits[fits["model"] == "full"].set_index("dataset")[["b0", "b1", "b2"]]
         figure_paths += plot_trial_means(means, predictions, out_dir, stem=f"{prefix}fig3_trial_means")
@@ -216,19 +239,21 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
 
 
 def _comparison(means: pd.DataFrame, boot_means, E: pd.Series, grids, models, comparisons, in_sample, seed: int,
-                n_perm: int, risk_draw: str) -> dict[str, pd.DataFrame]:
+                n_perm: int, risk_draw: str, features=None, groups=None) -> dict[str, pd.DataFrame]:
     """The out-of-sample comparison and the permutation tests (analysis.crossval,
     analysis.permutation) on the same participant resamples as the in-sample
     bootstrap. Risk redraws and permutations come from their own streams,
     ``default_rng([seed, RISK_DRAW_STREAM])`` and ``default_rng([seed, PERMUTATION_STREAM])``."""
     y = {d: g.set_index("trial")["mean_z"].reindex(list(TRIAL_IDS)).to_numpy()
          for d, g in means.groupby("dataset", sort=False)}
-    point, cv_pred = model_comparison(y, E, grids, models, SCHEMES, in_sample)
-    fixed = bootstrap_comparison(boot_means, E, grids, models, SCHEMES, in_sample)
+    schemes = SCHEMES + (STRUCTURE_SCHEME,)
+    kw = {"features": features, "groups": groups}
+    point, cv_pred = model_comparison(y, E, grids, models, schemes, in_sample, **kw)
+    fixed = bootstrap_comparison(boot_means, E, grids, models, schemes, in_sample, **kw)
     n_boot = len(next(iter(boot_means.values())))
     if risk_draw == "binomial":
         draws = redraw_risk(grids["R"], n_boot, np.random.default_rng([seed, RISK_DRAW_STREAM]))
-        boot = bootstrap_comparison(boot_means, E, grids, models, SCHEMES, in_sample, risk_draws=draws)
+        boot = bootstrap_comparison(boot_means, E, grids, models, schemes, in_sample, risk_draws=draws, **kw)
         summary = summarize_comparison(point, boot, fixed)
         tests = comparison_tests(point, boot, comparisons, fixed)
         cv_boot = pd.concat([boot.assign(risk_draw="binomial"), fixed.assign(risk_draw="none")], ignore_index=True)
@@ -239,6 +264,7 @@ def _comparison(means: pd.DataFrame, boot_means, E: pd.Series, grids, models, co
     perm, null = permutation_test(y, E, grids["R"], n_perm, np.random.default_rng([seed, PERMUTATION_STREAM]))
     gain = gain_over_effort(point, boot if risk_draw == "binomial" else fixed)
     return {"model_comparison": summary, "model_comparison_gain": gain, "model_comparison_tests": tests,
+            "model_comparison_held_out_tests": held_out_tests(cv_pred, comparisons),
             "cv_predictions": cv_pred,
             "cv_bootstrap": cv_boot, "permutation_test": perm, "permutation_null": null}
 

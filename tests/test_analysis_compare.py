@@ -17,7 +17,7 @@ from analysis import (TRIAL_IDS, bootstrap_model_correlations, resample_trial_me
 from analysis.crossval import (SCHEMES, CrossValidationError, RiskGrid, bootstrap_comparison, cross_validate,
                                make_folds, model_comparison, redraw_risk, risk_grid, scores, verdicts)
 from analysis.data import HumanDataError
-from analysis.permutation import check_count, draw_permutations, permutation_test
+from analysis.permutation import KINDS, check_count, draw_permutations, permutation_test
 from analysis.recovery import model_cost, recovery, simulate_trial_means
 
 MODELS3 = ["full", "effort", "risk"]
@@ -262,7 +262,7 @@ def test_permutation_p_values_are_uniform_under_a_null_and_small_for_a_planted_e
     y = {"time": E_ * (1 - R) + 4 * E_ * R + 0.3 * rng.normal(size=24)}
     summary, null = permutation_test(y, E, grid, 199, rng)
     assert (summary["p_value"] <= 0.02).all()
-    assert len(null) == 2 * 199
+    assert len(null) == len(KINDS) * 199
 
 
 def test_distinct_risk_tables_bound_the_smallest_p():

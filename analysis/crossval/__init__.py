@@ -66,7 +66,8 @@ bootstrap tests and verdicts); every name is importable from analysis.crossval.
 """
 from __future__ import annotations
 
-from analysis.crossval.decisions import N_PARAMETERS, SCORES, comparison_tests, direct_p, verdicts  # noqa: F401
+from analysis.crossval.decisions import (N_PARAMETERS, SCORES, comparison_tests, direct_p, held_out_tests,  # noqa: F401
+                                        sign_flip_p, verdicts)
 from analysis.crossval.fits import CHUNK, COLLINEAR_REL, cross_validate, cv_arrays, scores  # noqa: F401
 from analysis.crossval.folds import (CV_SCHEMES, MIN_PAIRS, SCHEMES, STRUCTURE_SCHEME, CrossValidationError,  # noqa: F401
                                      grouping_label, make_folds, pairs_of, structure_folds, structure_groups)

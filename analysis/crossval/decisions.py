@@ -25,6 +25,11 @@ def direct_p(better: np.ndarray, worse: np.ndarray, higher_is_better: bool) -> f
     return float(np.mean(~wins))
 
 
+#: How the direct bootstrap test is labelled in every table: its intervals of resampled
+#: trial means carry extra noise, so out of sample it is biased toward the simpler model.
+DIRECT_METHOD = "direct bootstrap (paper's method; biased toward the simpler model held out)"
+
+
 def comparison_tests(point: pd.DataFrame, boot: pd.DataFrame, comparisons: Sequence[tuple[str, str]],
                      boot_fixed_risk: pd.DataFrame | None = None) -> pd.DataFrame:
     """Direct bootstrap tests (analysis.crossval's docstring) of each comparison,
@@ -52,6 +57,7 @@ def comparison_tests(point: pd.DataFrame, boot: pd.DataFrame, comparisons: Seque
                 rows.append((dataset, scheme, score, a, c, va, vc, better, p, pf, len(wide)))
     out = pd.DataFrame(rows, columns=["dataset", "scheme", "score", "model_a", "model_b", "value_a", "value_b",
                                       "better", "p_value", "p_value_fixed_risk", "n_boot"])
+    out["method"] = DIRECT_METHOD
     if boot_fixed_risk is None:
         out = out.drop(columns=["p_value_fixed_risk"])
     return out
@@ -72,3 +78,53 @@ def verdicts(score_by_model: Mapping[str, np.ndarray], higher_is_better: bool = 
     rank = np.array([model_spec(m).n_parameters * len(names) + k for k, m in enumerate(names)])
     cost = np.where(tied, rank.reshape((-1,) + (1,) * (S.ndim - 1)), np.iinfo(int).max)
     return np.array(names, dtype=object)[np.argmin(cost, axis=0)]
+
+
+#: Folds up to this many: every sign flip enumerated (exact); more: SIGN_FLIP_DRAWS random flips.
+SIGN_FLIP_EXACT = 16
+SIGN_FLIP_DRAWS = 65536
+
+
+def sign_flip_p(d: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
+    """One-sided paired test over folds: d (N, F) per-fold differences (positive:
+    the first model better); p (N,) = fraction of sign flips s with sum(s d) >=
+    sum(d) (relative 1e-12 ties count). Exact (all 2^F flips, the identity among
+    them) for F <= SIGN_FLIP_EXACT, else SIGN_FLIP_DRAWS random flips plus the
+    identity from `rng` (default default_rng(0))."""
+    d = np.atleast_2d(np.asarray(d, dtype=float))
+    F = d.shape[1]
+    if F <= SIGN_FLIP_EXACT:
+        signs = 1.0 - 2.0 * ((np.arange(2 ** F)[:, None] >> np.arange(F)[None, :]) & 1)
+    else:
+        rng = np.random.default_rng(0) if rng is None else rng
+        signs = np.vstack([np.ones(F), 1.0 - 2.0 * (rng.random((SIGN_FLIP_DRAWS, F)) < 0.5)])
+    obs = d.sum(axis=1)
+    null = d @ signs.T
+    return np.mean(null >= (obs - 1e-12 * np.abs(obs))[:, None], axis=1)
+
+
+def held_out_tests(cv_predictions: pd.DataFrame, comparisons: Sequence[tuple[str, str]]) -> pd.DataFrame:
+    """The held-out comparison test paired over folds, per dataset, cross-validated
+    scheme and comparison (a, b): d_f = SSE_b,f - SSE_a,f over the trials fold f
+    holds out, p of "a predicts held-out trials better than b" by `sign_flip_p`.
+    `cv_predictions` from crossval.model_comparison. Returns dataset, scheme,
+    model_a, model_b, sse_a, sse_b, n_folds, p_value, method."""
+    rows = []
+    cv = cv_predictions[cv_predictions["scheme"] != "in-sample"]
+    for (dataset, scheme), g in cv.groupby(["dataset", "scheme"], sort=False):
+        wide = g.pivot_table(index=["fold", "trial"], columns="model", values="predicted", sort=False)
+        obs = g.drop_duplicates(["fold", "trial"]).set_index(["fold", "trial"])["observed"].reindex(wide.index)
+        folds = wide.index.get_level_values("fold").to_numpy()
+        order = list(dict.fromkeys(folds))
+        for a, b in comparisons:
+            if a not in wide or b not in wide:
+                continue
+            sq_a = (obs.to_numpy() - wide[a].to_numpy()) ** 2
+            sq_b = (obs.to_numpy() - wide[b].to_numpy()) ** 2
+            d = np.array([sq_b[folds == f].sum() - sq_a[folds == f].sum() for f in order])
+            p = float(sign_flip_p(d[None])[0])
+            method = "exact" if len(order) <= SIGN_FLIP_EXACT else f"{SIGN_FLIP_DRAWS} random flips"
+            rows.append((dataset, scheme, a, b, float(sq_a.sum()), float(sq_b.sum()), len(order), p,
+                         f"sign-flip over folds ({method})"))
+    return pd.DataFrame(rows, columns=["dataset", "scheme", "model_a", "model_b", "sse_a", "sse_b", "n_folds",
+                                       "p_value", "method"])

@@ -138,6 +138,7 @@ def summarize_comparison(point: pd.DataFrame, boot: pd.DataFrame, boot_fixed_ris
         return out.reset_index()
 
     table = point.merge(bands(boot), on=keys, how="left")
+    table = _with_centred(table, boot, keys, ("rmse", "r"), level)
     if boot_fixed_risk is not None:
         fixed = bands(boot_fixed_risk, "_fixed_risk")
         table = table.merge(fixed[keys + ["rmse_low_fixed_risk", "rmse_high_fixed_risk", "r_low_fixed_risk",
@@ -150,11 +151,34 @@ def summarize_comparison(point: pd.DataFrame, boot: pd.DataFrame, boot_fixed_ris
     return table
 
 
+def _with_centred(table: pd.DataFrame, boot: pd.DataFrame, keys, scores, level: float) -> pd.DataFrame:
+    """Columns <score>_low_centred, <score>_high_centred: the bootstrap interval
+    shifted to the point estimate (analysis.bootstrap.centred_interval), always
+    containing it, beside the paper's percentile interval (<score>_low/high)."""
+    from analysis.bootstrap import centred_interval
+
+    groups = dict(iter(boot.groupby(keys, sort=False)))
+    for score in scores:
+        lo, hi = [], []
+        for _, row in table.iterrows():
+            g = groups.get(tuple(row[k] for k in keys))
+            c = centred_interval(row[score], g[score].to_numpy() if g is not None else [], level,
+                                 (-1.0, 1.0) if score == "r" else (0.0, np.inf))
+            lo.append(c[0])
+            hi.append(c[1])
+        table[f"{score}_low_centred"], table[f"{score}_high_centred"] = lo, hi
+    return table
+
+
 def gain_over_effort(point: pd.DataFrame, boot: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
     """How much lower each model's RMSE is than effort-only's (effort RMSE - model
     RMSE; positive: the model predicts better), per dataset and scheme, with the
-    percentile interval of the per-resample difference. In sample Eq. 1's gain is
-    >= 0 by construction; out of sample it can be negative."""
+    percentile interval of the per-resample difference (gain_low, gain_high) and
+    the same shifted to the gain (gain_low_centred, gain_high_centred: always
+    containing it). In sample Eq. 1's gain is >= 0 by construction; out of
+    sample it can be negative."""
+    from analysis.bootstrap import centred_interval
+
     tail = (1 - level) / 2
     keys = ["dataset", "scheme"]
     pt = point.pivot_table(index=keys, columns="model", values="rmse", sort=False)
@@ -163,6 +187,10 @@ def gain_over_effort(point: pd.DataFrame, boot: pd.DataFrame, level: float = 0.9
     for model in [m for m in pt.columns if m != "effort"]:
         g = (bt["effort"] - bt[model]).groupby(level=keys, sort=False)
         lo, hi = g.quantile(tail), g.quantile(1 - tail)
+        diffs = dict(iter((bt["effort"] - bt[model]).groupby(level=keys, sort=False)))
         for key in pt.index:
-            rows.append((*key, model, float(pt.loc[key, "effort"] - pt.loc[key, model]), float(lo[key]), float(hi[key])))
-    return pd.DataFrame(rows, columns=keys + ["model", "gain", "gain_low", "gain_high"])
+            gain = float(pt.loc[key, "effort"] - pt.loc[key, model])
+            rows.append((*key, model, gain, float(lo[key]), float(hi[key]),
+                         *centred_interval(gain, diffs[key].to_numpy(), level)))
+    return pd.DataFrame(rows, columns=keys + ["model", "gain", "gain_low", "gain_high", "gain_low_centred",
+                                              "gain_high_centred"])
