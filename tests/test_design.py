@@ -172,3 +172,14 @@ def test_bad_input_is_refused_in_one_line_by_the_command(tmp_path, args, words):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and words in lines[0], r.stderr
     assert not out.exists()
+
+
+def test_pairs_match_effort_and_put_the_riskier_trial_as_hard():
+    import pandas as pd
+
+    from stimuli.design.outputs import pair_ids
+
+    chosen = pd.DataFrame({"effort": [0.9, 0.1, 0.5, 0.12, 0.55, 0.95], "risk_prior": [0.1, 0.4, 0.3, 0.0, 0.05, 0.2],
+                           "candidate": [1, 2, 3, 4, 5, 6]})
+    # by effort: (0.1, 0.12) -> pair 1, (0.5, 0.55) -> pair 2, (0.9, 0.95) -> pair 3; E = lower risk
+    assert pair_ids(chosen) == ["3E", "1H", "2H", "1E", "2E", "3H"]

@@ -31,13 +31,16 @@ def parse_args(argv=None):
     D = DesignConfig()
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, type=cli.output_dir, help="folder for the designed set (created if missing)")
-    p.add_argument("--trials", type=int, default=D.trials, help="trials in the set, >= 4 (default %(default)s)")
+    size = p.add_mutually_exclusive_group()
+    size.add_argument("--trials", type=int, default=None, help=f"trials in the set, >= 4 (default {D.trials})")
+    size.add_argument("--pairs", type=int, default=None,
+                      help="design 2 x PAIRS trials and pair them (by effort; E the lower risk): ids 1E, 1H, ...")
     p.add_argument("--seed", type=cli.seed, default=D.seed)
     p.add_argument("--candidates", type=int, default=D.candidates, help="candidates screened (default %(default)s)")
     p.add_argument("--budget", type=int, default=MAX_BLOCKS, help="most blocks per trial, >= 1 (default %(default)s, the paper's most)")
     p.add_argument("--sigma-prior", type=float, nargs=2, metavar=("LOW", "HIGH"), default=[PRIOR_LO, PRIOR_HI],
                    help="the sigma prior, uniform, in (0, 1] units of d (default %(default)s)")
-    p.add_argument("--finalists", type=int, default=None, help="finalists checked faithfully (default 2 x --trials)")
+    p.add_argument("--finalists", type=int, default=None, help="finalists checked faithfully (default 1.5 x --trials)")
     p.add_argument("--samples", type=int, default=D.samples, help="M, layouts of A per finalist's effort (default %(default)s)")
     p.add_argument("--n-sims", type=int, default=D.n_sims, help="N, MuJoCo runs per finalist and sigma (default %(default)s)")
     p.add_argument("--screen-runs", type=int, default=SCREEN_RUNS, help="static Monte Carlo runs per candidate and sigma (default %(default)s)")
@@ -47,8 +50,10 @@ def parse_args(argv=None):
     p.add_argument("--no-paper", action="store_true", help="skip the paper's 24 beside the set (correlations, power)")
     p.add_argument("--no-render", action="store_true", help="skip the rendered contact sheet")
     p.add_argument("--studies", type=int, default=200, help="simulated studies per world of the power table (default %(default)s)")
+    p.add_argument("--no-power", action="store_true", help="skip the power table (analysis.power)")
     args = p.parse_args(argv)
-    cfg = DesignConfig(trials=args.trials, seed=args.seed, candidates=args.candidates, budget=args.budget,
+    trials = 2 * args.pairs if args.pairs is not None else (D.trials if args.trials is None else args.trials)
+    cfg = DesignConfig(trials=trials, pairs=args.pairs is not None, seed=args.seed, candidates=args.candidates, budget=args.budget,
                        prior=tuple(args.sigma_prior), finalists=args.finalists, samples=args.samples, n_sims=args.n_sims,
                        screen_runs=args.screen_runs, engine=args.engine)
     from stimuli.design.run import check_config
@@ -77,41 +82,42 @@ def main(argv=None) -> int:
     with executor_for_scheduler(args.scheduler, args.jobs) as ex:
         design = run_design(cfg, out, ex, cache, log)
         paths = outputs.write_set(design, out)
+        import stimuli
+
+        designed = [stimuli.load_file(p) for p in paths]
         paper = None
         if not args.no_paper:
-            import stimuli
             from stimuli.design.run import _paper_features
 
             t1 = time.perf_counter()
-            trials = stimuli.load_paper()
-            log(f"the paper's 24 beside it: M = {cfg.samples}, N = {cfg.n_sims} x {len(cfg.sigmas)} sigmas (cached stages)")
-            effort, risk = faithful(trials, cfg, ex, cache)
-            paper = (_paper_features(cfg).merge(effort[["trial", "effort"]], on="trial")
-                     .merge(wide(risk), left_on="trial", right_index=True))
+            paper_trials = stimuli.load_paper()
+            log(f"the paper's 24 beside it: M = {cfg.samples}, N = {cfg.n_sims} x {len(cfg.faithful_sigmas)} sigmas (cached stages)")
+            p_effort, p_risk = faithful(paper_trials, cfg, ex, cache)
+            paper = (_paper_features(cfg).merge(p_effort[["trial", "effort"]], on="trial")
+                     .merge(wide(p_risk), left_on="trial", right_index=True))
             design.timings["paper"] = time.perf_counter() - t1
         outputs.write_tables(design, out, paper)
+        if not args.no_power:
+            from stimuli.design import power
+
+            t3 = time.perf_counter()
+            if power.write_power(out, cfg, ex, cache, args.studies, args.jobs, log, include_paper=not args.no_paper):
+                design.timings["power"] = time.perf_counter() - t3
         if not args.no_render:
             t2 = time.perf_counter()
             from stimuli.render import contact_sheet, render_trials
 
-            designed = [stimuli_load(p) for p in paths]
             render_trials(designed, out / "pictures", seed=cfg.seed, executor=ex, log=log)
             contact_sheet(out / "pictures", out / "contact_sheet.png")
             design.timings["render"] = time.perf_counter() - t2
     design.timings["command"] = time.perf_counter() - t0
-    outputs.write_json({"config": cfg.__dict__ | {"sigmas": cfg.sigmas}, "objective": design.terms,
+    outputs.write_json({"config": cfg.__dict__ | {"sigmas": cfg.sigmas, "faithful_sigmas": cfg.faithful_sigmas}, "objective": design.terms,
                         "timings_s": design.timings, "screened": cfg.candidates, "passed_screen": len(design.pool),
                         "discards": dict(design.reasons)}, out / "design.json")
     t = design.terms
     print(f"wrote {len(paths)} designed trials to {out.resolve()}: |r| max {t['max_abs_r']:.2f}, rising {t['rising']:.0%}, "
           f"{design.timings['command']:.0f} s (python -m lgp.reproduce --stimuli {args.out})")
     return 0
-
-
-def stimuli_load(path):
-    import stimuli
-
-    return stimuli.load_file(path)
 
 
 if __name__ == "__main__":

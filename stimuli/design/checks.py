@@ -72,12 +72,12 @@ def features(trial, sigmas=PRIOR_GRID, runs: int = SCREEN_RUNS, seed: int = 0) -
     xy = B.positions[:, :2]
     extent = xy.max(axis=0) - xy.min(axis=0) + d
     A = trial.sample_initial(np.random.default_rng([seed, 0]))
-    proxy, dist, moved = effort_proxy(A, B)
+    dist, squared, moved = effort_proxy(A, B)
     model = StackModel(B)
     curve = model.risk_curve(sigmas, screen_normals(len(model), runs, np.random.default_rng([seed, 1])))
     row = {"trial": trial.id, "blocks": len(B.blocks), "moved": moved, "height": round(top / d, 3),
            "stacked": sum(1 for b in B.blocks if TABLE not in graph[b.name]),
-           "footprint": round(float(extent[0] * extent[1]) / d ** 2, 3), "distance": dist, "effort_proxy": proxy,
+           "footprint": round(float(extent[0] * extent[1]) / d ** 2, 3), "distance": dist, "effort_proxy": dist, "path_squared": squared,
            "static_stands": model.stands()}
     row.update({f"screen_risk_{s:g}": float(r) for s, r in zip(sigmas, curve)})
     row["screen_risk_prior"] = float(np.mean(curve))

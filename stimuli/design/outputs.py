@@ -28,7 +28,8 @@ from stimuli.design.grammar import draw
 from stimuli.design.run import Design, write_trial_file
 
 #: Predictors of the correlation matrix (columns of design.csv / the paper's table).
-PREDICTORS = ("effort", "height", "blocks", "stacked", "distance", "risk_0.065", "risk_0.1", "risk_0.15", "risk_prior")
+PREDICTORS = ("effort", "height", "blocks", "stacked", "distance", "risk_0.065", "risk_0.1", "risk_0.15", "risk_0.25",
+              "risk_prior")
 OBJECTIVE_TEXT = "decorrelate risk (0.10, 0.15 d) from height, blocks and effort; spread risk over the prior (stimuli/design/objective.py)"
 
 
@@ -37,14 +38,37 @@ def trial_ids(k: int) -> list[str]:
     return [f"D{i + 1:0{width}d}" for i in range(k)]
 
 
+def pair_ids(chosen: pd.DataFrame) -> list[str]:
+    """--pairs: ids <pair><E|H> for the chosen rows (in their order). Trials are
+    paired by effort (sorted by faithful effort, neighbours paired, ties by
+    candidate), and within a pair the one of lower mean risk over the prior is E:
+    a pair varies risk at nearly matched effort."""
+    order = chosen.sort_values(["effort", "candidate"]).index.tolist()
+    ids = {}
+    for k in range(0, len(order) - 1, 2):
+        a, b = order[k], order[k + 1]
+        lo, hi = sorted((a, b), key=lambda i: (chosen.loc[i, "risk_prior"], chosen.loc[i, "candidate"]))
+        ids[lo], ids[hi] = f"{k // 2 + 1}E", f"{k // 2 + 1}H"
+    return [ids[i] for i in chosen.index]
+
+
+def output_ids(design: Design) -> list[str]:
+    return pair_ids(design.chosen) if design.config.pairs else trial_ids(len(design.chosen))
+
+
 def write_set(design: Design, out: Path) -> list[Path]:
-    """The chosen trials as trial files D01.yaml ... (rank = order by the faithful prior risk)."""
+    """The chosen trials as trial files D01.yaml ... (rank = order by the faithful
+    prior risk), or 1E.yaml, 1H.yaml ... with --pairs (`pair_ids`)."""
     cfg = design.config
     paths = []
-    for rank, (tid, row) in enumerate(zip(trial_ids(len(design.chosen)), design.chosen.itertuples()), 1):
+    for rank, (tid, row) in enumerate(zip(output_ids(design), design.chosen.itertuples()), 1):
         cand = draw(int(row.candidate), cfg.seed, cfg.budget)
         data = dict(cand.data)
         data["id"] = tid
+        if cfg.pairs:
+            data = {"id": tid, "pair": int(tid[:-1]), "level": tid[-1],
+                    **{k: v for k, v in data.items() if k != "id"}}
+            data["dimension"] = f"risk at matched effort ({cand.data['dimension']})"
         data["provenance"] = {"designed": [f"designed: objective {OBJECTIVE_TEXT}; seed {cfg.seed}; rank {rank} of "
                                            f"{len(design.chosen)} (by mean risk over the prior); candidate {cand.id} of "
                                            f"{cfg.candidates}"],
@@ -55,7 +79,7 @@ def write_set(design: Design, out: Path) -> list[Path]:
 
 def design_table(design: Design) -> pd.DataFrame:
     t = design.chosen.copy()
-    t.insert(0, "designed", trial_ids(len(t)))
+    t.insert(0, "designed", output_ids(design))
     return t.rename(columns={"trial": "candidate_id"})
 
 
@@ -124,5 +148,5 @@ def write_tables(design: Design, out: Path, paper: pd.DataFrame | None) -> dict[
         write_csv_atomic(paper, out / "paper.csv")
     write_csv_atomic(corr, out / "correlations.csv")
     plot_correlations(corr, out / "correlations.png")
-    write_csv_atomic(screen_check(design.finalists, paper, design.config.sigmas), out / "screen_check.csv")
+    write_csv_atomic(screen_check(design.finalists, paper, design.config.faithful_sigmas), out / "screen_check.csv")
     return files

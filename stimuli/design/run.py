@@ -3,7 +3,7 @@ choose the set, write it (`design`; the command line is stimuli/design/__main__.
 
 1. Screen: candidates 0..C-1 of the seed (grammar.draw) through the screen's
    checks (checks.screen_candidate), spread over the executor; duplicates dropped.
-2. Finalists: the objective chooses F (default 2 x the set) from the screened
+2. Finalists: the objective chooses F (default 1.5 x the set) from the screened
    pool on the screen's numbers; each must stand in the physics engine and plan
    (layout 0); a finalist that fails is discarded (reason counted) and the
    choice is made again without it.
@@ -38,8 +38,8 @@ class DesignConfig:
     budget: int = MAX_BLOCKS
     prior: tuple[float, float] = (PRIOR_LO, PRIOR_HI)
     finalists: int | None = None  # default 2 x trials
-    samples: int = 10  # M layouts of the faithful effort
-    n_sims: int = 50  # N runs per sigma of the faithful risk
+    samples: int = 5  # M layouts of the faithful effort
+    n_sims: int = 40  # N runs per sigma of the faithful risk
     screen_runs: int = SCREEN_RUNS
     engine: str | None = None
     pairs: bool = False
@@ -53,8 +53,16 @@ class DesignConfig:
         return tuple(sorted(pts))
 
     @property
+    def faithful_sigmas(self) -> tuple[float, ...]:
+        """The faithful check's sigmas: the prior's ends, 0.10 and 0.15 d (the
+        objective's), the paper's 0.065 d and 0.20 d where inside the prior: the
+        simulations cost ~100x the screen's, so fewer points."""
+        lo, hi = self.prior
+        return tuple(sorted({s for s in (0.065, 0.2) if lo <= s <= hi} | {round(lo, 4), round(hi, 4), 0.1, 0.15}))
+
+    @property
     def n_finalists(self) -> int:
-        return self.finalists or 2 * self.trials
+        return self.finalists or (3 * self.trials + 1) // 2
 
 
 def check_config(cfg: DesignConfig) -> None:
@@ -65,7 +73,8 @@ def check_config(cfg: DesignConfig) -> None:
     if cfg.budget < 1:
         raise ValueError(f"--budget {cfg.budget}: a trial needs at least 1 block")
     if cfg.trials < 4:
-        raise ValueError(f"--trials {cfg.trials}: a design needs at least 4 trials")
+        raise ValueError(f"--pairs {cfg.trials // 2}: a design needs at least 2 pairs" if cfg.pairs
+                         else f"--trials {cfg.trials}: a design needs at least 4 trials")
     if cfg.trials > cfg.candidates:
         raise ValueError(f"--trials {cfg.trials} is more than the {cfg.candidates} candidates (--candidates)")
     if cfg.n_finalists < cfg.trials:
@@ -166,7 +175,7 @@ def faithful(trials, cfg: DesignConfig, executor, cache) -> tuple[pd.DataFrame, 
     from models.effort import summarise_effort
 
     samples = effort_tables(trials, cfg.samples, cfg.seed, executor, cache, verbose=False)
-    risk = risk_tables(trials, list(cfg.sigmas), cfg.n_sims, cfg.seed, cfg.engine, executor, cache, verbose=False)
+    risk = risk_tables(trials, list(cfg.faithful_sigmas), cfg.n_sims, cfg.seed, cfg.engine, executor, cache, verbose=False)
     return summarise_effort(samples, trials), risk
 
 
@@ -192,6 +201,8 @@ class Design:
     chosen: pd.DataFrame
     terms: dict
     timings: dict = field(default_factory=dict)
+    effort: pd.DataFrame | None = None  # faithful effort per finalist (trial, effort, effort_sd, ...)
+    risk: pd.DataFrame | None = None  # faithful risk table of the finalists (trial, sigma, risk, ...)
 
 
 def _paper_features(cfg: DesignConfig) -> pd.DataFrame:
@@ -235,7 +246,7 @@ def run_design(cfg: DesignConfig, out: Path, executor, cache, log=print) -> Desi
         path = write_trial_file(cand.data, folder / f"{cand.id}.yaml", f"# Design finalist {cand.id}: {cand.data['description']}\n")
         trials.append(stimuli.load_file(path))
     t2 = time.perf_counter()
-    log(f"faithful check: {len(trials)} finalists, M = {cfg.samples} layouts, N = {cfg.n_sims} runs x {len(cfg.sigmas)} sigmas")
+    log(f"faithful check: {len(trials)} finalists, M = {cfg.samples} layouts, N = {cfg.n_sims} runs x {len(cfg.faithful_sigmas)} sigmas")
     effort, risk = faithful(trials, cfg, executor, cache)
     timings["faithful"] = time.perf_counter() - t2
     fin = fin.merge(effort[["trial", "effort", "effort_sd"]], on="trial").merge(wide(risk), left_on="trial", right_index=True)
@@ -243,4 +254,4 @@ def run_design(cfg: DesignConfig, out: Path, executor, cache, log=print) -> Desi
     idx, terms = objective.choose(fin, cfg.trials, rng, effort="effort", risk="risk")
     chosen = fin.iloc[idx].sort_values(["risk_prior", "candidate"]).reset_index(drop=True)
     timings["total"] = time.perf_counter() - t0
-    return Design(cfg, pool, reasons, fin, chosen, terms, timings)
+    return Design(cfg, pool, reasons, fin, chosen, terms, timings, effort, risk)
