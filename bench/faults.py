@@ -432,11 +432,14 @@ def command_cases():
 
 
 def api_cases():
-    from models.risk import physical_risk
+    from models.risk import RiskModel, physical_risk
     from models.risk.structures import tower
 
     def risk(sigma=0.05, **kw):
         return lambda: physical_risk(tower(2), sigma, **{"n_sims": 3, "seed": 0, **kw})
+
+    def model(**kw):  # the risk model is checked when made, inside the probe
+        return lambda: physical_risk(tower(2), 0.05, n_sims=3, seed=0, model=RiskModel(**kw))
 
     for value in (float("inf"), 1e308, float("nan"), 1.5, -0.1, "0.1"):
         yield f"physical_risk sigma={value!r}", risk(value)
@@ -444,9 +447,9 @@ def api_cases():
         yield f"physical_risk n_sims={value!r}", risk(n_sims=value)
     for value in (None, -1, 1.5):
         yield f"physical_risk seed={value!r}", risk(seed=value)
-    yield "physical_risk fall_rule='sideways'", risk(fall_rule="sideways")
-    yield "physical_risk fall_threshold=0", risk(fall_threshold=0)
-    yield "physical_risk engine='bullet'", risk(engine="bullet")
+    yield "physical_risk fall_rule='sideways'", model(fall_rule="sideways")
+    yield "physical_risk fall_threshold=0", model(fall_threshold=0)
+    yield "physical_risk engine='bullet'", model(engine="bullet")
 
     import lgp
 

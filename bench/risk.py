@@ -56,7 +56,7 @@ def grid_sample_seconds(engine: str, per_trial: int) -> float:
     for t in trials:
         check_stable(t.target, engine)
     t0 = time.perf_counter()
-    table = risk_table(trials, [SIGMA_GRID[0], SIGMA_GRID[5], SIGMA_GRID[-1]], n_sims=per_trial, seed=1, engine=engine, jobs=1)
+    table = risk_table(trials, [SIGMA_GRID[0], SIGMA_GRID[5], SIGMA_GRID[-1]], n_sims=per_trial, seed=1, model=engine, jobs=1)
     return (time.perf_counter() - t0) / (len(table) * per_trial)
 
 
@@ -64,7 +64,7 @@ def measured_grid_seconds(engine: str, jobs: int) -> float:
     import stimuli
 
     t0 = time.perf_counter()
-    risk_table(stimuli.load_paper(), SIGMA_GRID, n_sims=100, seed=0, engine=engine, jobs=jobs)
+    risk_table(stimuli.load_paper(), SIGMA_GRID, n_sims=100, seed=0, model=engine, jobs=jobs)
     return time.perf_counter() - t0
 
 

@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import stimuli  # noqa: E402
-from models.risk import risk_table  # noqa: E402
+from models.risk import RiskModel, risk_table  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -32,11 +32,11 @@ def main(argv=None) -> int:
     p.add_argument("--jobs", type=int, default=None)
     args = p.parse_args(argv)
     trials = stimuli.load_paper()
-    rule = dict(fall_rule=args.fall_rule, fall_threshold=args.fall_threshold)
     runs, wall = {}, {}
     for engine in ["mujoco", *args.engines]:
         t0 = time.perf_counter()
-        runs[engine] = risk_table(trials, [args.sigma], n_sims=args.n_sims, seed=0, engine=engine, jobs=args.jobs, runs=True, **rule)
+        model = RiskModel(engine, None, args.fall_rule, args.fall_threshold)
+        runs[engine] = risk_table(trials, [args.sigma], n_sims=args.n_sims, seed=0, model=model, jobs=args.jobs, runs=True)
         wall[engine] = time.perf_counter() - t0
     base = runs["mujoco"]["fell"].to_numpy()
     print(f"sigma = {args.sigma} d, {len(trials)} trials x {args.n_sims} runs (seed 0), fall rule {args.fall_rule} "

@@ -64,7 +64,7 @@ def parse_args(argv=None) -> RunConfig:
     here, in one line, before any work (lgp.cli); the run's RunConfig."""
     from lgp.app.build_risk import BUILD_SIGMAS
     from lgp.app.config import QUICK
-    from models.risk.engine import FALL_RULES
+    from models.risk.model import FALL_RULES, NOISE_RULES
 
     D = RunConfig.default
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -85,7 +85,7 @@ def parse_args(argv=None) -> RunConfig:
     grid.add_argument("--sigmas", type=cli.sigma, nargs="+", help="noise levels in (0, 1], units of d (default: 0.05..0.10 step 0.005)")
     grid.add_argument("--sigma-grid", choices=list(SIGMA_GRIDS),
                       help="a named sigma grid: paper (default) or wide (0.05..0.30 d step 0.01 plus the paper's points)")
-    p.add_argument("--noise-rule", choices=["lift", "settle"],
+    p.add_argument("--noise-rule", choices=NOISE_RULES,
                    help="heights of the noisy blocks: lift (default) or settle (every block rests on what lies beneath it; "
                         "docs/risk.md)")
     p.add_argument("--engine", help="physics engine for risk: mujoco, drake, physx (optional extra) (default: mujoco)")
@@ -148,11 +148,11 @@ def parse_args(argv=None) -> RunConfig:
     sensitivity.add_arguments(p)
     args = p.parse_args(argv)
     try:  # bad engine, profile, rule or threshold: one line, before any work
-        from models.risk import DEFAULT_ENGINE, check_fall_rule, engine_name
+        from models.risk import RiskModel
 
         if args.engine is not None or args.profile is not None:
-            args.engine = engine_name(args.engine or DEFAULT_ENGINE, args.profile)
-        check_fall_rule(args.fall_rule, args.fall_threshold)
+            args.engine = RiskModel(args.engine, args.profile).engine
+        RunConfig.from_args(args).risk_model
         sensitivity.check_arguments(args)
     except ValueError as e:
         p.exit(2, f"{p.prog}: error: {e}\n")
@@ -296,15 +296,15 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
             import models.effort  # noqa: F401
             import models.risk  # noqa: F401
         from models.effort import summarise_effort
-        check_targets(trials, args.engine, cache, args.fall_rule, args.fall_threshold)  # an unstable B fails now, not after the effort stage
+        model = args.risk_model
+        check_targets(trials, model, cache)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache, verbose=args.verbose,
                                        approach_height=args.approach_height, slices_per_phase=args.slices,
                                        **args.planner_choice())
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
         risk_runs: list = []
-        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, args.engine, executor, cache, args.risk_chunk,
-                           fall_rule=args.fall_rule, fall_threshold=args.fall_threshold, noise_rule=args.noise_rule,
+        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, model, executor, cache, args.risk_chunk,
                            runs_out=risk_runs, verbose=args.verbose)
         clock.lap("risk")
         sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log,
@@ -316,9 +316,8 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
             from lgp.app import build_risk
 
             stages = build_risk.build_risk_tables(trials, args.build_sigmas or build_risk.BUILD_SIGMAS, args.n_sims,
-                                                   args.samples, args.seed, args.engine, executor, cache,
-                                                   fall_rule=args.fall_rule, fall_threshold=args.fall_threshold,
-                                                   approach_height=args.approach_height, noise_rule=args.noise_rule)
+                                                   args.samples, args.seed, model, executor, cache,
+                                                   approach_height=args.approach_height)
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,

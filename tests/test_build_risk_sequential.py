@@ -8,8 +8,9 @@ import pytest
 import stimuli
 from lgp.paper import BLOCK_SIZE as D
 from lgp.scene import Block, Scene
-from models.risk import risk_table
-from models.risk.build import (MEASURES, _sequential_worker, build_risk, build_risk_aggregates, measure_table)
+from models.risk import RiskModel, risk_table
+from models.risk.build import (MEASURES, BuildTask, _sequential_worker, build_risk, build_risk_aggregates,
+                               measure_table)
 from models.risk.core import wilson_interval
 
 
@@ -30,7 +31,7 @@ def test_a_block_placed_past_its_settled_supports_edge_collapses_the_build_at_th
     z[2, 1, 0] = -3.0   # 0.6 d apart, so it collapses: the settled bottom was carried forward
     z[3, 0, 0] = 3.0    # both 0.3 d to +x: aligned on the carried bottom, stands
     z[3, 1, 0] = 3.0
-    at = _sequential_worker((_two_stage_plan(), sigma, z, "mujoco", "horizontal", 0.25, "settle"))
+    at = _sequential_worker(BuildTask(tuple(_two_stage_plan()), sigma, z, RiskModel(noise_rule="settle")))
     assert at.tolist() == [0, 2, 2, 0]
 
 
@@ -76,8 +77,9 @@ def test_a_towers_sequential_risk_is_at_least_its_final_state_risk_under_settle(
     (Under "lift" it is not for 7H and 4H: docs/results.md.)"""
     trial = stimuli.load_trial(tid)
     n = 60
-    final = risk_table([trial], [0.2], n_sims=n, seed=0, noise_rule="settle", jobs=2).iloc[0]
-    seq = build_risk(trial, 0.2, n_sims=n, samples=1, seed=0, mode="sequential", noise_rule="settle", jobs=2)
+    settle = RiskModel(noise_rule="settle")
+    final = risk_table([trial], [0.2], n_sims=n, seed=0, model=settle, jobs=2).iloc[0]
+    seq = build_risk(trial, 0.2, n_sims=n, samples=1, seed=0, model=settle, mode="sequential", jobs=2)
     falls = int(seq["falls"].sum())
     low, high = wilson_interval(falls, n)
     assert final["risk"] <= high, f"{tid}: sequential {falls}/{n} [{low:.2f}, {high:.2f}] vs final {final['risk']:.2f}"

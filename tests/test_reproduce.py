@@ -305,12 +305,12 @@ def test_the_run_config_is_built_once_with_every_default_from_its_one_place():
     from lgp.app.config import QUICK, RunConfig
     from lgp.paper import N_BOOT, N_SIMS, SAMPLES, SIGMA_GRID
     from lgp.planner.design import APPROACH, SLICES_PER_PHASE, Design
-    from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
+    from models.risk.model import DEFAULT_MODEL
 
     full = reproduce.parse_args([])
     assert isinstance(full, RunConfig)
     assert (full.samples, full.n_sims, full.sigmas, full.n_boot) == (SAMPLES, N_SIMS, SIGMA_GRID, N_BOOT)
-    assert (full.fall_rule, full.fall_threshold) == (DEFAULT_FALL_RULE, FALL_THRESHOLD)
+    assert full.risk_model == DEFAULT_MODEL
     assert full.design == Design(APPROACH, SLICES_PER_PHASE) and full.planner_choice() == {}
     quick = reproduce.parse_args(["--quick", "--trials", "7h", "7H", "1E", "--sigmas", "0.05", "0.05", "0.1"])
     assert (quick.samples, quick.n_sims, quick.n_boot) == (QUICK["samples"], QUICK["n_sims"], QUICK["n_boot"])

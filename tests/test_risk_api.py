@@ -82,9 +82,9 @@ def test_risk_table_is_tidy_in_input_order_and_matches_physical_risk():
 def test_parallel_grid_gives_identical_numbers_to_serial(engine, scenes, n):
     scenes = [staircase(4), harmonic(4, 0.8)][:scenes]
     progress = []
-    serial = risk_table(scenes, [0.06, 0.1], n_sims=n, seed=9, engine=engine, jobs=1, runs=True)
+    serial = risk_table(scenes, [0.06, 0.1], n_sims=n, seed=9, model=engine, jobs=1, runs=True)
     parallel = risk_table(
-        scenes, [0.06, 0.1], n_sims=n, seed=9, engine=engine, jobs=2, runs=True, progress=lambda d, t: progress.append((d, t))
+        scenes, [0.06, 0.1], n_sims=n, seed=9, model=engine, jobs=2, runs=True, progress=lambda d, t: progress.append((d, t))
     )
     pd.testing.assert_frame_equal(serial, parallel)
     total = len(scenes) * 2 * n
@@ -109,9 +109,9 @@ def test_floating_scene_is_refused_before_simulating():
 
 def test_unknown_engine_is_refused_naming_the_known_ones():
     with pytest.raises(ValueError, match=r"unknown physics engine 'bullet'; known engines: mujoco, drake, physx"):
-        physical_risk(tower(2), 0.065, n_sims=2, engine="bullet")
+        physical_risk(tower(2), 0.065, n_sims=2, model="bullet")
     with pytest.raises(ValueError, match="known engines"):
-        risk_table([tower(2)], [0.1], n_sims=2, engine="bullet")
+        risk_table([tower(2)], [0.1], n_sims=2, model="bullet")
 
 
 def test_bad_sigma_or_n_is_refused():

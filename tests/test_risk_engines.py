@@ -6,7 +6,7 @@ import pytest
 
 from lgp.scene import BLOCK_SIZE
 from models.risk import ENGINES, UnstableSceneError, available_engines, check_stable, get_engine
-from models.risk.core import fall_threshold
+from models.risk.model import DEFAULT_MODEL
 from models.risk.noise import draw_normals, perturb_from_normals
 from models.risk.static import static_margins, static_stable
 from models.risk.structures import bridge, grid, harmonic, line, pyramid, staircase, tower, two_block
@@ -41,7 +41,7 @@ def engines(names=None, failure=None):
 
 def falls(scene, engine, early_stop=True) -> bool:
     rollout = get_engine(engine).simulate(scene, early_stop=early_stop)
-    return bool(rollout.horizontal_displacement().max() > fall_threshold(scene))
+    return bool(rollout.horizontal_displacement().max() > DEFAULT_MODEL.fall_distance(scene))
 
 
 def _falls(item) -> bool:
@@ -194,7 +194,7 @@ def test_mujoco_sleeping_does_not_change_verdicts():
     awake = MujocoEngine(sleep=False)
     for s in noisy_scenes()[:20]:
         r = awake.simulate(s)
-        assert (r.horizontal_displacement().max() > fall_threshold(s)) == falls(s, "mujoco"), s.label
+        assert (r.horizontal_displacement().max() > DEFAULT_MODEL.fall_distance(s)) == falls(s, "mujoco"), s.label
 
 
 @pytest.mark.parametrize("engine", engines())

@@ -12,13 +12,12 @@ from lgp.paper import BLOCK_SIZE
 from models.risk import (
     ENGINES,
     FALL_RULES,
-    apply_fall_rule,
+    RiskModel,
     available_engines,
     get_engine,
     physical_risk,
     risk_table,
 )
-from models.risk.core import displacement, fall_threshold
 from models.risk.noise import draw_normals, perturb_from_normals
 from models.risk.structures import grid, staircase, tower
 
@@ -36,7 +35,13 @@ def lifted_top(n=4, lift=0.006):
 
 
 def verdict(rollout, scene, rule, thr):
-    return bool(displacement(rollout, rule).max() > fall_threshold(scene, thr))
+    model = RiskModel(fall_rule=rule, fall_threshold=thr)
+    return bool(model.displacement(rollout).max() > model.fall_distance(scene))
+
+
+def stop(thr):
+    """The early-stop distance (units of d) of a model with threshold `thr`."""
+    return RiskModel(fall_threshold=thr).stop_distance
 
 
 @pytest.mark.parametrize("engine", FAITHFUL)
@@ -60,7 +65,8 @@ def test_rules_through_the_api_agree_with_the_displacements():
     scene = tower(6)
     risks = {}
     for rule, thr in RULES:
-        risk, runs = physical_risk(scene, 0.08, n_sims=12, seed=3, return_table=True, fall_rule=rule, fall_threshold=thr)
+        risk, runs = physical_risk(scene, 0.08, n_sims=12, seed=3, return_table=True,
+                                   model=RiskModel(fall_rule=rule, fall_threshold=thr))
         column = "max_displacement" if rule == "horizontal" else "max_displacement_3d"
         assert risk == pytest.approx(np.mean(runs[column] > thr * D))
         assert (runs["fall_rule"] == rule).all() and (runs["fall_threshold"] == thr).all()
@@ -72,8 +78,9 @@ def test_re_judging_runs_by_another_rule_equals_simulating_with_it():
     scenes = [tower(5), staircase(3, 0.3)]
     base = risk_table(scenes, [0.08], n_sims=10, seed=1, runs=True, jobs=1)
     for rule, thr in RULES[1:]:
-        direct = risk_table(scenes, [0.08], n_sims=10, seed=1, runs=True, jobs=1, fall_rule=rule, fall_threshold=thr)
-        again = apply_fall_rule(base, rule, thr, D)
+        model = RiskModel(fall_rule=rule, fall_threshold=thr)
+        direct = risk_table(scenes, [0.08], n_sims=10, seed=1, model=model, runs=True, jobs=1)
+        again = model.rejudge(base, D)
         assert again["fell"].tolist() == direct["fell"].tolist()
         assert (again["fall_rule"] == rule).all()
 
@@ -95,13 +102,14 @@ def test_early_termination_gives_the_full_four_second_verdict_for_every_rule(eng
     scenes = noisy_scenes()
     assert len(scenes) >= 40
     eng = get_engine(engine)
-    early = [verdict(eng.simulate(s, fall_threshold=thr), s, rule, thr) for s in scenes]
-    full = [verdict(eng.simulate(s, early_stop=False, fall_threshold=thr), s, rule, thr) for s in scenes]
+    early = [verdict(eng.simulate(s, stop_distance=stop(thr)), s, rule, thr) for s in scenes]
+    full = [verdict(eng.simulate(s, early_stop=False, stop_distance=stop(thr)), s, rule, thr) for s in scenes]
     assert 0 < sum(full) < len(full), "the check needs both verdicts"
     wrong = [k for k in range(len(scenes)) if early[k] != full[k]]
     assert not wrong, f"{engine}, {rule} {thr} d: early stop changes the verdict of scenes {wrong}: " + ", ".join(
-        f"{displacement(eng.simulate(scenes[k], fall_threshold=thr), rule).max() / D:.3f} d early vs "
-        f"{displacement(eng.simulate(scenes[k], early_stop=False, fall_threshold=thr), rule).max() / D:.3f} d full" for k in wrong)
+        f"{RiskModel(fall_rule=rule).displacement(eng.simulate(scenes[k], stop_distance=stop(thr))).max() / D:.3f} d early vs "
+        f"{RiskModel(fall_rule=rule).displacement(eng.simulate(scenes[k], early_stop=False, stop_distance=stop(thr))).max() / D:.3f} d full"
+        for k in wrong)
 
 
 @pytest.mark.parametrize("kwargs,message", [
@@ -114,7 +122,7 @@ def test_early_termination_gives_the_full_four_second_verdict_for_every_rule(eng
 ])
 def test_bad_engine_profile_or_rule_is_refused(kwargs, message):
     with pytest.raises(ValueError, match=message):
-        physical_risk(tower(2), 0.05, n_sims=2, **kwargs)
+        physical_risk(tower(2), 0.05, n_sims=2, model=RiskModel(**kwargs))
 
 
 def test_rules_are_the_documented_ones():

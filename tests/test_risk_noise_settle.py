@@ -10,7 +10,7 @@ from scipy.stats import norm
 import stimuli
 from lgp.paper import BLOCK_SIZE as D
 from lgp.scene import CONTACT_TOLERANCE
-from models.risk import draw_normals, perturb_from_normals, physical_risk
+from models.risk import RiskModel, draw_normals, perturb_from_normals, physical_risk
 from models.risk.core import wilson_interval
 from models.risk.noise import NOISE_RULES, NoiseRule
 from models.risk.structures import tower
@@ -109,7 +109,7 @@ def test_unknown_noise_rule_is_refused_naming_the_known_ones():
     with pytest.raises(ValueError, match="unknown noise rule 'drop'; known rules: lift, settle"):
         NoiseRule(tower(3), "drop")
     with pytest.raises(ValueError, match="known rules: lift, settle"):
-        physical_risk(tower(3), 0.065, n_sims=2, noise_rule="drop")
+        physical_risk(tower(3), 0.065, n_sims=2, model=RiskModel(noise_rule="drop"))
     assert NOISE_RULES == ("lift", "settle")
 
 
@@ -146,7 +146,7 @@ def test_centre_of_mass_closed_form_and_its_monte_carlo_agree():
 def test_ten_tower_risk_under_settle_at_the_papers_sigma_is_the_centre_of_mass_estimate():
     scene = stimuli.load_trial("7H").target
     assert len(scene) == 10
-    _, runs = physical_risk(scene, 0.065, n_sims=100, seed=0, noise_rule="settle", return_table=True)
+    _, runs = physical_risk(scene, 0.065, n_sims=100, seed=0, model=RiskModel(noise_rule="settle"), return_table=True)
     falls = int(runs["fell"].sum())
     low, high = wilson_interval(falls, 100)
     estimate = com_estimate(0.065)

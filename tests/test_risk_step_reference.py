@@ -7,7 +7,8 @@ import pytest
 
 import stimuli
 from lgp.geometry import quaternion_from_yaw
-from models.risk.engine import CHECK_INTERVAL, REST_SLACK, REST_SPEED, REST_WINDOW, Rollout, _smallest_width, fall_certain
+from models.risk.engine import CHECK_INTERVAL, REST_SLACK, REST_SPEED, REST_WINDOW, Rollout, smallest_width
+from models.risk.model import fall_certain
 from models.risk.mujoco_engine import MujocoEngine, mjcf
 from models.risk.noise import NoiseRule, draw_normals
 
@@ -28,7 +29,7 @@ def reference_rollout(mj, model, data, scene, p_WB, duration=4.0, fall_threshold
     qpos[:, 3:] = quaternion_from_yaw([b.yaw for b in scene.blocks])
     mj.mj_forward(model, data)
     p_start, _ = state()
-    certain = fall_certain(fall_threshold) * _smallest_width(scene)
+    certain = fall_certain(fall_threshold) * smallest_width(scene)
     t, rest_since, rest_speed = 0.0, 0.0, np.inf
     for k in range(1, int(round(duration / CHECK_INTERVAL)) + 1):
         t = min(duration, k * CHECK_INTERVAL)

@@ -14,7 +14,7 @@ from lgp.app import stages
 from lgp.app.cache import Cache
 from lgp.app.config import RunConfig
 from lgp.executor import SerialExecutor
-from models.risk import available_engines, risk_table
+from models.risk import RiskModel, available_engines, risk_table
 
 ENGINES = [e for e in ("mujoco", "physx", "physx:game-defaults") if e in available_engines()]
 
@@ -40,8 +40,8 @@ def test_risk_section_is_tidy_matches_the_api_and_is_cached(tmp_path, monkeypatc
 
     # every cell is what the risk API gives with that engine and rule, simulated directly
     for (engine, rule, thr, noise_rule), g in table.groupby(["engine", "fall_rule", "fall_threshold", "noise_rule"]):
-        direct = risk_table(trials, list(sensitivity.RISK_SIGMAS), n_sims=6, seed=2, engine=engine, jobs=1,
-                            fall_rule=rule, fall_threshold=thr, noise_rule=noise_rule)
+        model = RiskModel(engine, None, rule, thr, noise_rule)
+        direct = risk_table(trials, list(sensitivity.RISK_SIGMAS), n_sims=6, seed=2, model=model, jobs=1)
         merged = g.merge(direct, on=["trial", "sigma"], suffixes=("", "_api"))
         assert len(merged) == len(g)
         np.testing.assert_array_equal(merged["risk"], merged["risk_api"])
@@ -91,7 +91,7 @@ def test_bad_risk_options_of_reproduce_are_one_error_line(capsys, args, message)
 
 
 def test_fall_rule_is_part_of_the_risk_cache_key():
-    keys = {str(sorted(stages.risk_key_inputs(None, r, t).items())) for r, t in sensitivity.RISK_RULES}
+    keys = {str(sorted(stages.risk_key_inputs(judge).items())) for judge in sensitivity.RISK_RULES}
     assert len(keys) == len(sensitivity.RISK_RULES)
 
 

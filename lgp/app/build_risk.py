@@ -5,8 +5,6 @@ stage and a report section.
 """
 from __future__ import annotations
 
-from lgp.app.files import atomic_path
-
 import time
 from pathlib import Path
 
@@ -27,43 +25,45 @@ SEQUENTIAL_SAMPLES = 1
 EASY, HARD = "tab:red", "tab:blue"
 
 
-def build_key_inputs(engine: str | None) -> dict:
-    """What a stage table depends on besides the trial and the parameters:
-    lgp.app.stages.engine_key_inputs of models.risk.build (its code, the engine's
-    settings, the libraries and the engine's own, e.g. sapien for PhysX)."""
+def build_key_inputs(model) -> dict:
+    """What a stage table depends on besides the trial and the parameters: the
+    RiskModel `model` as the tables record it and lgp.app.stages.engine_key_inputs
+    of models.risk.build (its code, the engine's settings, the libraries and the
+    engine's own, e.g. sapien for PhysX)."""
     from lgp.app.stages import engine_key_inputs
+    from models.risk import RiskModel
 
-    return engine_key_inputs(engine, "models.risk.build")
+    model = RiskModel.of(model)
+    return {**model.record(), **engine_key_inputs(model.engine, "models.risk.build")}
 
 
-def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, engine: str | None, executor,
-                      cache: Cache, *, fall_rule: str | None = None, fall_threshold: float | None = None,
-                      approach_height: float | None = None, noise_rule: str = "lift",
+def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, model, executor, cache: Cache, *,
+                      approach_height: float | None = None,
                       sequential_samples: int = SEQUENTIAL_SAMPLES) -> pd.DataFrame:
-    """The stage table of every trial (models.risk.build_risk), one cached file per
-    trial and mode keyed by the trial file, the parameters and the code it
-    depends on: mode "stages" over `samples` layouts and mode "sequential" over
-    the first `sequential_samples` (the `sequential` aggregate)."""
+    """The stage table of every trial (models.risk.build_risk) under the RiskModel
+    `model`, one cached file per trial and mode keyed by the trial file, the
+    parameters and the code it depends on: mode "stages" over `samples` layouts
+    and mode "sequential" over the first `sequential_samples` (the `sequential`
+    aggregate). `approach_height`: the effort run's (work shares only)."""
+    from models.risk import RiskModel
     from models.risk.build import build_risk
-    from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
 
-    rule = {"fall_rule": fall_rule or DEFAULT_FALL_RULE,
-            "fall_threshold": FALL_THRESHOLD if fall_threshold is None else float(fall_threshold),
-            "approach_height": approach_height, "noise_rule": noise_rule}
-    depends = build_key_inputs(engine)
+    model = RiskModel.of(model)
+    depends = {**build_key_inputs(model), "approach_height": approach_height}
     out = []
     for k, trial in enumerate(trials, 1):
         t0 = time.perf_counter()
         hows, tables = [], []
         for mode, m in (("stages", samples), ("sequential", min(samples, sequential_samples))):
             key = input_key(trial=trial.id, digest=trial.digest, sigmas=[float(s) for s in sigmas], n_sims=n_sims,
-                            samples=m, seed=seed, mode=mode, **rule, **depends)
+                            samples=m, seed=seed, mode=mode, **depends)
             df = cache.get("buildrisk", key)
             how = "cached"
             if df is None:
                 t1 = time.perf_counter()
                 df = cache.put("buildrisk", key, build_risk(trial, list(sigmas), n_sims=n_sims, samples=m, seed=seed,
-                                                            engine=engine, executor=executor, mode=mode, **rule))
+                                                            model=model, executor=executor, mode=mode,
+                                                            approach_height=approach_height))
                 how = f"{time.perf_counter() - t1:.1f} s"
             hows.append(f"{mode} {how}")
             tables.append(df)

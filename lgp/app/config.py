@@ -18,7 +18,7 @@ from analysis.recovery import N_STUDIES
 from lgp.executor import default_jobs
 from lgp.paper import N_BOOT, N_SIMS, SAMPLES, SIGMA_GRID, SIGMA_GRIDS
 from lgp.planner.design import APPROACH, SLICES_PER_PHASE, Design
-from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
+from models.risk.model import DEFAULT_MODEL, FALL_THRESHOLD, RiskModel
 
 #: What --quick changes: a small version of the run, about a minute.
 QUICK = {"samples": 3, "n_sims": 20, "sigmas": (0.05, 0.065, 0.08, 0.1), "n_boot": 200, "n_perm": 200,
@@ -44,12 +44,12 @@ class RunConfig:
     sigmas: tuple[float, ...] = SIGMA_GRID
     engine: str | None = None
     profile: str | None = None
-    fall_rule: str = DEFAULT_FALL_RULE
+    fall_rule: str = DEFAULT_MODEL.fall_rule.value
     fall_threshold: float = FALL_THRESHOLD
     #: --sigma-grid: a named grid (lgp.paper.SIGMA_GRIDS) that sets `sigmas`; None: --sigmas or the paper's
     sigma_grid: str | None = None
     #: --noise-rule: lift (the default) or settle (models/risk/noise.py)
-    noise_rule: str = "lift"
+    noise_rule: str = DEFAULT_MODEL.noise_rule.value
     approach_height: float = APPROACH
     slices: int = SLICES_PER_PHASE
     planner: str = "paper"
@@ -99,6 +99,11 @@ class RunConfig:
     def design(self) -> Design:
         """The planner's motion design of the effort stage (checked)."""
         return Design(self.approach_height, self.slices)
+
+    @property
+    def risk_model(self) -> RiskModel:
+        """The risk model of the run (checked): engine and profile, fall rule, threshold, noise rule."""
+        return RiskModel.from_args(self)
 
     @classmethod
     def from_args(cls, args) -> "RunConfig":

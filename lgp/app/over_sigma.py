@@ -37,6 +37,7 @@ def pairs_over_sigma(effort: pd.DataFrame, risk: pd.DataFrame) -> pd.DataFrame:
     """`effort`: trial, effort (mean over layouts); `risk`: the risk table (trial,
     sigma, risk, risk_low, risk_high). One row per (pair, sigma): COLUMNS."""
     from analysis.pairs import pair_order
+    from models.risk.core import contrast_holds
 
     E = effort.set_index("trial")["effort"].astype(float)
     rows = []
@@ -49,7 +50,7 @@ def pairs_over_sigma(effort: pd.DataFrame, risk: pd.DataFrame) -> pd.DataFrame:
             re, rh = by.loc[e], by.loc[h]
             rows.append({"pair": pair, "sigma": float(sigma), "risk_E": re["risk"], "risk_E_low": re["risk_low"],
                          "risk_E_high": re["risk_high"], "risk_H": rh["risk"], "risk_H_low": rh["risk_low"],
-                         "risk_H_high": rh["risk_high"], "holds": bool(rh["risk_low"] > re["risk_high"]),
+                         "risk_H_high": rh["risk_high"], "holds": contrast_holds(re, rh),
                          "paper_risk_pair": pair in RISK_PAIRS, "effort_E": E[e], "effort_H": E[h],
                          "tied": pair_order(E[e], E[h]) == "tie" and pair_order(re["risk"], rh["risk"]) == "tie"})
             rows[-1]["full_E_lt_H_for_b2_over_b1"] = ratio_text(ratio_range(E[e], re["risk"], E[h], rh["risk"], tie=rows[-1]["tied"]))

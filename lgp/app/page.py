@@ -221,7 +221,7 @@ def key_settings(args, trials) -> dict:
     ids = [t.id for t in trials]
     shown = "the paper's 24" if sorted(ids) == sorted(TRIAL_IDS) else (", ".join(ids) if len(ids) <= 12 else f"{', '.join(ids[:10])} ...")
     sigmas = getattr(args, "sigmas", ()) or ()
-    engine = getattr(args, "engine", None) or "mujoco"
+    model = args.risk_model
     design = getattr(args, "approach_height", None)
     return {
         "trials": f"{len(ids)} ({shown})",
@@ -229,8 +229,8 @@ def key_settings(args, trials) -> dict:
         "N, noisy runs per trial and sigma": getattr(args, "n_sims", ""),
         "sigmas (units of d)": ", ".join(num(x) for x in sigmas) if len(sigmas) <= 6 else
                                f"{len(sigmas)} from {num(min(sigmas))} to {num(max(sigmas))}",
-        "risk engine": engine + (f" ({args.profile} profile)" if getattr(args, "profile", None) else ""),
-        "fall rule": f"{getattr(args, 'fall_rule', 'horizontal')} displacement > {num(getattr(args, 'fall_threshold', 0.25))} d",
+        "risk engine": model.engine + (f" ({args.profile} profile)" if args.profile else ""),
+        "fall rule": model.fall_text,
         "effort design": (f"approach leg {num(design)} m" if design else "no approach leg (clearance constraint)")
                          + f", {getattr(args, 'slices', '')} slices per phase",
         "seed": getattr(args, "seed", ""),

@@ -122,7 +122,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         "",
         f"Settings: trials {len(effort)}, M = {args.samples} layouts, N = {args.n_sims} runs per sigma, "
         f"sigmas {', '.join(f'{s:g}' for s in args.sigmas)} (x d), "
-        f"fall rule {args.fall_rule} > {args.fall_threshold:g} d, noise rule {getattr(args, 'noise_rule', 'lift')}, seed {args.seed}, "
+        f"fall rule {args.risk_model.fall_text}, noise rule {args.risk_model.noise_rule}, seed {args.seed}, "
         f"effort planned with {_design_text(args.approach_height, args.slices)}"
         + (f", planner search ({args.budget})" if args.planner == "search" else "")
         + (" (--quick: a small version; numbers are noisier than the full run)" if args.quick else "") + ".",

@@ -114,49 +114,49 @@ def engine_key_inputs(engine: str | None, model: str) -> dict:
             "engine": name, "engine_settings": get_engine(name).settings(), "libraries": library_versions(LIBRARIES + extra)}
 
 
-def risk_key_inputs(engine: str | None, fall_rule: str | None = None, fall_threshold: float | None = None,
-                    noise_rule: str | None = None) -> dict:
+def risk_key_inputs(model=None) -> dict:
     """What a risk table depends on besides the trial and the parameters:
-    engine_key_inputs of models.risk.core, the fall rule and the noise rule (None:
-    the model's defaults)."""
-    from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
-    from models.risk.noise import DEFAULT_NOISE_RULE
+    engine_key_inputs of models.risk.core and the risk model as the tables record
+    it (a models.risk.RiskModel, an engine name or None: RiskModel.of)."""
+    from models.risk import RiskModel
 
-    return {**engine_key_inputs(engine, "models.risk.core"), "fall_rule": fall_rule or DEFAULT_FALL_RULE,
-            "fall_threshold": float(FALL_THRESHOLD if fall_threshold is None else fall_threshold),
-            "noise_rule": noise_rule or DEFAULT_NOISE_RULE}
+    model = RiskModel.of(model)
+    return {**engine_key_inputs(model.engine, "models.risk.core"), **model.record()}
 
 
-#: The per-run columns a run caches (what the risk table and the required
-#: precision's bootstrap over runs are computed from).
-RUN_CACHE_COLUMNS = ["trial", "sigma", "run", "fell", "engine", "fall_rule", "fall_threshold", "noise_rule"]
+def _run_cache_columns() -> list[str]:
+    """The per-run columns a run caches: what the risk table and the required
+    precision's bootstrap over runs are computed from."""
+    from models.risk import MODEL_COLUMNS
+
+    return ["trial", "sigma", "run", "fell", *MODEL_COLUMNS]
 
 
-def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, executor, cache: Cache, chunk: int = 6,
-                fall_rule: str | None = None, fall_threshold: float | None = None, noise_rule: str | None = None,
+def risk_tables(trials, sigmas, n_sims: int, seed: int, model, executor, cache: Cache, chunk: int = 6,
                 runs_out: list | None = None, verbose: bool = True) -> pd.DataFrame:
-    """Per (trial, sigma) risk, one cached file per trial (common random numbers over sigma).
+    """Per (trial, sigma) risk of the RiskModel `model`, one cached file per trial
+    (common random numbers over sigma).
 
-    Each trial's cached file holds its runs' verdicts (RUN_CACHE_COLUMNS); the
+    Each trial's cached file holds its runs' verdicts (the run columns); the
     risk table (with its Wilson intervals) is summarised from them, and
     `runs_out`, when given, receives the per-run tables (for the required precision).
     Uncached trials are simulated a few at a time on the run's one executor, so
     the grid keeps every worker busy and an interruption loses at most one chunk.
     """
-    from models.risk import risk_table, summarise
+    from models.risk import RiskModel, risk_table, summarise
+    from models.risk.core import twins
 
-    depends = risk_key_inputs(engine, fall_rule, fall_threshold, noise_rule)
+    model = RiskModel.of(model)
+    columns = _run_cache_columns()
+    depends = risk_key_inputs(model)
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(sigmas), n_sims=n_sims, seed=seed, **depends) for t in trials}
     tables = {t.id: cache.get("riskruns", keys[t.id], rows=len(sigmas) * n_sims) for t in trials}
     todo = [t for t in trials if tables[t.id] is None]
-    # a trial whose B is identical to another's has the same runs (models.risk.core.geometry_key):
-    # simulate one of each, give the others its runs under their own id
-    from models.risk.core import geometry_key
-
-    twins: dict[str, list] = {}
-    for t in todo:
-        twins.setdefault(geometry_key(t.target), []).append(t)
-    simulate = [group[0] for group in twins.values()]
+    # a trial whose B is identical to another's has the same runs: the grid simulates
+    # one of each, so a chunk takes each distinct B with all its twins
+    first = twins([t.target for t in todo])
+    simulate = [t for k, t in enumerate(todo) if first[k] == k]
+    with_twins = {t.id: [todo[j] for j in range(len(todo)) if todo[first[j]] is t] for t in simulate}
     if todo:
         _log(f"risk: {len(simulate) * len(sigmas) * n_sims} simulations of B ({len(simulate)} trial(s) x {len(sigmas)} sigma(s) "
              f"x {n_sims} noisy runs" + (f"; {len(todo) - len(simulate)} trial(s) with an identical B reuse their runs"
@@ -165,16 +165,13 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     bar = Progress("risk", len(simulate) * len(sigmas) * n_sims, "runs", what="noisy runs of B")
     for k in range(0, len(simulate), chunk):
         group = simulate[k:k + chunk]
+        members = [same for t in group for same in with_twins[t.id]]
         t0 = time.perf_counter()
         base = bar.done
-        table = risk_table(group, sigmas=list(sigmas), n_sims=n_sims, seed=seed, engine=engine, executor=executor,
-                           fall_rule=depends["fall_rule"], fall_threshold=depends["fall_threshold"],
-                           noise_rule=depends["noise_rule"], runs=True,
-                           progress=lambda done, total: bar.advance(base + done - bar.done))[RUN_CACHE_COLUMNS]
-        for t in group:
-            runs = table[table["trial"] == t.id].reset_index(drop=True)
-            for same in twins[geometry_key(t.target)]:
-                tables[same.id] = cache.put("riskruns", keys[same.id], runs.assign(trial=same.id))
+        table = risk_table(members, sigmas=list(sigmas), n_sims=n_sims, seed=seed, model=model, executor=executor,
+                           runs=True, progress=lambda done, total: bar.advance(base + done - bar.done))[columns]
+        for same in members:
+            tables[same.id] = cache.put("riskruns", keys[same.id], table[table["trial"] == same.id].reset_index(drop=True))
         if verbose:
             _log(f"[risk] simulated {', '.join(t.id for t in group)}: {len(group) * len(sigmas) * n_sims} runs in {time.perf_counter() - t0:.1f} s")
     if todo:
@@ -191,21 +188,21 @@ def risk_tables(trials, sigmas, n_sims: int, seed: int, engine: str | None, exec
     return pd.concat(out, ignore_index=True)
 
 
-def check_targets(trials, engine: str | None, cache: Cache, fall_rule: str | None = None,
-                  fall_threshold: float | None = None) -> None:
-    """Before the long work: B of every trial must stand unperturbed (the risk
-    model's sigma = 0 run), one simulation per trial, cached like the results.
-    Raises UnstableSceneError naming every trial whose B falls and its blocks."""
-    from models.risk import UnstableSceneError, check_stable
+def check_targets(trials, model, cache: Cache) -> None:
+    """Before the long work: B of every trial must stand unperturbed under the
+    RiskModel `model` (its sigma = 0 run), one simulation per trial, cached like
+    the results. Raises UnstableSceneError naming every trial whose B falls and its blocks."""
+    from models.risk import RiskModel, UnstableSceneError, check_stable
 
-    depends = risk_key_inputs(engine, fall_rule, fall_threshold)
+    model = RiskModel.of(model)
+    depends = risk_key_inputs(model)
     problems = []
     for t in trials:
         key = input_key(trial=t.id, digest=t.digest, check="B stands unperturbed", **depends)
         df = cache.get("stable", key)
         if df is None:
             try:
-                check_stable(t.target, engine, fall_rule=depends["fall_rule"], fall_threshold=depends["fall_threshold"])
+                check_stable(t.target, model)
                 df = pd.DataFrame([{"trial": t.id, "stable": True, "problem": ""}])
             except UnstableSceneError as e:
                 df = pd.DataFrame([{"trial": t.id, "stable": False, "problem": str(e)}])

@@ -2,37 +2,41 @@
 to fall when every block is nudged by Gaussian noise and the scene is simulated
 for 4 s. See docs/risk.md for the noise rule, the fall rule and the engines.
 
-    from models.risk import SIGMA_GRID, physical_risk, risk_table
+    from models.risk import SIGMA_GRID, RiskModel, physical_risk, risk_table
     physical_risk(scene, sigma=0.065, n_sims=100, seed=0) # fraction of falls
-    physical_risk(scene, 0.065, engine="physx", fall_rule="3d", fall_threshold=0.1)
+    physical_risk(scene, 0.065, model=RiskModel("physx", fall_rule="3d"))  # another engine and fall rule
     risk_table(stimuli.load_all(), SIGMA_GRID, n_sims=100)# tidy (trial, sigma) table
 """
 from models.risk.core import (  # noqa: F401
-    DEFAULT_ENGINE,
     UnstableSceneError,
-    apply_fall_rule,
-    check_fall_rule,
     check_stable,
-    fall_threshold,
     physical_risk,
     risk_curve,
     risk_table,
-    run_grid,
+    simulate_grid,
     summarise,
 )
 from lgp.paper import N_SIMS, SIGMA_GRID  # noqa: F401  (re-exported for convenience)
 from models.risk.engine import (  # noqa: F401
-    DEFAULT_FALL_RULE,
     DURATION,
     ENGINES,
-    FALL_RULES,
-    FALL_THRESHOLD,
     PROFILES,
     EngineUnavailableError,
     Rollout,
     available_engines,
     engine_name,
     get_engine,
+)
+from models.risk.model import (  # noqa: F401
+    DEFAULT_ENGINE,
+    DEFAULT_MODEL,
+    FALL_RULES,
+    FALL_THRESHOLD,
+    MODEL_COLUMNS,
+    NOISE_RULES,
+    FallRule,
+    Noise,
+    RiskModel,
 )
 from models.risk.noise import draw_normals, perturb, perturb_from_normals  # noqa: F401
 from models.risk.static import static_stable  # noqa: F401

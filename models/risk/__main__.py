@@ -6,8 +6,8 @@
         [--sigmas 0.05 0.065 ... | --sigma-grid paper|wide]
         [--precision risk_precision.csv [--precision-levels 0.5 0.1]]
 
-Writes the tidy (trial, sigma, risk, falls, n, engine, fall_rule, fall_threshold,
-noise_rule, risk_low, risk_high) table as CSV, optionally the per-run table and
+Writes the tidy (trial, sigma, risk, falls, n, the model's columns, risk_low,
+risk_high) table as CSV, optionally the per-run table and
 the required precision sigma* per trial (models/risk/precision.py), and prints
 risk per trial and sigma.
 
@@ -27,9 +27,9 @@ import time
 
 from lgp import cli
 from lgp.paper import N_SIMS, PAPER_SIGMA, SAMPLES, SIGMA_GRID, SIGMA_GRIDS
-from models.risk.core import DEFAULT_ENGINE, _engine_name, check_fall_rule, risk_table, summarise
-from models.risk.engine import DEFAULT_FALL_RULE, ENGINES, FALL_RULES, FALL_THRESHOLD, PROFILES
-from models.risk.noise import DEFAULT_NOISE_RULE, NOISE_RULES
+from models.risk.core import risk_table, summarise
+from models.risk.engine import ENGINES, PROFILES
+from models.risk.model import DEFAULT_MODEL, FALL_RULES, FALL_THRESHOLD, NOISE_RULES, RiskModel
 from models.risk.precision import PRECISION_LEVELS
 
 
@@ -38,17 +38,17 @@ PROG = "python -m models.risk"
 
 def main(argv=None) -> int:
     p = cli.parser(PROG, description=__doc__.splitlines()[0])
-    p.add_argument("--table", type=cli.output_file, help="CSV to write: trial, sigma, risk, falls, n, engine, fall_rule, fall_threshold")
+    p.add_argument("--table", type=cli.output_file, help="CSV to write: trial, sigma, risk, falls, n, the model's columns, risk_low, risk_high")
     p.add_argument("--runs", type=cli.output_file, help="also write the per-run CSV here")
     p.add_argument("--n-sims", type=cli.bounded_count("MAX_N_SIMS"), default=N_SIMS, help="simulations per trial and sigma (default %(default)s)")
     p.add_argument("--seed", type=cli.seed, default=0)
-    p.add_argument("--engine", default=DEFAULT_ENGINE, help=f"physics engine: {', '.join(ENGINES)} (default %(default)s)")
+    p.add_argument("--engine", default=DEFAULT_MODEL.engine, help=f"physics engine: {', '.join(ENGINES)} (default %(default)s)")
     p.add_argument("--profile", help="engine profile: " + "; ".join(f"{e}: {', '.join(v)}" for e, v in PROFILES.items())
                    + " (default: faithful; game-defaults is unfaithful, docs/risk.md)")
-    p.add_argument("--fall-rule", type=cli.one_of(FALL_RULES, "fall rule"), default=DEFAULT_FALL_RULE, help=f"{' or '.join(FALL_RULES)} displacement (default %(default)s)")
+    p.add_argument("--fall-rule", type=cli.one_of(FALL_RULES, "fall rule"), default=DEFAULT_MODEL.fall_rule.value, help=f"{' or '.join(FALL_RULES)} displacement (default %(default)s)")
     p.add_argument("--fall-threshold", type=float, default=FALL_THRESHOLD, help="fall threshold in units of d (default %(default)s)")
     cli.add_jobs_argument(p, None, "worker processes (default: all cores)")
-    p.add_argument("--noise-rule", choices=NOISE_RULES, default=DEFAULT_NOISE_RULE,
+    p.add_argument("--noise-rule", choices=NOISE_RULES, default=DEFAULT_MODEL.noise_rule.value,
                    help="heights of the noisy blocks: lift (default, blocks may start above their support) or settle "
                         "(every block rests on what lies beneath it; docs/risk.md)")
     grid = p.add_mutually_exclusive_group()
@@ -70,8 +70,7 @@ def main(argv=None) -> int:
     args.jobs = cli.capped_jobs(args.jobs, p.prog, args.oversubscribe)
     args.sigmas = list(SIGMA_GRIDS[args.sigma_grid] if args.sigma_grid else args.sigmas or SIGMA_GRID)
     try:
-        args.engine = _engine_name(args.engine, args.profile)
-        check_fall_rule(args.fall_rule, args.fall_threshold)
+        args.model = RiskModel.from_args(args)
     except ValueError as e:
         p.exit(2, f"{p.prog}: error: {e}\n")
     if args.build_risk:
@@ -97,8 +96,7 @@ def main(argv=None) -> int:
             last[0] = now
             print(f"  {done}/{total} runs, {now - t0:.0f} s", file=sys.stderr, flush=True)
 
-    runs = risk_table(trials, args.sigmas, args.n_sims, args.seed, args.engine, args.jobs, progress, runs=True,
-                      fall_rule=args.fall_rule, fall_threshold=args.fall_threshold, noise_rule=args.noise_rule)
+    runs = risk_table(trials, args.sigmas, args.n_sims, args.seed, args.model, args.jobs, progress, runs=True)
     table = summarise(runs)
     order = {t.id: k for k, t in enumerate(trials)}
     table = table.sort_values(["trial", "sigma"], key=lambda c: c.map(order) if c.name == "trial" else c).reset_index(drop=True)
@@ -114,8 +112,9 @@ def main(argv=None) -> int:
             print(f"sigma* (risk reaches {level:g}): " + ", ".join(f"{r['trial']} {precision_text(r)}" for _, r in g.iterrows()))
     wide = table.pivot(index="trial", columns="sigma", values="risk").reindex([t.id for t in trials])
     print(wide.to_string(float_format=lambda x: f"{x:.2f}"))
-    label = args.engine if ENGINES[args.engine].faithful else f"{args.engine} (UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md)"
-    print(f"{len(runs)} runs with {label}, {args.fall_rule} fall rule at {args.fall_threshold:g} d, {args.noise_rule} noise rule, "
+    engine = args.model.engine
+    label = engine if ENGINES[engine].faithful else f"{engine} (UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md)"
+    print(f"{len(runs)} runs with {label}, {args.model.describe()}, "
           f"in {time.perf_counter() - t0:.1f} s -> {args.table}", file=sys.stderr)
     return 0
 
@@ -134,8 +133,7 @@ def _build_risk(args) -> int:
         trial = stimuli.load_trial(tid)
         t1 = time.perf_counter()
         stages = build_risk(trial, sigmas, n_sims=args.n_sims, samples=args.samples, seed=args.seed,
-                            engine=args.engine, jobs=args.jobs, fall_rule=args.fall_rule,
-                            fall_threshold=args.fall_threshold, mode=args.mode, noise_rule=args.noise_rule)
+                            model=args.model, jobs=args.jobs, mode=args.mode)
         tables.append(stages)
         curve = stage_curve(stages)
         for sigma, c in curve.groupby("sigma", sort=False):

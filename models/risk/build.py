@@ -81,12 +81,12 @@ import numpy as np
 import pandas as pd
 
 from lgp.errors import InputError
-from lgp.executor import default_jobs
 from lgp.paper import N_SIMS, SAMPLES
 from lgp.scene import Scene, support_graph, supported_by
-from models.risk.core import UnstableSceneError, _engine_name, check_fall_rule, check_stable, map_runs
-from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD, _smallest_width, get_engine
-from models.risk.noise import DEFAULT_NOISE_RULE, NoiseRule, check_noise_rule, draw_normals
+from models.risk.core import UnstableSceneError, check_stable, chunk_size, map_tasks, resolve_jobs, simulate_grid
+from models.risk.engine import get_engine
+from models.risk.model import RiskModel, check_n_sims, check_sigma
+from models.risk.noise import NoiseRule, draw_normals
 
 #: The stage table, one row per (trial, sample, sigma, stage).
 STAGE_COLUMNS = ["trial", "sample", "sigma", "stage", "action_index", "blocks_in_structure",
@@ -198,16 +198,14 @@ def _stage_key(scene: Scene, sources) -> str:
 
 
 def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed: int = 0,
-               engine: str | None = None, jobs: int | None = 1, executor=None,
-               progress: Callable[[int, int], None] | None = None, *, profile: str | None = None,
-               fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD,
-               approach_height: float | None = None, mode: str = "stages",
-               noise_rule: str = DEFAULT_NOISE_RULE) -> pd.DataFrame:
+               model: RiskModel | str | None = None, jobs: int | None = 1, executor=None,
+               progress: Callable[[int, int], None] | None = None, *, approach_height: float | None = None,
+               mode: str = "stages") -> pd.DataFrame:
     """Risk of every stage of the plans of `samples` layouts of `trial`.
 
     `mode`: "stages" (default: each stage simulated on its own from B's poses)
     or "sequential" (one noisy build carried through the stages, module
-    docstring); `noise_rule` that of `physical_risk`.
+    docstring). `model`: the RiskModel of `physical_risk` (engine, rules).
 
     `trial` is a stimuli.Trial or its id; `sigma` one noise level or several
     (fractions of d; common random numbers across them and across stages).
@@ -215,8 +213,7 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
     sigma, stage), `stage` 1..K, `action_index` the 1-based index of the Place in
     the plan, `blocks_in_structure` the blocks at their B pose, `blocks_simulated`
     those plus the stack blocks not yet moved, `work_share` the effort-proxy
-    share w_k. `engine`, `profile`, `fall_rule` and `fall_threshold` are those of
-    `physical_risk`; `approach_height` that of the effort run (work shares only).
+    share w_k. `approach_height` is that of the effort run (work shares only).
     Raises BuildStageError naming trial, sample and stage when a stage
     falls without noise.
     """
@@ -224,19 +221,16 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
         import stimuli
 
         trial = stimuli.load_trial(trial)
-    sigmas = [float(s) for s in np.atleast_1d(sigma)]
-    if n_sims < 1:
-        raise InputError(f"trial {trial.id}: need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
+    try:
+        sigmas = [check_sigma(s) for s in np.atleast_1d(sigma)]
+        n_sims = check_n_sims(n_sims)
+    except InputError as e:
+        raise InputError(f"trial {trial.id}: {e}") from None
     if samples < 1:
         raise InputError(f"trial {trial.id}: need samples >= 1 layouts, got {samples}")
-    for s in sigmas:
-        if not s >= 0:
-            raise InputError(f"trial {trial.id}: sigma must be >= 0 (a fraction of the block size), got {s}")
     if mode not in MODES:
         raise InputError(f"trial {trial.id}: unknown build-risk mode {mode!r}; known modes: {', '.join(MODES)}")
-    noise_rule = check_noise_rule(noise_rule)
-    name = _engine_name(engine, profile)
-    fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
+    model = RiskModel.of(model)
     drawn = range(samples) if trial.initial.is_random else [0]
     plans = {s: plan_stages(trial, seed, s, approach_height) for s in drawn}
     unique: dict[str, Stage] = {}
@@ -261,40 +255,31 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
     for key in keys:
         st = unique[key]
         try:
-            check_stable(st.scene, name, fall_rule=fall_rule, fall_threshold=fall_threshold)
+            check_stable(st.scene, model)
         except UnstableSceneError as e:
             raise BuildStageError(f"trial {trial.id} sample {st.sample} stage {st.stage} "
                                   f"(after action {st.action_index}): {e}") from None
-    jobs = (executor.jobs if executor is not None else default_jobs()) if jobs is None else max(1, int(jobs))
     if mode == "sequential":
-        return _sequential(trial, plans, sigmas, z_B, a_index, n_sims, samples, name, fall_rule, fall_threshold,
-                           noise_rule, executor, jobs, progress)
-    total = len(keys) * len(sigmas) * n_sims
-    chunk = max(1, min(n_sims, -(-total // (8 * jobs)))) if total else 1
-    tasks, args = [], []
+        return _sequential(trial, plans, sigmas, z_B, a_index, n_sims, samples, model, executor, jobs, progress)
+    normals = []
     for key in keys:
         st = unique[key]
-        j = [target.names.index(b) for b in st.structure]
-        z = z_B[:, j]
+        z = z_B[:, [target.names.index(b) for b in st.structure]]
         if st.stack:
             z = np.concatenate([z, z_A[:, [a_index[a] for a in st.stack]]], axis=1)
-        for s in sigmas:
-            for a in range(0, n_sims, chunk):
-                tasks.append((key, s))
-                args.append((st.scene, s, z[a:min(a + chunk, n_sims)], a, name, fall_rule, fall_threshold, noise_rule))
-    results = map_runs(args, total, executor, jobs, progress)
-    falls: dict[tuple[str, float], int] = {}
-    for (key, s), res in zip(tasks, results):
-        falls[key, s] = falls.get((key, s), 0) + sum(bool(r["fell"]) for r in res)
+        normals.append(z)
+    runs = simulate_grid([unique[key].scene for key in keys], sigmas, n_sims, seed, model, executor, jobs=jobs,
+                         progress=progress, ids=keys, normals=normals)
+    falls = runs.groupby(["trial", "sigma"], sort=False)["fell"].sum()
     rows = []
     for sample in range(samples):
         stages = plans[sample if trial.initial.is_random else 0]
         for s in sigmas:
             for st in stages:
-                f = falls[st.key, s]
+                f = int(falls[st.key, s])
                 rows.append((trial.id, sample, s, st.stage, st.action_index, len(st.structure),
-                             len(st.structure) + len(st.stack), f / n_sims, f, n_sims, st.work_share, name,
-                             "stages", n_sims, noise_rule))
+                             len(st.structure) + len(st.stack), f / n_sims, f, n_sims, st.work_share, model.engine,
+                             "stages", n_sims, model.noise_rule.value))
     return pd.DataFrame(rows, columns=STAGE_COLUMNS)
 
 
@@ -304,8 +289,20 @@ def _sources(st: Stage, target: Scene, a_index: dict[str, int]) -> list[tuple[st
     return [("B", target.names.index(b)) for b in st.structure] + [("A", a_index[a]) for a in st.stack]
 
 
-def _sequential(trial, plans, sigmas, z_B, a_index, n_sims, samples, engine, fall_rule, fall_threshold, noise_rule,
-                executor, jobs, progress) -> pd.DataFrame:
+@dataclass(frozen=True)
+class BuildTask:
+    """A chunk of runs of one sequential build: the plan as (stage scene, block
+    sources, index of the block the Place put or None) per stage, the noise
+    level, the normals of B's blocks (runs, blocks of B, 3) and the model."""
+
+    plan: tuple
+    sigma: float
+    z_B: np.ndarray
+    model: RiskModel
+
+
+def _sequential(trial, plans, sigmas, z_B, a_index, n_sims, samples, model: RiskModel, executor, jobs,
+                progress) -> pd.DataFrame:
     """mode="sequential" of `build_risk` (module docstring): one task per distinct
     plan (its sequence of stage scenes), sigma and chunk of runs."""
     target = trial.target
@@ -316,32 +313,21 @@ def _sequential(trial, plans, sigmas, z_B, a_index, n_sims, samples, engine, fal
         sequences.setdefault(key, stages)
         of_sample[sample] = key
     keys = list(sequences)
+    jobs = resolve_jobs(executor, jobs)
     total = len(keys) * len(sigmas) * n_sims
-    chunk = max(1, min(n_sims, -(-total // (8 * jobs)))) if total else 1
+    chunk = chunk_size(total, n_sims, jobs)
     tasks, args = [], []
     for key in keys:
-        stages = sequences[key]
         plan = []
-        for st in stages:
+        for st in sequences[key]:
             sources = _sources(st, target, a_index)
             placed = ("B", target.names.index(st.placed))
             plan.append((st.scene, sources, sources.index(placed) if placed in sources else None))
         for s in sigmas:
             for a in range(0, n_sims, chunk):
-                b = min(a + chunk, n_sims)
                 tasks.append((key, s))
-                args.append((plan, s, z_B[a:b], engine, fall_rule, fall_threshold, noise_rule))
-    done = [0]
-
-    def arrived(k, res):
-        done[0] += res.shape[0]
-        if progress:
-            progress(done[0], total)
-
-    from lgp.executor import borrowed
-
-    with borrowed(executor, 1 if len(args) <= 1 else min(jobs, len(args))) as ex:
-        results = ex.map(_sequential_worker, args, arrived)
+                args.append(BuildTask(tuple(plan), s, z_B[a:a + chunk], model))
+    results = map_tasks(_sequential_worker, args, total, executor, jobs, progress, size=lambda res: res.shape[0])
     collapsed: dict[tuple, list[np.ndarray]] = {}
     for task, res in zip(tasks, results):
         collapsed.setdefault(task, []).append(res)
@@ -355,21 +341,21 @@ def _sequential(trial, plans, sigmas, z_B, a_index, n_sims, samples, engine, fal
             for st in stages:
                 f = int((at == st.stage).sum())
                 rows.append((trial.id, sample, s, st.stage, st.action_index, len(st.structure),
-                             len(st.structure) + len(st.stack), f / n_sims, f, n_sims, st.work_share, engine,
-                             "sequential", reached, noise_rule))
+                             len(st.structure) + len(st.stack), f / n_sims, f, n_sims, st.work_share, model.engine,
+                             "sequential", reached, model.noise_rule.value))
                 reached -= f
     return pd.DataFrame(rows, columns=STAGE_COLUMNS)
 
 
-def _sequential_worker(args) -> np.ndarray:
+def _sequential_worker(task: BuildTask) -> np.ndarray:
     """Runs of one sequential build: for each run (rows of z_B), the stage at which
     it collapsed (1-based), 0 when it stood to the end."""
-    plan, sigma, z_B, engine, fall_rule, fall_threshold, noise_rule = args
-    eng = get_engine(engine)
+    model, z_B = task.model, task.z_B
+    eng = get_engine(model.engine)
     runs = len(z_B)
     at = np.zeros(runs, dtype=int)
     settled: dict[tuple[str, int], np.ndarray] = {}  # source -> (runs, 3) centres after the last stage
-    for k, (scene, sources, placed) in enumerate(plan, start=1):
+    for k, (scene, sources, placed) in enumerate(task.plan, start=1):
         n = len(scene)
         start = np.broadcast_to(scene.positions, (runs, n, 3)).copy()
         for q, src in enumerate(sources):
@@ -380,19 +366,17 @@ def _sequential_worker(args) -> np.ndarray:
         if placed is not None:  # the block this Place put: fresh placement noise
             movable[placed] = True
             z[:, placed] = z_B[:, sources[placed][1]]
-        p_WB = NoiseRule(scene, noise_rule, movable).positions(sigma, z, start) if movable.any() else start
-        threshold = fall_threshold * _smallest_width(scene)
+        p_WB = NoiseRule(scene, model.noise_rule, movable).positions(task.sigma, z, start) if movable.any() else start
+        threshold = model.fall_distance(scene)
         for r in np.flatnonzero(at == 0):
-            rollout = eng.simulate(scene, fall_threshold=fall_threshold, p_WB=p_WB[r])
-            moved = rollout.horizontal_displacement() if fall_rule == "horizontal" else rollout.displacement_3d()
+            rollout = eng.simulate(scene, stop_distance=model.stop_distance, p_WB=p_WB[r])
+            moved = model.displacement(rollout)
             if len(moved) and moved.max() > threshold:
                 at[r] = k
             else:
                 for q, src in enumerate(sources):
                     settled.setdefault(src, np.zeros((runs, 3)))[r] = rollout.p_WB_final[q]
     return at
-
-
 
 
 def aggregate_plan(risks: Sequence[float], shares: Sequence[float]) -> dict[str, float]:
@@ -462,9 +446,9 @@ def stage_curve(stages: pd.DataFrame, sigma: float | None = None) -> pd.DataFram
 
 
 def build_risk_table(trials: Iterable, sigmas, n_sims: int = N_SIMS, samples: int = SAMPLES, seed: int = 0,
-                     engine: str | None = None, jobs: int | None = 1, executor=None) -> pd.DataFrame:
+                     model: RiskModel | str | None = None, jobs: int | None = 1, executor=None) -> pd.DataFrame:
     """`build_risk` of several trials, concatenated in input order."""
-    return pd.concat([build_risk(t, sigmas, n_sims, samples, seed, engine, jobs, executor) for t in trials],
+    return pd.concat([build_risk(t, sigmas, n_sims, samples, seed, model, jobs, executor) for t in trials],
                      ignore_index=True)
 
 

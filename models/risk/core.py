@@ -4,18 +4,19 @@ of N noisy copies of B that fall when simulated for 4 s.
 Run r of a scene perturbs B with the standard normals z[r] (drawn once from the
 seed, shape (n_blocks, 3)) scaled by sigma, so every sigma value sees the same
 random numbers (common random numbers) and a risk curve over sigma is smooth. A
-scene's numbers depend only on (scene, sigma, n_sims, seed, engine, fall rule),
-never on the other scenes of a table, on the order of runs, or on the number of
+scene's numbers depend only on (scene, sigma, n_sims, seed, RiskModel), never
+on the other scenes of a table, on the order of runs, or on the number of
 worker processes.
 
-The fall rule (docs/risk.md, "Fall rule"): a run falls when some block's centre
-ends more than `fall_threshold` * d from where it started, measured in the
-horizontal plane (`fall_rule="horizontal"`, the default) or in 3-D (`"3d"`, the
-paper's wording). A block lifted by the noise drops back onto its support: that
+The fall rule (docs/risk.md, "Fall rule"; models.risk.model.RiskModel): a run
+falls when some block's centre ends more than the fall threshold (units of d)
+from where it started, measured in the horizontal plane (FallRule.HORIZONTAL,
+the default) or in 3-D (FallRule.THREE_D, the paper's wording). A block lifted by the noise drops back onto its support: that
 drop counts under "3d" when it exceeds the threshold, never under "horizontal".
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from typing import Callable, Iterable, Sequence
 
@@ -27,27 +28,25 @@ from lgp.executor import borrowed, default_jobs
 from lgp.geometry import digest
 from lgp.paper import N_SIMS, SIGMA_GRID
 from lgp.scene import Scene
-from models.risk.engine import (
-    DEFAULT_FALL_RULE,
-    FALL_RULES,
-    FALL_THRESHOLD,
-    Rollout,
-    _smallest_width,
-    engine_name,
-    fall_certain,
-    get_engine,
+from models.risk.engine import Rollout, get_engine
+from models.risk.model import (
+    DEFAULT_ENGINE,
+    DEFAULT_MODEL,
+    MODEL_COLUMNS,
+    RiskModel,
+    check_n_sims,
+    check_seed,
+    check_sigma,
 )
-from models.risk.noise import DEFAULT_NOISE_RULE, NoiseRule, check_noise_rule, draw_normals
+from models.risk.noise import NoiseRule, draw_normals
 
-#: The engine used when none is named: the one that passes the faithfulness suite
-#: with the better throughput (docs/risk.md).
-DEFAULT_ENGINE = "mujoco"
+__all__ = ["DEFAULT_ENGINE", "RUN_COLUMNS", "RISK_COLUMNS", "UnstableSceneError", "check_stable",
+           "geometry_key", "twins", "chunk_size", "SimTask", "simulate_runs", "map_tasks", "simulate_grid",
+           "wilson_interval", "summarise", "physical_risk", "risk_curve", "risk_table"]
 
-RUN_COLUMNS = ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", "engine",
-               "fall_rule", "fall_threshold", "noise_rule"]
+RUN_COLUMNS = ["trial", "sigma", "run", "fell", "max_displacement", "max_displacement_3d", "sim_time", *MODEL_COLUMNS]
 #: risk_low, risk_high: the 95% Wilson score interval of risk = falls / n (Monte Carlo error).
-RISK_COLUMNS = ["trial", "sigma", "risk", "falls", "n", "engine", "fall_rule", "fall_threshold", "noise_rule",
-                "risk_low", "risk_high"]
+RISK_COLUMNS = ["trial", "sigma", "risk", "falls", "n", *MODEL_COLUMNS, "risk_low", "risk_high"]
 #: Two-sided 95% normal quantile of the Wilson intervals.
 WILSON_Z = 1.959963984540054
 
@@ -59,91 +58,15 @@ class UnstableSceneError(ValueError):
 # ----------------------------------------------------------------------------- single runs
 
 
-def _engine_name(engine: str | None, profile: str | None = None) -> str:
-    """The registry name of an engine (None: DEFAULT_ENGINE) with its profile."""
-    return engine_name(DEFAULT_ENGINE if engine is None else engine, profile)
-
-
-def check_fall_rule(fall_rule: str, fall_threshold: float) -> tuple[str, float]:
-    """(rule, threshold) checked: ValueError for an unknown rule or a threshold <= 0."""
-    if fall_rule not in FALL_RULES:
-        raise InputError(f"unknown fall rule {fall_rule!r}; known rules: {', '.join(FALL_RULES)}")
-    try:
-        threshold = float(fall_threshold)
-    except (TypeError, ValueError):
-        raise InputError(f"fall threshold must be a number (units of the block size d), got {fall_threshold!r}") from None
-    if not threshold > 0 or not np.isfinite(threshold):
-        raise InputError(f"fall threshold must be > 0 (units of the block size d), got {fall_threshold!r}")
-    return fall_rule, threshold
-
-
-def check_sigma(sigma) -> float:
-    """A noise SD in units of the block size d: a finite number in [0, 1] (0: the
-    unperturbed scene; the command lines take (0, 1]). Beyond 1 d the noise moves
-    blocks by more than their size and the perturbed positions overflow long
-    before sigma = 1e308; inf and nan are no noise level."""
-    if isinstance(sigma, bool) or not isinstance(sigma, (int, float, np.integer, np.floating)):
-        raise InputError(f"sigma must be a number in [0, 1] (units of the block size d), got {sigma!r}")
-    value = float(sigma)
-    if not (np.isfinite(value) and 0 <= value <= 1):
-        raise InputError(f"sigma must be a finite number in [0, 1] (units of the block size d), got {sigma!r}")
-    return value
-
-
-def check_n_sims(n_sims) -> int:
-    """A count of runs: a whole number >= 1 (not 2.5, not the text '4', not True)."""
-    if isinstance(n_sims, bool) or not isinstance(n_sims, (int, np.integer)):
-        raise InputError(f"n_sims must be a whole number >= 1 (runs per sigma; risk is falls / n_sims), got {n_sims!r}")
-    if n_sims < 1:
-        raise InputError(f"need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
-    return int(n_sims)
-
-
-def check_seed(seed) -> None:
-    """A seed: a whole number >= 0 or a numpy Generator. None is refused: numpy
-    would seed from the operating system, and the same call would give other
-    numbers every time (the project promises same seed, same numbers)."""
-    if isinstance(seed, np.random.Generator):
-        return
-    if seed is None:
-        raise InputError("seed=None would draw irreproducible numbers (numpy seeds from the operating system); "
-                         "give a whole number >= 0 or a numpy.random.Generator")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise InputError(f"seed must be a whole number >= 0 or a numpy.random.Generator, got {seed!r}")
-
-
-def fall_threshold(scene: Scene, fall_threshold: float = FALL_THRESHOLD) -> float:
-    """Distance (m) a block centre must move for a run to count as a fall
-    (`fall_threshold` in units of the block size d)."""
-    return fall_threshold * _smallest_width(scene)
-
-
-def displacement(rollout: Rollout, fall_rule: str = DEFAULT_FALL_RULE) -> np.ndarray:
-    """Per-block distance (m) between final and start centre, measured by the rule."""
-    return rollout.horizontal_displacement() if fall_rule == "horizontal" else rollout.displacement_3d()
-
-
-def _row(rollout: Rollout, threshold: float, fall_rule: str) -> dict:
+def _row(rollout: Rollout, threshold: float, model: RiskModel) -> dict:
     h = rollout.horizontal_displacement()
-    moved = displacement(rollout, fall_rule)
+    moved = model.displacement(rollout)
     return {
         "fell": bool(moved.max() > threshold) if len(h) else False,
         "max_displacement": float(h.max()) if len(h) else 0.0,
         "max_displacement_3d": float(rollout.displacement_3d().max()) if len(h) else 0.0,
         "sim_time": float(rollout.sim_time),
     }
-
-
-def apply_fall_rule(runs: pd.DataFrame, fall_rule: str, fall_threshold: float, d: float) -> pd.DataFrame:
-    """The per-run table with `fell` decided again by another rule from its
-    displacement columns (`d`: the block size, m). Exact when the runs were
-    simulated with a threshold whose early-stop distance (engine.fall_certain)
-    equals the new one's, e.g. any two thresholds <= 0.5 d."""
-    fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
-    if "fall_threshold" in runs and (runs["fall_threshold"].map(fall_certain) != fall_certain(fall_threshold)).any():
-        raise InputError(f"runs simulated with early stops for another fall threshold cannot be re-judged at {fall_threshold:g} d")
-    column = "max_displacement" if fall_rule == "horizontal" else "max_displacement_3d"
-    return runs.assign(fell=runs[column] > fall_threshold * d, fall_rule=fall_rule, fall_threshold=fall_threshold)
 
 
 _STABLE: dict[tuple, Rollout] = {}
@@ -156,136 +79,151 @@ def _scene_key(scene: Scene) -> str:
 
 
 def geometry_key(scene: Scene) -> str:
-    """What a scene's noisy runs depend on besides sigma, n, seed, engine and rules:
+    """What a scene's noisy runs depend on besides sigma, normals and the model:
     every block's pose and size in order and the fixed boxes -- not the label or
-    the block names. Two trials with the same key (the identical 6-towers of 1H,
-    9E, 9H, 11E, 11H, for example) have the same runs to the bit, so a grid
-    simulates one of them (run_grid, lgp.app.stages.risk_tables)."""
+    the block names. The identical 6-towers of 1H, 9E, 9H, 11E, 11H share a key."""
     return digest(*(part for b in scene.blocks for part in (b.p_WB, b.size, np.float64(b.yaw))),
                   *(part for f in scene.fixed for part in (f.p_WO, f.size)))
 
 
-def check_stable(scene: Scene, engine: str | None = None, *, profile: str | None = None,
-                 fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD) -> Rollout:
+def check_stable(scene: Scene, model: RiskModel | str | None = None) -> Rollout:
     """Simulate the unperturbed scene once (cached per scene, engine and early-stop
     distance) and raise UnstableSceneError, naming the scene and the blocks that
-    moved, if it falls by the fall rule."""
-    name = _engine_name(engine, profile)
-    fall_rule, thr = check_fall_rule(fall_rule, fall_threshold)
-    key = (_scene_key(scene), name, fall_certain(thr))
+    moved, if it falls by the model's fall rule. `model`: a RiskModel, an engine
+    name (its default rules) or None (the default model)."""
+    model = RiskModel.of(model)
+    key = (_scene_key(scene), model.engine, model.stop_distance)
     if key not in _STABLE:
         scene.validate()
-        _STABLE[key] = get_engine(name).simulate(scene, fall_threshold=thr)
+        _STABLE[key] = get_engine(model.engine).simulate(scene, stop_distance=model.stop_distance)
     rollout = _STABLE[key]
-    threshold = thr * _smallest_width(scene)
-    moved = displacement(rollout, fall_rule)
+    threshold = model.fall_distance(scene)
+    moved = model.displacement(rollout)
     if len(moved) and moved.max() > threshold:
         names = [f"{scene.blocks[i].name} moved {moved[i] * 1000:.1f} mm" for i in np.argsort(-moved) if moved[i] > threshold]
         raise UnstableSceneError(
             f"{scene.label}: unstable before any noise (sigma = 0): block {', block '.join(names)} in {rollout.sim_time:.2f} s "
-            f"of {name} simulation (a fall is a {fall_rule} move of more than {threshold * 1000:.1f} mm)"
+            f"of {model.engine} simulation (a fall is a {model.fall_rule} move of more than {threshold * 1000:.1f} mm)"
         )
     return rollout
 
 
-def _simulate_runs(scene: Scene, sigma: float, z: np.ndarray, runs: Sequence[int], engine: str,
-                   fall_rule: str = DEFAULT_FALL_RULE, fall_threshold: float = FALL_THRESHOLD,
-                   noise_rule: str = DEFAULT_NOISE_RULE) -> list[dict]:
-    """Perturb and simulate runs `runs` of the scene (z: their normals, len(runs) x n x 3)."""
-    eng = get_engine(engine)
-    threshold = fall_threshold * _smallest_width(scene)
-    p_WB = NoiseRule(scene, noise_rule).positions(sigma, np.asarray(z, float).reshape(len(runs), len(scene), 3))
+@dataclass(frozen=True)
+class SimTask:
+    """A chunk of noisy runs of one scene: runs start .. start + len(z) at noise
+    level `sigma`, with their standard normals `z` (runs, blocks, 3)."""
+
+    scene: Scene
+    sigma: float
+    z: np.ndarray
+    start: int
+    model: RiskModel
+
+
+def simulate_runs(task: SimTask) -> list[dict]:
+    """Perturb and simulate the runs of `task` (a worker's unit): one row each."""
+    model, scene = task.model, task.scene
+    eng = get_engine(model.engine)
+    threshold = model.fall_distance(scene)
+    record = model.record()
+    p_WB = NoiseRule(scene, model.noise_rule).positions(task.sigma, task.z)
     rows = []
-    for r, p_r in zip(runs, p_WB):
-        rollout = eng.simulate(scene, fall_threshold=fall_threshold, p_WB=p_r)
-        rows.append({"sigma": sigma, "run": int(r), **_row(rollout, threshold, fall_rule), "engine": engine,
-                     "fall_rule": fall_rule, "fall_threshold": fall_threshold, "noise_rule": noise_rule})
+    for r, p_r in enumerate(p_WB, start=task.start):
+        rollout = eng.simulate(scene, stop_distance=model.stop_distance, p_WB=p_r)
+        rows.append({"sigma": task.sigma, "run": r, **_row(rollout, threshold, model), **record})
     return rows
 
 
 # ----------------------------------------------------------------------------- grids
 
 
-@dataclass(frozen=True)
-class _Task:
-    scene_index: int
-    sigma: float
-    start: int
-    stop: int
+def twins(scenes: Sequence[Scene], normals: Sequence[np.ndarray] | None = None) -> list[int]:
+    """For each scene, the index of the first scene with the same geometry
+    (geometry_key) and, when `normals` are given per scene, the same normals:
+    such scenes have the same runs to the bit, so a grid simulates one of them."""
+    first: dict[str, int] = {}
+    out = []
+    for i, scene in enumerate(scenes):
+        key = geometry_key(scene)
+        if normals is not None:
+            key += hashlib.sha1(np.ascontiguousarray(normals[i], dtype=float).tobytes()).hexdigest()
+        out.append(first.setdefault(key, i))
+    return out
 
 
-def _task_worker(args):
-    """args: (scene, sigma, z, start, engine[, fall_rule, fall_threshold[, noise_rule]])."""
-    scene, sigma, z, start, engine, *rule = args
-    return _simulate_runs(scene, sigma, z, range(start, start + len(z)), engine, *rule)
+def chunk_size(total: int, n_sims: int, jobs: int) -> int:
+    """Runs per task: small enough to balance the load over `jobs` workers (about
+    8 tasks each), large enough to amortise the engine's model build."""
+    return max(1, min(n_sims, -(-total // (8 * jobs)))) if total else 1
 
 
-def map_runs(args: list, total: int, executor, jobs: int, progress: Callable[[int, int], None] | None) -> list:
-    """Simulate chunks of runs (`_task_worker` arguments) on `executor` (or a pool
-    of `jobs`), results in input order; `progress(done, total)` counts runs."""
+def resolve_jobs(executor, jobs: int | None) -> int:
+    """Worker count of a grid: `jobs`, else the executor's, else every core."""
+    return (executor.jobs if executor is not None else default_jobs()) if jobs is None else max(1, int(jobs))
+
+
+def map_tasks(worker, tasks: list, total: int, executor, jobs: int, progress: Callable[[int, int], None] | None,
+              size=len) -> list:
+    """`worker` over `tasks` on `executor` (or a pool of `jobs`), results in input
+    order; `progress(done, total)` counts runs (`size(result)` each)."""
     done = 0
 
     def arrived(k, res):
         nonlocal done
-        done += len(res)
+        done += size(res)
         if progress:
             progress(done, total)
 
-    with borrowed(executor, 1 if len(args) <= 1 else min(jobs, len(args))) as ex:
-        return ex.map(_task_worker, args, arrived)
+    with borrowed(executor, 1 if len(tasks) <= 1 else min(jobs, len(tasks))) as ex:
+        return ex.map(worker, tasks, arrived)
 
 
-def run_grid(
+def simulate_grid(
     scenes: Sequence[Scene],
     sigmas: Iterable[float],
     n_sims: int = N_SIMS,
     seed: int = 0,
-    engine: str | None = None,
-    jobs: int | None = None,
-    progress: Callable[[int, int], None] | None = None,
-    trial_ids: Sequence[str] | None = None,
+    model: RiskModel = DEFAULT_MODEL,
     executor=None,
     *,
-    profile: str | None = None,
-    fall_rule: str = DEFAULT_FALL_RULE,
-    fall_threshold: float = FALL_THRESHOLD,
-    noise_rule: str = DEFAULT_NOISE_RULE,
+    jobs: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    ids: Sequence[str] | None = None,
+    normals: Sequence[np.ndarray] | None = None,
 ) -> pd.DataFrame:
     """Every (scene, sigma, run): a tidy table with columns RUN_COLUMNS, in the
-    order of `scenes`, then `sigmas`, then runs.
+    order of `scenes`, then `sigmas`, then runs; `trial` from `ids` (default:
+    the scenes' labels).
 
-    Each scene is checked for stability first (UnstableSceneError). The grid is
-    spread over `jobs` processes (None: all cores; 1: in this process), with
-    numbers identical to a serial run. `progress(done, total)` is called as runs
-    finish.
+    Common random numbers: run r of a scene uses the normals z[r] at every
+    sigma, ``draw_normals(n_sims, len(scene), seed)`` unless `normals` gives
+    them per scene (arrays (n_sims, blocks, 3)). A scene with the geometry and
+    normals of an earlier one (`twins`) is simulated once. Each scene is
+    checked for stability first (UnstableSceneError). The grid is spread over
+    `jobs` processes (None: the executor's or all cores; 1: in this process),
+    numbers identical to a serial run. `progress(done, total)` counts runs.
     """
-    name = _engine_name(engine, profile)
-    fall_rule, fall_threshold = check_fall_rule(fall_rule, fall_threshold)
-    noise_rule = check_noise_rule(noise_rule)
+    model = RiskModel.of(model)
     sigmas = [check_sigma(s) for s in sigmas]
     n_sims = check_n_sims(n_sims)
     check_seed(seed)
-    ids = list(trial_ids) if trial_ids is not None else [s.label for s in scenes]
+    ids = list(ids) if ids is not None else [s.label for s in scenes]
     for scene in scenes:
-        check_stable(scene, name, fall_rule=fall_rule, fall_threshold=fall_threshold)
-    # a scene identical to an earlier one (geometry_key) has the same runs: simulated once
-    first: dict[str, int] = {}
-    twin = [first.setdefault(geometry_key(scene), i) for i, scene in enumerate(scenes)]
+        check_stable(scene, model)
+    twin = twins(scenes, normals)
     unique = [i for i in range(len(scenes)) if twin[i] == i]
-    normals = {i: draw_normals(n_sims, len(scenes[i]), seed) for i in unique}
-    jobs = (executor.jobs if executor is not None else default_jobs()) if jobs is None else max(1, int(jobs))
+    if normals is None:
+        z = {i: draw_normals(n_sims, len(scenes[i]), seed) for i in unique}
+    else:
+        z = {i: np.asarray(normals[i], dtype=float).reshape(n_sims, len(scenes[i]), 3) for i in unique}
+    jobs = resolve_jobs(executor, jobs)
     total = len(unique) * len(sigmas) * n_sims
-    # chunks small enough to balance the load, large enough to amortise the model build
-    chunk = max(1, min(n_sims, -(-total // (8 * jobs)))) if total else 1
-    tasks = [
-        _Task(i, s, a, min(a + chunk, n_sims)) for i in unique for s in sigmas for a in range(0, n_sims, chunk)
-    ]
-    args = [(scenes[t.scene_index], t.sigma, normals[t.scene_index][t.start : t.stop], t.start, name, fall_rule, fall_threshold,
-             noise_rule) for t in tasks]
-    results = map_runs(args, total, executor, jobs, progress)
+    chunk = chunk_size(total, n_sims, jobs)
+    tasks = [SimTask(scenes[i], s, z[i][a:a + chunk], a, model) for i in unique for s in sigmas for a in range(0, n_sims, chunk)]
+    results = map_tasks(simulate_runs, tasks, total, executor, jobs, progress)
     by_scene: dict[int, list[dict]] = {}
-    for t, res in zip(tasks, results):
-        by_scene.setdefault(t.scene_index, []).extend(res)
+    for i, res in zip((i for i in unique for s in sigmas for a in range(0, n_sims, chunk)), results):
+        by_scene.setdefault(i, []).extend(res)
     rows = []
     for i in range(len(scenes)):  # in (scene, sigma, run) order
         rows += [{"trial": ids[i], **row} for row in by_scene.get(twin[i], [])]
@@ -308,11 +246,11 @@ def wilson_interval(falls, n, z: float = WILSON_Z):
 
 
 def summarise(runs: pd.DataFrame) -> pd.DataFrame:
-    """Per (trial, sigma): risk = fraction of runs that fell, with falls, n, engine,
-    the rules and the 95% Wilson interval (risk_low, risk_high)."""
+    """Per (trial, sigma): risk = fraction of runs that fell, with falls, n, the
+    model's columns and the 95% Wilson interval (risk_low, risk_high)."""
     if "noise_rule" not in runs:
-        runs = runs.assign(noise_rule=DEFAULT_NOISE_RULE)
-    g = runs.groupby(["trial", "sigma", "engine", "fall_rule", "fall_threshold", "noise_rule"], sort=False)["fell"]
+        runs = runs.assign(noise_rule=DEFAULT_MODEL.noise_rule.value)
+    g = runs.groupby(["trial", "sigma", *MODEL_COLUMNS], sort=False)["fell"]
     out = g.agg(falls="sum", n="size").reset_index()
     out["falls"] = out["falls"].astype(int)
     out["risk"] = out["falls"] / out["n"]
@@ -330,102 +268,52 @@ def contrast_holds(risk_e: pd.Series | dict, risk_h: pd.Series | dict) -> bool:
 # ----------------------------------------------------------------------------- public API
 
 
-def physical_risk(
-    scene: Scene,
-    sigma: float,
-    n_sims: int = N_SIMS,
-    seed: int = 0,
-    engine: str | None = None,
-    return_table: bool = False,
-    jobs: int | None = 1,
-    *,
-    profile: str | None = None,
-    fall_rule: str = DEFAULT_FALL_RULE,
-    fall_threshold: float = FALL_THRESHOLD,
-    noise_rule: str = DEFAULT_NOISE_RULE,
-):
+def physical_risk(scene: Scene, sigma: float, n_sims: int = N_SIMS, seed: int = 0,
+                  model: RiskModel | str | None = None, return_table: bool = False, jobs: int | None = 1):
     """Physical risk of `scene` (a Finish state B): the fraction of `n_sims` perturbed
     copies (noise SD `sigma` * d per axis) that fall within 4 s of simulation.
 
-    `engine`: "mujoco" (default), "drake", "physx" (optional extra); `profile`:
-    the engine's profile ("faithful", or for physx "game-defaults", unfaithful;
-    the same as engine="physx:game-defaults"). A run falls when a block centre
-    moves more than `fall_threshold` * d, measured by `fall_rule`
-    ("horizontal" or "3d"). With `return_table`, also the per-run table (columns
+    `model`: the RiskModel (engine and profile, fall rule and threshold, noise
+    rule; an engine name stands for that engine with the default rules; None:
+    the default model). With `return_table`, also the per-run table (columns
     run, sigma, fell, max_displacement, max_displacement_3d [m], sim_time [s],
-    engine, fall_rule, fall_threshold). Raises UnstableSceneError when the
-    unperturbed scene falls, ValueError for an unknown engine, profile or rule, a
-    threshold <= 0, or a missing optional engine (saying how to install it);
-    ValueError too for a sigma that is not a finite number in [0, 1], an `n_sims`
-    that is not a whole number >= 1 (2.5, '4' and True are refused), and a
-    `seed` that is not a whole number >= 0 or a Generator (None is refused: it
-    would give other numbers on every call).
-    `noise_rule`: "lift" (default, the paper's reading) or "settle" (every block
-    set to rest on what lies beneath its new outline; models/risk/noise.py).
+    and the model's MODEL_COLUMNS). Raises UnstableSceneError
+    when the unperturbed scene falls; ValueError for a sigma that is not a
+    finite number in [0, 1], an `n_sims` that is not a whole number >= 1 (2.5,
+    '4' and True are refused), and a `seed` that is not a whole number >= 0 or
+    a Generator (None is refused: it would give other numbers on every call).
     """
-    runs = run_grid([scene], [sigma], n_sims, seed, engine, jobs, profile=profile, fall_rule=fall_rule,
-                    fall_threshold=fall_threshold, noise_rule=noise_rule)
+    runs = simulate_grid([scene], [sigma], n_sims, seed, model, jobs=jobs)
     risk = float(runs["fell"].mean())
     if return_table:
         return risk, runs.drop(columns="trial")
     return risk
 
 
-def risk_curve(
-    scene: Scene,
-    sigmas: Iterable[float] = SIGMA_GRID,
-    n_sims: int = N_SIMS,
-    seed: int = 0,
-    engine: str | None = None,
-    jobs: int | None = None,
-    return_table: bool = False,
-    *,
-    profile: str | None = None,
-    fall_rule: str = DEFAULT_FALL_RULE,
-    fall_threshold: float = FALL_THRESHOLD,
-    noise_rule: str = DEFAULT_NOISE_RULE,
-) -> pd.DataFrame:
+def risk_curve(scene: Scene, sigmas: Iterable[float] = SIGMA_GRID, n_sims: int = N_SIMS, seed: int = 0,
+               model: RiskModel | str | None = None, jobs: int | None = None, return_table: bool = False) -> pd.DataFrame:
     """Risk of one scene at each sigma (same random numbers for every sigma):
-    columns sigma, risk, falls, n, engine, fall_rule, fall_threshold (and the
-    per-run table with `return_table`)."""
-    runs = run_grid([scene], sigmas, n_sims, seed, engine, jobs, profile=profile, fall_rule=fall_rule,
-                    fall_threshold=fall_threshold, noise_rule=noise_rule)
+    columns sigma, risk, falls, n, the model's columns and the Wilson interval
+    (and the per-run table with `return_table`)."""
+    runs = simulate_grid([scene], sigmas, n_sims, seed, model, jobs=jobs)
     curve = summarise(runs).drop(columns="trial")
     return (curve, runs.drop(columns="trial")) if return_table else curve
 
 
-def risk_table(
-    trials_or_scenes,
-    sigmas: Iterable[float] = SIGMA_GRID,
-    n_sims: int = N_SIMS,
-    seed: int = 0,
-    engine: str | None = None,
-    jobs: int | None = None,
-    progress: Callable[[int, int], None] | None = None,
-    runs: bool = False,
-    executor=None,
-    *,
-    profile: str | None = None,
-    fall_rule: str = DEFAULT_FALL_RULE,
-    fall_threshold: float = FALL_THRESHOLD,
-    noise_rule: str = DEFAULT_NOISE_RULE,
-) -> pd.DataFrame:
+def risk_table(trials_or_scenes, sigmas: Iterable[float] = SIGMA_GRID, n_sims: int = N_SIMS, seed: int = 0,
+               model: RiskModel | str | None = None, jobs: int | None = None,
+               progress: Callable[[int, int], None] | None = None, runs: bool = False, executor=None) -> pd.DataFrame:
     """Risk of many scenes over a grid of sigma values, as a tidy table.
 
     `trials_or_scenes`: trials (objects with `.id` and `.target`, e.g.
     `stimuli.load_all()`), Scenes (named by their label) or a {trial id: Scene}
-    mapping. Returns columns trial, sigma, risk, falls, n, engine, fall_rule,
-    fall_threshold, noise_rule, risk_low, risk_high (95% Wilson interval), one
-    row per (trial, sigma) in input order; with `runs=True`
-    the per-run table instead (trial, sigma, run, fell, max_displacement,
-    max_displacement_3d, sim_time, engine, fall_rule, fall_threshold). `engine`,
-    `profile`, `fall_rule`, `fall_threshold`: as in `physical_risk`. Each trial's
-    numbers equal `physical_risk(scene, sigma, n_sims, seed, ...)`.
+    mapping. Returns RISK_COLUMNS (trial, sigma, risk, falls, n, the model's
+    MODEL_COLUMNS, risk_low, risk_high: the 95% Wilson interval), one row per (trial, sigma) in input order; with `runs=True` the
+    per-run table instead (RUN_COLUMNS). `model` as in `physical_risk`. Each
+    trial's numbers equal `physical_risk(scene, sigma, n_sims, seed, model)`.
     """
     ids, scenes = _as_scenes(trials_or_scenes)
-    sigmas = list(sigmas)
-    table = run_grid(scenes, sigmas, n_sims, seed, engine, jobs, progress, trial_ids=ids, executor=executor,
-                     profile=profile, fall_rule=fall_rule, fall_threshold=fall_threshold, noise_rule=noise_rule)
+    table = simulate_grid(scenes, list(sigmas), n_sims, seed, model, executor, jobs=jobs, progress=progress, ids=ids)
     if runs:
         return _in_order(table, ids, ["sigma", "run"])
     return _in_order(summarise(table), ids, ["sigma"])

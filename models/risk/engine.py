@@ -20,18 +20,10 @@ from lgp.scene import Scene
 #: Wood (kg/m^3) and wood-on-wood friction, for blocks, table and fixed boxes.
 DENSITY = 600.0
 FRICTION = 0.6
-#: A run falls when some block's centre ends farther than FALL_THRESHOLD (fraction
-#: of the block size d) from where it started, measured by the fall rule: in the
-#: horizontal plane ("horizontal", the default) or in 3-D ("3d", the paper's
-#: wording: "the difference between the final and initial positions").
-FALL_THRESHOLD = 0.25
-FALL_RULES = ("horizontal", "3d")
-DEFAULT_FALL_RULE = "horizontal"
 #: Early termination is checked every CHECK_INTERVAL s of simulated time: the run
-#: stops as a fall once a block has moved FALL_CERTAIN * d horizontally, or twice
-#: the fall threshold if that is larger (a rocking tower can carry its top block
-#: past the threshold and back; horizontal distance never exceeds 3-D distance,
-#: so the stop is a fall under either rule), and as a stand
+#: stops as a fall once a block has moved `stop_distance` * d horizontally (the
+#: risk model's: FALL_CERTAIN, or twice the fall threshold if that is larger,
+#: models.risk.model.fall_certain), and as a stand
 #: once every point of every block has moved slower than REST_SPEED for
 #: REST_WINDOW s in a row without speeding up by more than REST_SLACK over that
 #: window (a structure that starts to topple from rest speeds up slowly at first),
@@ -78,17 +70,17 @@ class Engine:
         return {}
 
     def simulate(self, scene: Scene, duration: float = DURATION, early_stop: bool = True,
-                 fall_threshold: float = FALL_THRESHOLD, p_WB: np.ndarray | None = None) -> Rollout:
+                 stop_distance: float = FALL_CERTAIN, p_WB: np.ndarray | None = None) -> Rollout:
         """Run `scene` from rest for `duration` s (less with early termination;
-        `fall_threshold`, in units of d, sets how far a block must have moved for
-        the run to stop as a certain fall). `p_WB` (n, 3): start the blocks at these
+        `stop_distance`, in units of d, is how far a block must have moved
+        horizontally for the run to stop as a certain fall). `p_WB` (n, 3): start the blocks at these
         centres instead of the scene's (a noisy copy of the same layout, orientations
         unchanged), the same as simulating the moved scene without building it."""
         self._load(scene, scene.positions if p_WB is None else np.asarray(p_WB, float).reshape(len(scene), 3))
         p_start, _ = self._state()
         if not len(scene):
             return Rollout(p_start, p_start, 0.0, False)
-        certain = fall_certain(fall_threshold) * _smallest_width(scene)
+        certain = stop_distance * smallest_width(scene)
         xy_start = p_start[:, :2]
         t, rest_since, rest_speed = 0.0, 0.0, np.inf
         n_checks = int(round(duration / CHECK_INTERVAL))
@@ -128,12 +120,7 @@ class Engine:
         return False
 
 
-def fall_certain(fall_threshold: float = FALL_THRESHOLD) -> float:
-    """Horizontal move (units of d) after which a run stops as a fall."""
-    return max(FALL_CERTAIN, 2.0 * fall_threshold)
-
-
-def _smallest_width(scene: Scene) -> float:
+def smallest_width(scene: Scene) -> float:
     """The block size d the fall threshold is a fraction of (the smallest horizontal
     block edge, = BLOCK_SIZE for the cubes of the stimuli)."""
     if not len(scene):

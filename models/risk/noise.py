@@ -43,12 +43,8 @@ import numpy as np
 from lgp.errors import InputError
 from lgp.geometry import rectangle_overlap
 from lgp.scene import CONTACT_TOLERANCE, Scene
+from models.risk.model import NOISE_RULES, Noise, check_sigma
 
-#: The noise rules: how a block's height is set once its horizontal place is
-#: known (module docstring). "lift" is the default and the one of every result
-#: before issue 22.
-NOISE_RULES: tuple[str, ...] = ("lift", "settle")
-DEFAULT_NOISE_RULE = "lift"
 #: Numerical slack (m) below which an overlap counts as none.
 _EPS = 1e-12
 #: Projected Gauss-Seidel sweeps allowed for the side pairs (a compressed line of
@@ -56,11 +52,11 @@ _EPS = 1e-12
 _MAX_SWEEPS = 500
 
 
-def check_noise_rule(noise_rule: str) -> str:
+def check_noise_rule(noise_rule: str) -> Noise:
     """The noise rule checked: ValueError naming the known ones."""
     if noise_rule not in NOISE_RULES:
         raise InputError(f"unknown noise rule {noise_rule!r}; known rules: {', '.join(NOISE_RULES)}")
-    return noise_rule
+    return Noise(noise_rule)
 
 
 def draw_normals(n_runs: int, n_blocks: int, seed=0) -> np.ndarray:
@@ -73,7 +69,7 @@ def draw_normals(n_runs: int, n_blocks: int, seed=0) -> np.ndarray:
     return rng.standard_normal((n_runs, n_blocks, 3))
 
 
-def perturb(scene: Scene, sigma: float, rng: np.random.Generator, noise_rule: str = DEFAULT_NOISE_RULE) -> Scene:
+def perturb(scene: Scene, sigma: float, rng: np.random.Generator, noise_rule: str = Noise.LIFT) -> Scene:
     """A noisy copy of `scene`: see the module docstring for the rule.
 
     `sigma` is the noise SD as a fraction of the block size d; `rng` a numpy
@@ -83,13 +79,13 @@ def perturb(scene: Scene, sigma: float, rng: np.random.Generator, noise_rule: st
     return perturb_from_normals(scene, sigma, rng.standard_normal((len(scene), 3)), noise_rule)
 
 
-def perturb_from_normals(scene: Scene, sigma: float, z: np.ndarray, noise_rule: str = DEFAULT_NOISE_RULE) -> Scene:
+def perturb_from_normals(scene: Scene, sigma: float, z: np.ndarray, noise_rule: str = Noise.LIFT) -> Scene:
     """`perturb` with the standard normals `z` (n_blocks, 3) given explicitly."""
     p_WB = perturbed_positions(scene, sigma, z, noise_rule)
     return scene.with_blocks(b.moved_to(p) for b, p in zip(scene.blocks, p_WB))
 
 
-def perturbed_positions(scene: Scene, sigma: float, z: np.ndarray, noise_rule: str = DEFAULT_NOISE_RULE) -> np.ndarray:
+def perturbed_positions(scene: Scene, sigma: float, z: np.ndarray, noise_rule: str = Noise.LIFT) -> np.ndarray:
     """Block centres p_WB (n, 3) of the noisy scene (the work of `perturb`); with
     normals z of shape (R, n, 3), the centres (R, n, 3) of R noisy scenes."""
     return NoiseRule(scene, noise_rule).positions(sigma, z)
@@ -103,7 +99,7 @@ class NoiseRule:
     numbers to the bit as one `perturbed_positions` call per run
     (tests/test_risk_noise_reference.py keeps the per-run rule as the reference)."""
 
-    def __init__(self, scene: Scene, noise_rule: str = DEFAULT_NOISE_RULE, movable=None):
+    def __init__(self, scene: Scene, noise_rule: str = Noise.LIFT, movable=None):
         """`movable` (n,) bools, default all: blocks marked False get no noise and
         keep their height (a sequential build's settled blocks,
         models/risk/build.py); side pairs still push them apart half each, as a
@@ -175,8 +171,10 @@ class NoiseRule:
         z = np.asarray(z, float)
         if z.shape[-2:] != (n, 3) or z.ndim not in (2, 3):
             raise InputError(f"{scene.label}: need standard normals of shape ({n}, 3), got {z.shape}")
-        if not sigma >= 0:
-            raise InputError(f"{scene.label}: sigma must be >= 0 (a fraction of the block size), got {sigma}")
+        try:
+            sigma = check_sigma(sigma)
+        except InputError as e:
+            raise InputError(f"{scene.label}: {e}") from None
         one = z.ndim == 2
         z = z[None] if one else z
         runs = len(z)
@@ -218,7 +216,7 @@ class NoiseRule:
                 z_rest = np.maximum(z_rest, rests.max(axis=1) + self.h[i])
             if not self.movable[i]:
                 pass  # a settled block keeps its height
-            elif self.noise_rule == "settle":
+            elif self.noise_rule is Noise.SETTLE:
                 p[:, i, 2] = z_rest  # rests on what lies beneath its new outline
             else:
                 p[:, i, 2] = np.maximum(p[:, i, 2], z_rest)  # lift: never into its support

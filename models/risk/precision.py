@@ -25,14 +25,14 @@ import numpy as np
 import pandas as pd
 
 from lgp.errors import InputError
+from models.risk.model import MODEL_COLUMNS
 
 #: The risk levels of sigma* (fractions of runs that fall).
 PRECISION_LEVELS: tuple[float, ...] = (0.5, 0.1)
 #: Bootstrap resamples of the runs.
 N_BOOT = 1000
 PRECISION_COLUMNS = ["trial", "level", "sigma_star", "sigma_low", "sigma_high", "censored", "grid_min", "grid_max",
-                     "n_sigmas", "n_sims", "n_boot", "engine", "fall_rule", "fall_threshold", "noise_rule"]
-_RULES = ("engine", "fall_rule", "fall_threshold", "noise_rule")
+                     "n_sigmas", "n_sims", "n_boot", *MODEL_COLUMNS]
 
 
 def check_levels(levels: Sequence[float]) -> tuple[float, ...]:
@@ -93,7 +93,7 @@ def required_precision(runs: pd.DataFrame, levels: Sequence[float] = PRECISION_L
         curve = fell.mean(axis=0)
         idx = rng.integers(0, n, size=(n_boot, n))
         boot = np.stack([fell[i].mean(axis=0) for i in idx]) if n_boot else np.empty((0, len(sigmas)))
-        rules = {k: (g[k].iloc[0] if k in g else None) for k in _RULES}
+        rules = {k: (g[k].iloc[0] if k in g else None) for k in MODEL_COLUMNS}
         for level in levels:
             star = first_crossing(sigmas, curve, level)[0]
             if np.isinf(star):

@@ -21,22 +21,21 @@ from lgp.app.cache import input_key
 from lgp.app.files import atomic_path, write_csv_atomic
 from lgp.app.sensitivity.section import Context, Section, markdown
 from lgp.paper import BLOCK_SIZE, PAPER_SIGMA, RISK_PAIRS
-from models.risk.engine import DEFAULT_FALL_RULE, FALL_THRESHOLD
+from models.risk.model import DEFAULT_MODEL, FALL_COLUMNS, FALL_THRESHOLD, MODEL_COLUMNS, NOISE_RULES, FallRule, RiskModel
 
 #: The noise levels of the risk section: the paper's sigma and the top of its grid.
 RISK_SIGMAS = (PAPER_SIGMA, 0.10)
-#: Fall rules of the risk section: (rule, threshold in units of d). The runs are
-#: simulated once per engine and judged by each rule (exact: every threshold
-#: here has the same early-stop distance, models.risk.engine.fall_certain).
-RISK_RULES = ((DEFAULT_FALL_RULE, FALL_THRESHOLD), ("3d", FALL_THRESHOLD), ("3d", 0.1))
-#: Noise rules of the risk section (each simulated: they give other scenes).
-NOISE_RULES = ("lift", "settle")
+#: Fall rules of the risk section, as models whose fall rule and threshold judge
+#: the runs (RiskModel.judged_by). The runs are simulated once per engine and
+#: noise rule and judged by each (exact: every threshold here has the same
+#: early-stop distance, RiskModel.stop_distance).
+RISK_RULES = (DEFAULT_MODEL, RiskModel(None, None, FallRule.THREE_D, FALL_THRESHOLD),
+              RiskModel(None, None, FallRule.THREE_D, 0.1))
 #: Engines of the risk section when none are named: every installed one but Drake
 #: (about 100x slower; add it with --sensitivity-engines ... drake or --engine drake).
 DEFAULT_RISK_ENGINES = ("mujoco", "physx", "physx:game-defaults")
 
-COLUMNS = ["engine", "faithful", "fall_rule", "fall_threshold", "noise_rule", "trial", "sigma", "risk", "falls", "n",
-           "stands_unperturbed"]
+COLUMNS = ["engine", "faithful", *MODEL_COLUMNS[1:], "trial", "sigma", "risk", "falls", "n", "stands_unperturbed"]
 
 
 def risk_engines(args) -> tuple[list[str], list[str]]:
@@ -56,13 +55,13 @@ def risk_engines(args) -> tuple[list[str], list[str]]:
     return sorted(dict.fromkeys(names), key=order.index), notes
 
 
-def _engine_runs(ctx: Context, engine: str, n_sims: int, seed: int, noise_rule: str = "lift") -> pd.DataFrame:
-    """Per-run tables of every trial for one engine at RISK_SIGMAS, judged by the
-    default rule, one cached file per trial; trials whose B falls unperturbed are
-    left out (they are flagged by `_stands`)."""
+def _engine_runs(ctx: Context, model: RiskModel, n_sims: int, seed: int) -> pd.DataFrame:
+    """Per-run tables of every trial for one engine and noise rule (`model`, with
+    the default fall rule) at RISK_SIGMAS, one cached file per trial; trials whose
+    B falls unperturbed are left out (they are flagged by `_stands`)."""
     from models.risk import UnstableSceneError, check_stable, risk_table
 
-    depends = ctx.risk_key(engine, noise_rule=noise_rule)  # the runs are judged by every rule of RISK_RULES afterwards
+    depends = ctx.risk_key(model)  # the runs are judged by every rule of RISK_RULES afterwards
     keys = {t.id: input_key(trial=t.id, digest=t.digest, sigmas=list(RISK_SIGMAS), n_sims=n_sims, seed=seed,
                             table="runs", **depends) for t in ctx.trials}
     tables = {t.id: ctx.cache.get("sensitivity", keys[t.id]) for t in ctx.trials}
@@ -70,28 +69,27 @@ def _engine_runs(ctx: Context, engine: str, n_sims: int, seed: int, noise_rule: 
     for t in ctx.trials:
         if tables[t.id] is None:
             try:
-                check_stable(t.target, engine)
+                check_stable(t.target, model.engine)
                 todo.append(t)
             except UnstableSceneError:
                 pass
     if todo:
         t0 = time.perf_counter()
-        runs = risk_table(todo, list(RISK_SIGMAS), n_sims=n_sims, seed=seed, engine=engine, runs=True, executor=ctx.executor,
-                          noise_rule=noise_rule)
+        runs = risk_table(todo, list(RISK_SIGMAS), n_sims=n_sims, seed=seed, model=model, runs=True, executor=ctx.executor)
         for t in todo:
             tables[t.id] = ctx.cache.put("sensitivity", keys[t.id], runs[runs["trial"] == t.id].reset_index(drop=True))
-        ctx.log(f"[sensitivity] {engine}, {noise_rule}: {len(runs)} runs of {len(todo)} trials in {time.perf_counter() - t0:.1f} s")
+        ctx.log(f"[sensitivity] {model.engine}, {model.noise_rule}: {len(runs)} runs of {len(todo)} trials in {time.perf_counter() - t0:.1f} s")
     else:
-        ctx.log(f"[sensitivity] {engine}, {noise_rule}: cached")
+        ctx.log(f"[sensitivity] {model.engine}, {model.noise_rule}: cached")
     found = [df for df in tables.values() if df is not None]
     return pd.concat(found, ignore_index=True) if found else pd.DataFrame()
 
 
-def _stands(trial, engine: str, rule: str, threshold: float) -> bool:
+def _stands(trial, model: RiskModel) -> bool:
     from models.risk import UnstableSceneError, check_stable
 
     try:
-        check_stable(trial.target, engine, fall_rule=rule, fall_threshold=threshold)
+        check_stable(trial.target, model)
         return True
     except UnstableSceneError:
         return False
@@ -99,20 +97,22 @@ def _stands(trial, engine: str, rule: str, threshold: float) -> bool:
 
 def risk_sensitivity_table(ctx: Context, engines: list[str]) -> pd.DataFrame:
     """Tidy table (COLUMNS): risk per engine, rule, trial and sigma."""
-    from models.risk import ENGINES, apply_fall_rule, summarise
+    from models.risk import ENGINES, summarise
 
     rows = []
     for engine, noise_rule in ((e, nr) for e in engines for nr in NOISE_RULES):
-        runs = _engine_runs(ctx, engine, ctx.args.n_sims, ctx.args.seed, noise_rule)
-        for rule, threshold in RISK_RULES:
-            judged = apply_fall_rule(runs, rule, threshold, BLOCK_SIZE) if len(runs) else runs
+        simulated = RiskModel(engine, noise_rule=noise_rule)
+        runs = _engine_runs(ctx, simulated, ctx.args.n_sims, ctx.args.seed)
+        for judge in RISK_RULES:
+            model = simulated.judged_by(judge)
+            judged = model.rejudge(runs, BLOCK_SIZE) if len(runs) else runs
             risk = summarise(judged) if len(judged) else pd.DataFrame(columns=["trial", "sigma", "risk", "falls", "n"])
             for t in ctx.trials:
-                stands = _stands(t, engine, rule, threshold)
+                stands = _stands(t, model)
                 for sigma in RISK_SIGMAS:
                     r = risk[(risk["trial"] == t.id) & np.isclose(risk["sigma"], sigma)]
-                    base = {"engine": engine, "faithful": ENGINES[engine].faithful, "fall_rule": rule,
-                            "fall_threshold": threshold, "noise_rule": noise_rule, "trial": t.id, "sigma": sigma, "stands_unperturbed": stands}
+                    base = {**model.record(), "faithful": ENGINES[engine].faithful, "trial": t.id, "sigma": sigma,
+                            "stands_unperturbed": stands}
                     if len(r):
                         rows.append({**base, "risk": float(r["risk"].iloc[0]), "falls": int(r["falls"].iloc[0]),
                                      "n": int(r["n"].iloc[0])})
@@ -129,11 +129,10 @@ def risk_sensitivity_summary(table: pd.DataFrame) -> pd.DataFrame:
     out = []
     if "noise_rule" not in table:
         table = table.assign(noise_rule="lift")
-    for (engine, faithful, rule, thr, noise_rule, sigma), g in table.groupby(
-            ["engine", "faithful", "fall_rule", "fall_threshold", "noise_rule", "sigma"], sort=False):
+    keys = ["engine", "faithful", *MODEL_COLUMNS[1:], "sigma"]
+    for values, g in table.groupby(keys, sort=False):
         risk = dict(zip(g["trial"], g["risk"]))
-        row = {"engine": engine, "faithful": bool(faithful), "fall_rule": rule, "fall_threshold": thr,
-               "noise_rule": noise_rule, "sigma": sigma,
+        row = {**dict(zip(keys, values)), "faithful": bool(values[1]),
                "trials": int(g["risk"].notna().sum()), "trials_risk_gt_0": int((g["risk"] > 0).sum()),
                "unstable_unperturbed": int((~g["stands_unperturbed"].astype(bool)).sum())}
         for pair in RISK_PAIRS:
@@ -152,7 +151,7 @@ def risk_sensitivity_figure(table: pd.DataFrame, path: Path) -> Path:
 
     if "noise_rule" not in table:
         table = table.assign(noise_rule="lift")
-    panels = list(table.groupby(["engine", "noise_rule", "fall_rule", "fall_threshold"], sort=False))
+    panels = list(table.groupby(["engine", "noise_rule", *FALL_COLUMNS], sort=False))
     ncol = len(RISK_RULES)
     nrow = -(-len(panels) // ncol)
     fig = Figure(figsize=(3.6 * ncol, 2.9 * nrow))
@@ -192,7 +191,7 @@ def risk_section(ctx: Context) -> Section:
              write_csv_atomic(summary, ctx.out / "risk_sensitivity_summary.csv"),
              risk_sensitivity_figure(table, ctx.out / "figures" / "risk_sensitivity.png")]
     shown = summary.assign(engine=[e if f else f"{e} (UNFAITHFUL)" for e, f in zip(summary["engine"], summary["faithful"])],
-                           rule=[f"{r} > {t:g} d" for r, t in zip(summary["fall_rule"], summary["fall_threshold"])])
+                           rule=[f"{r} > {t:g} d" for r, t in zip(*(summary[c] for c in FALL_COLUMNS))])
     shown = shown.assign(suite=["passes" if f else "fails (docs/risk.md)" for f in shown["faithful"]])
     cols = ["engine", "suite", "noise_rule", "rule", "sigma", "trials_risk_gt_0", *[f"{p}H>{p}E" for p in RISK_PAIRS],
             "contrasts"]
