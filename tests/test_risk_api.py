@@ -130,8 +130,8 @@ def test_identical_scenes_are_simulated_once_with_the_same_numbers(monkeypatch):
     trials = [stimuli.load_trial(t) for t in ("1H", "9E", "4H")]  # 1H and 9E: the same 6-tower
     assert core.geometry_key(trials[0].target) == core.geometry_key(trials[1].target) != core.geometry_key(trials[2].target)
     calls = []
-    real = core._simulate_runs
-    monkeypatch.setattr(core, "_simulate_runs", lambda scene, *a, **k: calls.append(scene.label) or real(scene, *a, **k))
+    real = core.simulate_runs
+    monkeypatch.setattr(core, "simulate_runs", lambda task: calls.append(task.scene.label) or real(task))
     table = risk_table(trials, [0.1, 0.2], n_sims=12, seed=1, jobs=1, runs=True)
     assert trials[1].target.label not in calls and trials[0].target.label in calls
     a, b = (table[table["trial"] == t].drop(columns="trial").reset_index(drop=True) for t in ("1H", "9E"))
