@@ -390,7 +390,7 @@ UsageRefusal.__module__ = "analysis.import_study"  # a refusal of the command, a
 # ----------------------------------------------------------------------------- counts on the command line
 
 
-def command_cases():
+def command_cases(tmp: Path):
     def argv_case(module, argv):
         def run():
             import importlib
@@ -414,6 +414,73 @@ def command_cases():
     yield "models.effort --samples 1000000000", argv_case("models.effort.__main__", ["--samples", "1000000000"])
     yield "analysis.demo --n-boot 1000000000000", argv_case("analysis.demo", ["--n-boot", big])
     yield "stimuli.generate --count 1000000000000", argv_case("stimuli.generate", ["--out", "/nonexistent/x", "--count", big])
+
+    yield "lgp.reproduce --scheduler tcp:// (no host)", argv_case("lgp.reproduce", ["--scheduler", "tcp://"])
+    yield "lgp.reproduce --scheduler inproc://x", argv_case("lgp.reproduce", ["--scheduler", "inproc://x"])
+
+    def loop_case(make, module="lgp.reproduce", flag="--stimuli"):
+        def run():
+            folder = Path(tempfile.mkdtemp(dir=tmp))
+            try:
+                return argv_case(module, [flag, str(make(folder))])()
+            finally:
+                shutil.rmtree(folder, ignore_errors=True)
+        return run
+    yield "lgp.reproduce --stimuli DIR, DIR a loop of symbolic links (\"does not exist\" before)", loop_case(
+        lambda f: (f / "loop").symlink_to("loop") or f / "loop")
+
+    def anchor_fifo():
+        from stimuli import experiment as ex
+
+        folder = Path(tempfile.mkdtemp(dir=tmp))
+        try:
+            os.mkfifo(folder / "anchor.yaml")
+            return ex.load_anchor(folder / "anchor.yaml", "easy", set())
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
+    yield "stimuli.experiment --anchor-easy FIFO (\"no such file\" before)", anchor_fifo
+
+    def lock_fifo():
+        from lgp.app.manifest import OutputLock
+
+        folder = Path(tempfile.mkdtemp(dir=tmp))
+        try:
+            os.mkfifo(folder / OutputLock.NAME)
+            with OutputLock(folder, "probe"):
+                return "locked"
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
+    yield "<out>/.lgp-run.lock a FIFO (\"[Errno 22] Invalid argument\" before)", lock_fifo
+
+    def peer(reply):
+        def run():
+            import socket
+            import threading
+
+            from lgp.executor import DaskExecutor
+
+            server = socket.socket()
+            server.bind(("127.0.0.1", 0))
+            server.listen(4)
+
+            def serve():
+                try:
+                    c, _ = server.accept()
+                    if reply:
+                        c.sendall(reply)
+                    time.sleep(3)
+                    c.close()
+                except OSError:
+                    pass
+            threading.Thread(target=serve, daemon=True).start()
+            try:
+                DaskExecutor(f"tcp://127.0.0.1:{server.getsockname()[1]}", timeout=2.0).close()
+                return "connected"
+            finally:
+                server.close()
+        return run
+    yield "--scheduler at a peer answering junk (MemoryError, Client.__del__ traceback, 20 s before)", peer(b"junk junk " * 50)
+    yield "--scheduler at an HTTP server (silent until asked; 14 s then a traceback before)", peer(None)
 
     def jobs():
         from lgp import cli
@@ -697,7 +764,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         groups = [("trial file", trial_cases(tmp)), ("human data", human_cases(tmp)),
-                  ("study import", import_cases(tmp)), ("output folder", output_cases(tmp)), ("command line", command_cases()), ("API", api_cases()),
+                  ("study import", import_cases(tmp)), ("output folder", output_cases(tmp)), ("command line", command_cases(tmp)), ("API", api_cases()),
                   ("cache entry", itertools.chain(((n, _cache_run(d, tmp)) for n, d in cache_cases(tmp)),
                                                   resigned_cases(tmp)))]
         for group, cases in groups:
@@ -708,7 +775,7 @@ def main(argv=None) -> int:
                 if run == "crowded":
                     run = lambda: crowded(tmp)  # noqa: E731
                 verdict, what = judge(run, accept)
-                rows.append((group, name, verdict, what.replace("|", "\\|").replace(str(tmp), "TMP")))
+                rows.append((group, name, verdict, what.replace("|", "\\|").replace(str(tmp), "TMP").replace(str(ROOT), "<repo>")))
                 print(f"{verdict:>22}  {group}: {name}: {what[:150]}", flush=True)
     bad = [r for r in rows if not r[2].startswith("accepted")]
     refused = [r for r in bad if r[2] in ("refused", "recomputed")]

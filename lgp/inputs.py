@@ -51,13 +51,16 @@ def check_regular(path: str | Path, what: str = "input file") -> os.stat_result:
     path = Path(path)
     try:
         st = path.stat()
-    except FileNotFoundError:
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            raise InputFileError(f"{path}: a loop of symbolic links (a link that leads back to itself), not a {what}",
+                                 path, "symlink loop") from None
+        if not isinstance(e, FileNotFoundError):
+            raise InputFileError(f"{path}: cannot read the {what} ({e.strerror})", path, "unreadable") from None
         if path.is_symlink():
             raise InputFileError(f"{path}: a dangling symbolic link (to {os.readlink(path)}, which does not exist), "
                                  f"not a {what}", path, "dangling symlink") from None
         raise InputFileError(f"{path}: no such {what}", path, "missing") from None
-    except OSError as e:
-        raise InputFileError(f"{path}: cannot read the {what} ({e.strerror})", path, "unreadable") from None
     if not stat.S_ISREG(st.st_mode):
         raise InputFileError(f"{path}: {_kind(st.st_mode)}{_link_note(path)}, not a regular file; a {what} must "
                              "be a regular file", path, "not a regular file")

@@ -32,6 +32,7 @@ from lgp import cli
 from lgp.planner.design import check_approach_height
 from lgp.paper import PAPER_SIGMA, SIGMA_GRIDS, TRIAL_IDS
 from lgp.executor import ProcessExecutor, SerialExecutor, WorkerDied, executor_for_scheduler, stop_signals
+from lgp.executor.cluster import check_address
 from lgp.app.progress import log as progress_log
 from lgp.app.cache import library_versions, write_csv_atomic
 from lgp.app.config import RunConfig
@@ -107,7 +108,7 @@ def parse_args(argv=None) -> RunConfig:
                    help="--planner search: at most this many seconds per layout (default 120)")
     cli.add_jobs_argument(p, D("jobs"), "processes, or LocalCluster workers with --scheduler local-dask, >= 1 "
                           "(default: all cores, %(default)s here)")
-    p.add_argument("--scheduler", help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
+    p.add_argument("--scheduler", type=cli.checked(check_address, "scheduler address"), help="run the work units on Dask: tcp://HOST:8786 (a running scheduler) or local-dask "
                    "(a LocalCluster of --jobs workers); default: a local process pool. Needs the [dask] extra (docs/scaling.md)")
     p.add_argument("--sigma-from", metavar="FILE", type=cli.input_file,
                    help="summary.json of python -m analysis.mental_jenga: that sigma (the paper's unit) is simulated too "

@@ -8,6 +8,7 @@ any extra trial file a user drops in (sorted after). Every loader takes a
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
 from dataclasses import replace
@@ -67,6 +68,12 @@ def load_trial(trial_id: str, directory: str | Path | None = None) -> Trial:
     path = directory / f"{trial_id}.yaml"
     if not path.exists():
         if path.is_symlink():
+            try:
+                os.stat(path)
+            except OSError as e:
+                if e.errno == errno.ELOOP:
+                    raise StimulusError(f"no trial {trial_id!r}: {path} is a loop of symbolic links (it leads back "
+                                        f"to itself through {os.readlink(path)})") from None
             raise StimulusError(f"no trial {trial_id!r}: {path} is a symbolic link to {os.readlink(path)}, which does not exist")
         misnamed = [p.name for p in directory.glob("*.yaml") if p.stem.upper() == trial_id and p.stem != trial_id]
         if misnamed:

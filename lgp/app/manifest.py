@@ -24,6 +24,7 @@ import hashlib
 import json
 import math
 import os
+import stat
 import time
 from pathlib import Path
 
@@ -129,7 +130,13 @@ class OutputLock:
         import fcntl
 
         while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0), 0o644)
+            self._check_kind()
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0)
+                         | os.O_NONBLOCK, 0o644)
+            if not stat.S_ISREG(os.fstat(fd).st_mode):  # swapped in after the check
+                os.close(fd)
+                self._check_kind()
+                continue
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
@@ -157,6 +164,20 @@ class OutputLock:
             self.__exit__()
             raise OutputFolderBusy(str(e)) from None
         return self
+
+    def _check_kind(self) -> None:
+        """The lock file must be a regular file (or absent): a FIFO, a device, a
+        directory or a symbolic link at its path is named, not opened (issue 30:
+        a FIFO gave "[Errno 22] Invalid argument" with no path)."""
+        from lgp.cli import path_kind
+
+        if os.path.islink(self.path):
+            raise OutputFolderBusy(f"{self.path}: a symbolic link (to {os.readlink(self.path)}), not the lock file a "
+                                   "run makes (a regular file); remove it and rerun")
+        kind = path_kind(self.path) or ("a directory" if self.path.is_dir() else None)
+        if kind is not None:
+            raise OutputFolderBusy(f"{self.path}: {kind}, not the lock file a run makes (a regular file); remove it "
+                                   "and rerun")
 
     def __exit__(self, *exc):
         if getattr(self, "_tree", None) is not None:

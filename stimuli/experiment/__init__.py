@@ -201,7 +201,13 @@ def load_anchor(path: str | Path, role: str, trial_ids: set[str]):
     """An anchor trial file, validated like every trial file (StudyError naming the file)."""
     import stimuli
 
+    from lgp.cli import path_kind
+
     p = Path(path)
+    kind = path_kind(p) or ("a directory" if p.is_dir() else None)
+    if kind is not None:  # a FIFO, a device, a loop of links: say what it is, never open it
+        raise StudyError(f"--anchor-{role} {path}: {kind}, not a trial file (a regular file; the default anchors "
+                         f"are in {ANCHOR_DIR})")
     if not p.is_file():
         raise StudyError(f"--anchor-{role} {path}: no such file (the default anchors are in {ANCHOR_DIR})")
     try:
