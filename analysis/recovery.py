@@ -297,8 +297,9 @@ def main(argv=None) -> int:
     p.add_argument("--sigma", type=cli.sigma, default=None,
                    help="with --human-data: the sigma of the fitted parameters (default: the RMSE rule's)")
     p.add_argument("--seed", type=cli.seed, default=0)
-    p.add_argument("--jobs", type=cli.positive_int, default=1)
+    cli.add_jobs_argument(p, 1, "worker processes (default 1)")
     args = p.parse_args(argv)
+    args.jobs = cli.capped_jobs(args.jobs, p.prog, args.oversubscribe)
     if not (np.isfinite(args.noise) and args.noise > 0):
         p.error(f"--noise must be a finite number > 0, got {args.noise!r}")
     effort, risk = read_tables(Path(args.results))

@@ -85,7 +85,8 @@ def test_no_formula_reaches_the_csv_from_a_field_or_a_file_name(capsys, tmp_path
 
 
 @pytest.mark.parametrize("value, why", [("1_70", "no '_' digit separators"), ("\u0661\u0667", "ASCII digits 0-9"),
-                                        ("\uff11\uff17", "ASCII digits 0-9"), ("9" * 5000, "beyond the range of a float")])
+                                        ("\uff11\uff17", "ASCII digits 0-9"), ("9" * 5000, "beyond the range of a float")],
+                         ids=["separator", "arabic-indic", "full-width", "5000-digits"])
 def test_one_number_parser_refuses_the_same_responses_in_the_import_and_in_human_data(capsys, tmp_path, value, why):
     a = _write(tmp_path / "a.csv", _edit(_study_csv(0), 3, "response", value))
     err = _refused(capsys, [a], tmp_path)
@@ -161,6 +162,7 @@ def test_human_data_with_a_column_named_twice_or_a_200_kb_field_is_refused(tmp_p
         load_human_data(tmp_path / "f.csv")
 
 
+@pytest.mark.slow  # 4 threads x 15 writes of a 960-row file: about 3 s on a loaded machine
 def test_two_imports_to_one_out_at_once_leave_one_whole_file(tmp_path):
     """The fixed temporary name `.human.csv.tmp` of old let two imports write one file."""
     rows = {p: import_study.import_files([_write(tmp_path / f"{p}.csv", _study_csv(p))]) * 40 for p in (0, 1)}

@@ -38,12 +38,13 @@ def main(argv=None) -> int:
     parser.add_argument("--trials", nargs="+", type=cli.trial_id, help="trial ids (default: every trial file of the folder)")
     parser.add_argument("--seed", type=cli.seed, default=0, help="A is sample 0 of this seed, as effort's (default 0)")
     parser.add_argument("--size", type=parse_size, default=DEFAULT_SIZE, help="WIDTHxHEIGHT in pixels (default 960x640)")
-    parser.add_argument("--jobs", type=cli.positive_int, default=2, help="rendering processes (default 2)")
+    cli.add_jobs_argument(parser, 2, "rendering processes (default 2)")
     parser.add_argument("--layout", choices=LAYOUTS, default="sample0",
                         help="A of every trial is sample 0 of the seed (sample0, default: the results page's), or a trial of "
                              "pair p shows sample p - 1 (pair: the study's; a pair shares its Start, no two pairs do)")
     parser.add_argument("--sheet", metavar="PNG", type=cli.output_file, help="also write a contact sheet of all pictures")
     args = parser.parse_args(argv)
+    args.jobs = cli.capped_jobs(args.jobs, parser.prog, args.oversubscribe)
     if args.trials:
         trials = [stimuli.load_trial(t, args.stimuli) for t in args.trials]
     else:
