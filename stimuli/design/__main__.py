@@ -49,7 +49,7 @@ def parse_args(argv=None):
     p.add_argument("--scheduler", help="run the work on Dask as lgp.reproduce does (tcp://HOST:8786 or local-dask)")
     p.add_argument("--no-paper", action="store_true", help="skip the paper's 24 beside the set (correlations, power)")
     p.add_argument("--no-render", action="store_true", help="skip the rendered contact sheet")
-    p.add_argument("--studies", type=int, default=200, help="simulated studies per world of the power table (default %(default)s)")
+    p.add_argument("--studies", type=int, default=100, help="simulated studies per world of the power table (default %(default)s)")
     p.add_argument("--no-power", action="store_true", help="skip the power table (analysis.power)")
     args = p.parse_args(argv)
     trials = 2 * args.pairs if args.pairs is not None else (D.trials if args.trials is None else args.trials)

@@ -59,7 +59,7 @@ def geometry_key(trial) -> str:
         h.update(np.round(b.p_WB, 4).tobytes())
     s = trial.initial.scattered
     h.update(repr((len(s), trial.initial.region)).encode())
-    return h.hexdigest()[:16]
+    return "g" + h.hexdigest()[:16]  # a letter first: never read back as a number
 
 
 def features(trial, sigmas=PRIOR_GRID, runs: int = SCREEN_RUNS, seed: int = 0) -> dict:

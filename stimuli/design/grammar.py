@@ -178,7 +178,7 @@ def structure(kind: str, rng: np.random.Generator, budget: int = MAX_BLOCKS) -> 
 
 
 def _blocks(cells, x0: float, y0: float, prefix: str) -> list[dict]:
-    return [{"name": f"{prefix}{k + 1}", "p_WB": [round(x0 + x, 5), round(y0 + y, 5), round(d / 2 + lv * d, 5)]}
+    return [{"name": f"{prefix}{k + 1}", "p_WB": [round(float(x0 + x), 5), round(float(y0 + y), 5), round(float(d / 2 + lv * d), 5)]}
             for k, (x, y, lv) in enumerate(cells)]
 
 

@@ -95,8 +95,9 @@ def screen_check(finalists: pd.DataFrame, paper: pd.DataFrame | None, sigmas) ->
     for label, df in (("finalists", finalists), ("paper 24", paper)):
         if df is None:
             continue
-        pairs = [("effort", "effort_proxy", "effort")] + [(f"risk {s:g}", f"screen_risk_{s:g}", f"risk_{s:g}") for s in sigmas]
-        pairs.append(("risk over the prior (mean)", "screen_risk_prior", "risk_prior"))
+        pairs = [("effort", "effort_proxy", "effort")] + [(f"risk {s:g}", f"screen_risk_{s:g}", f"risk_{s:g}") for s in sigmas
+                                                          if f"screen_risk_{s:g}" in df.columns and f"risk_{s:g}" in df.columns]
+        pairs.append(("risk over the prior (mean of each grid)", "screen_risk_prior", "risk_prior"))
         for what, a, b in pairs:
             x, y = df[a].astype(float), df[b].astype(float)
             rho = float(spearmanr(x, y).statistic) if x.nunique() > 1 and y.nunique() > 1 else float("nan")

@@ -17,6 +17,9 @@ WORLDS: tuple[str, ...] = ("effort-only", "full:b2b1=2,sigma=0.1", "full:b2b1=3,
 #: The verdicts the design cares about: (procedure prefix, verdict) pairs kept in the short table.
 PARTICIPANTS = 60
 NOISE = 1.0
+#: The tests run on both sets: a designed set need not have pairs, so the
+#: within-pair permutation (pairs only) is left out of both.
+TESTS = ("freedman-lane", "sign-flip")
 
 
 def available() -> bool:
@@ -52,7 +55,8 @@ def power_tables(tables: dict, studies: int, seed: int, executor=None, jobs: int
     frames = []
     for label, table in tables.items():
         df = power(table, list(worlds), participants=participants, noise=noise, studies=studies, seed=seed,
-                   executor=executor, jobs=jobs)
+                   executor=executor, jobs=jobs, tests=TESTS)
+        df = pd.DataFrame(df.to_dict("list"))  # without .attrs (the per-study tables), which pd.concat cannot compare
         frames.append(df.assign(set=label, grouping=table.grouping))
     out = pd.concat(frames, ignore_index=True)
     out.insert(0, "SIMULATED", "SIMULATED studies, not human data")
@@ -86,5 +90,32 @@ def write_power(out, cfg, executor, cache, studies: int, jobs: int = 2, log=prin
         tables = {"paper 24": set_table(paper, p_effort, p_risk, None, cfg.samples, cfg.seed), **tables}
     log(f"power: {studies} SIMULATED studies x {len(WORLDS)} worlds x {len(tables)} sets, n = {PARTICIPANTS}, "
         f"noise {NOISE:g} (analysis.power)")
-    write_csv_atomic(power_tables(tables, studies, cfg.seed, executor, jobs), out / "power.csv")
+    table = power_tables(tables, studies, cfg.seed, executor, jobs)
+    write_csv_atomic(table, out / "power.csv")
+    write_csv_atomic(summary(table), out / "power_summary.csv")
     return True
+
+
+#: The comparisons of the short table: full against each simpler story.
+RIVALS = ("effort", "effort+height", "effort+stacked")
+
+
+def summary(table: pd.DataFrame) -> pd.DataFrame:
+    """The short power table: per set, world and rival, the rate at which the
+    held-out comparison prefers full over the rival, and the rates at which the
+    Freedman-Lane test finds full better (and, where analysis.power tests it, the
+    rival better) at alpha .05, each with its Wilson 95% interval."""
+    rows = []
+    for (label, world), g in table.groupby(["set", "world"], sort=False):
+        for rival in RIVALS:
+            row = {"SIMULATED": "SIMULATED", "set": label, "world": world, "rival": rival}
+            ho = g[(g["procedure"] == f"held-out full vs {rival}") & (g["verdict"] == "full")]
+            fl = g[(g["procedure"] == f"freedman-lane full>{rival}") & (g["verdict"].str.startswith("full beats"))]
+            flr = g[(g["procedure"] == f"freedman-lane {rival}>full") & (g["verdict"].str.startswith(f"{rival} beats"))]
+            for name, part in (("held_out_prefers_full", ho), ("fl_full_better", fl), ("fl_rival_better", flr)):
+                if len(part):
+                    r = part.iloc[0]
+                    row.update({name: r["rate"], f"{name}_low": r["rate_low"], f"{name}_high": r["rate_high"]})
+                    row["studies"] = int(r["n_studies"])
+            rows.append(row)
+    return pd.DataFrame(rows)

@@ -39,7 +39,7 @@ class DesignConfig:
     prior: tuple[float, float] = (PRIOR_LO, PRIOR_HI)
     finalists: int | None = None  # default 2 x trials
     samples: int = 5  # M layouts of the faithful effort
-    n_sims: int = 40  # N runs per sigma of the faithful risk
+    n_sims: int = 30  # N runs per sigma of the faithful risk
     screen_runs: int = SCREEN_RUNS
     engine: str | None = None
     pairs: bool = False
@@ -97,29 +97,53 @@ def _screen_unit(unit) -> list:
     return out
 
 
-def screen(cfg: DesignConfig, executor, log=print) -> tuple[pd.DataFrame, Counter]:
+def _code_key() -> str:
+    """The source of the design's screen and checks (and what they import): part of every cache key here."""
+    from lgp.app.cache import modules_digest
+
+    return modules_digest("stimuli.design.checks", "stimuli.design.grammar")
+
+
+def _as_frame(res: list) -> pd.DataFrame:
+    rows = [{"candidate": r[0], "discarded": r[1]} if isinstance(r, tuple) else {**r, "discarded": ""} for r in res]
+    return pd.DataFrame(rows)
+
+
+def screen(cfg: DesignConfig, executor, log=print, cache=None) -> tuple[pd.DataFrame, Counter]:
     """The screened pool (one row per candidate that passed, duplicates dropped)
-    and the discards counted by reason."""
+    and the discards counted by reason. Each chunk of 100 candidates is cached
+    (`cache`, lgp.app.cache.Cache, kind "screen") by the seed, its range, the
+    screen's settings and the code: an interrupted run resumes."""
+    from lgp.app.cache import input_key
+
     chunk = 100
     units = [(cfg.seed, a, min(a + chunk, cfg.candidates), cfg.budget, cfg.sigmas, cfg.screen_runs)
              for a in range(0, cfg.candidates, chunk)]
+    code = _code_key()
+    keys = [input_key(unit=list(u[:4]), sigmas=list(u[4]), runs=u[5], code=code) for u in units]
+    frames = {k: cache.get("screen", keys[k]) if cache is not None else None for k in range(len(units))}
+    todo = [k for k in range(len(units)) if frames[k] is None]
     t0 = time.perf_counter()
-    done = [0]
+    done = [sum(u[2] - u[1] for k, u in enumerate(units) if frames[k] is not None)]
+    if done[0]:
+        log(f"screen: {done[0]} candidates from the cache")
 
-    def arrived(k, res):
+    def arrived(j, res):
+        k = todo[j]
+        frames[k] = _as_frame(res)
+        if cache is not None:
+            cache.put("screen", keys[k], frames[k])
         done[0] += len(res)
         if done[0] % 1000 < chunk or done[0] == cfg.candidates:
             log(f"screen: {done[0]}/{cfg.candidates} candidates ({time.perf_counter() - t0:.0f} s)")
 
-    results = executor.map(_screen_unit, units, arrived)
-    rows, reasons = [], Counter()
-    for res in results:
-        for r in res:
-            if isinstance(r, tuple):
-                reasons[r[1]] += 1
-            else:
-                rows.append(r)
-    pool = pd.DataFrame(rows)
+    executor.map(_screen_unit, [units[k] for k in todo], arrived)
+    table = pd.concat([frames[k] for k in range(len(units))], ignore_index=True)
+    gone = table["discarded"].fillna("").astype(str) != ""
+    reasons = Counter(table.loc[gone, "discarded"].astype(str))
+    pool = table[~gone].drop(columns="discarded").reset_index(drop=True)
+    for col in [c for c in pool.columns if c.endswith("_rises") or c == "static_stands"]:
+        pool[col] = pool[col].astype(str).str.lower().eq("true")
     if len(pool):
         dup = pool.duplicated("key")
         reasons["duplicate"] += int(dup.sum())
@@ -139,7 +163,7 @@ def _finalist_unit(unit):
         return (e.reason, e.detail)
 
 
-def pick_finalists(cfg: DesignConfig, pool: pd.DataFrame, executor, reasons: Counter, log=print) -> pd.DataFrame:
+def pick_finalists(cfg: DesignConfig, pool: pd.DataFrame, executor, reasons: Counter, log=print, cache=None) -> pd.DataFrame:
     """F finalists chosen by the objective on the screen's numbers, each standing
     in the engine and planning; failures are discarded (counted) and the choice
     made again (at most 6 rounds)."""
@@ -156,8 +180,26 @@ def pick_finalists(cfg: DesignConfig, pool: pd.DataFrame, executor, reasons: Cou
         todo = [int(c) for c in chosen["candidate"] if int(c) not in checked]
         log(f"finalists, round {rnd + 1}: {len(chosen)} chosen (screen |r| max {terms['max_abs_r']:.2f}, "
             f"rising {terms['rising']:.0%}); {len(todo)} to check in the engine and the planner")
+        from lgp.app.cache import input_key
+        from lgp.app.stages import effort_key_inputs, engine_key_inputs
+
+        depends = {"code": _code_key(), "engine": engine_key_inputs(cfg.engine, "models.risk.core"),
+                   "effort": effort_key_inputs()}
         units = [(draw(c, cfg.seed, cfg.budget).data, cfg.engine, cfg.seed) for c in todo]
-        for c, (status, value) in zip(todo, executor.map(_finalist_unit, units)):
+        fkeys = [input_key(data=repr(u[0]), engine_name=u[1], seed=u[2], **depends) for u in units]
+        got = {j: cache.get("finalist", fkeys[j]) if cache is not None else None for j in range(len(units))}
+        need = [j for j in range(len(units)) if got[j] is None]
+
+        def checked_one(i, res):
+            j = need[i]
+            got[j] = pd.DataFrame([{"status": res[0], "value": str(res[1])}])
+            if cache is not None:
+                cache.put("finalist", fkeys[j], got[j])
+
+        executor.map(_finalist_unit, [units[j] for j in need], checked_one)
+        results = [(str(got[j]["status"].iloc[0]), got[j]["value"].iloc[0]) for j in range(len(units))]
+        for c, (status, value) in zip(todo, results):
+            value = float(value) if status == "ok" else value
             if status == "ok":
                 checked[c] = value
             else:
@@ -230,13 +272,13 @@ def run_design(cfg: DesignConfig, out: Path, executor, cache, log=print) -> Desi
     check_config(cfg)
     timings = {}
     t0 = time.perf_counter()
-    pool, reasons = screen(cfg, executor, log)
+    pool, reasons = screen(cfg, executor, log, cache)
     timings["screen"] = time.perf_counter() - t0
     log(f"screen: {len(pool)} of {cfg.candidates} candidates pass ({', '.join(f'{n} {r}' for r, n in reasons.most_common())})")
     if len(pool) < cfg.trials:
         raise RuntimeError(f"only {len(pool)} of {cfg.candidates} candidates pass the screen; --trials {cfg.trials} needs more")
     t1 = time.perf_counter()
-    fin = pick_finalists(cfg, pool, executor, reasons, log)
+    fin = pick_finalists(cfg, pool, executor, reasons, log, cache)
     timings["finalists"] = time.perf_counter() - t1
     folder = out / "finalists"
     folder.mkdir(parents=True, exist_ok=True)

@@ -37,7 +37,7 @@ PRIOR_LO, PRIOR_HI = 0.05, 0.25
 #: paper's 0.065 d, the analysis's 0.10 and 0.15 d, and the ends of the prior; every
 #: one a point of the wide grid (lgp.paper.WIDE_SIGMA_GRID), so the faithful check
 #: runs through the project's risk stage unchanged.
-PRIOR_GRID: tuple[float, ...] = (0.05, 0.065, 0.08, 0.10, 0.12, 0.15, 0.18, 0.21, 0.25)
+PRIOR_GRID: tuple[float, ...] = (0.05, 0.065, 0.08, 0.10, 0.12, 0.15, 0.18, 0.20, 0.25)
 #: Runs per sigma of the screen (common random numbers across sigma).
 SCREEN_RUNS = 100
 #: A risk curve "rises within the prior" when risk(0.25 d) - risk(0.05 d) is at least this.
