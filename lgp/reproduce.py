@@ -37,7 +37,7 @@ from lgp.app.progress import log as progress_log
 from lgp.app.cache import library_versions, write_csv_atomic
 from lgp.app.config import RunConfig
 from lgp import owned
-from lgp.app.manifest import (MANIFEST, OutputLock, TimedCache, check_output_folder, expand, file_sha256, input_hash,
+from lgp.app.manifest import (MANIFEST, OutputLock, TimedCache, check_output_folder, file_sha256, input_hash,
                               write_manifest)
 from lgp.app.page import write_index
 from lgp.app.pictures import rendered_trial_pictures
@@ -436,7 +436,10 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
                   "slices_per_phase": args.slices, **{k: repr(v) if k == "budget" else v for k, v in args.planner_choice().items()}}
     inputs = {"trial_files": {t.id: t.digest for t in trials},
               "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
-    files = list(dict.fromkeys(expand(written)))
+    # Every file of the staging folder is this run's (the listed outputs and what they
+    # brought along, e.g. replays/meshcat.min.js): the manifest lists them all.
+    # (`written`, the outputs named by each stage, lie among them.)
+    files = [stage / f for f in owned.staged_files(stage)]
     write_manifest(out, files, command=[PROG, *(sys.argv[1:] if argv is None else argv)],
                    parameters=parameters, inputs=inputs, input_hash=input_hash(**parameters, **inputs),
                    engine=engine_description(args.engine, software["engine"]), software=software,

@@ -183,7 +183,9 @@ def _docs_link(name: str, out: Path, text: str) -> str:
     from lgp.app.cache import ROOT
 
     target = ROOT / "docs" / name
-    if Path(out).name.startswith(".lgp-new-"):  # a run's staging folder (lgp/owned.py): the page will live one up
+    from lgp.owned import STAGING_PREFIX
+
+    if Path(out).name.startswith(STAGING_PREFIX):  # a run's staging folder (lgp/owned.py): the page will live one up
         out = Path(out).parent
     if not target.exists():
         return f"{_e(text)} (docs/{_e(name)})"
