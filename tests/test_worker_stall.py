@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from lgp.executor.processes import STALL_ENV, _cpu_and_state, stall_seconds_default
-from tests.test_worker_death import _workers
+from tests.test_worker_death import _workers, undisturbed  # noqa: F401  (a module fixture: the run without a fault)
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 
@@ -135,3 +135,85 @@ def test_the_stall_limit_comes_from_the_environment_when_it_is_a_number(monkeypa
     for bad in ("abc", "-1", "nan", "0"):
         monkeypatch.setenv(STALL_ENV, bad)
         assert stall_seconds_default() == 300.0
+
+
+@pytest.mark.slow  # a real lgp.reproduce run and its undisturbed twin (shared with test_worker_death)
+def test_reproduce_survives_a_worker_stopped_mid_effort_with_identical_csvs(tmp_path, undisturbed):
+    """The issue's probe: `kill -STOP` one worker of a default (process-pool) run while
+    it plans (it hung forever at [effort] 11/12); with LGP_STALL_SECONDS=5 the run
+    replaces the worker, ends by itself, exit 0, with an undisturbed run's CSVs."""
+    import threading
+
+    from tests.test_worker_death import RUN, _csvs
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT), STALL_ENV: "5"}
+    proc = subprocess.Popen(RUN + ["--out", str(tmp_path / "hit")], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    lines, seen = [], threading.Event()
+
+    def read():
+        for line in proc.stderr:
+            lines.append(line)
+            if "[effort  1/2]" in line:
+                seen.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    assert seen.wait(240), "".join(lines)[-3000:]
+    victims = _workers(proc.pid)
+    assert victims
+    os.kill(victims[0], signal.SIGSTOP)
+    try:
+        proc.wait(timeout=240)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail("the run hung after a worker was stopped:\n" + "".join(lines)[-3000:])
+    reader.join(5)
+    err = "".join(lines)
+    assert proc.returncode == 0, err[-3000:]
+    assert "made no progress" in err and "SIGSTOP" in err, err[-3000:]
+    want, got = _csvs(undisturbed), _csvs(tmp_path / "hit")
+    for name in want:
+        assert got[name].equals(want[name]), name
+
+
+_IDLE = textwrap.dedent("""
+    import json, os, signal, sys, time
+    from lgp.executor import ProcessExecutor
+
+    def pid(_):
+        t = time.monotonic()
+        while time.monotonic() - t < 0.2:
+            pass
+        return os.getpid()
+
+    def unit(k):
+        t = time.monotonic()
+        while time.monotonic() - t < 0.05:
+            pass
+        return k
+
+    if __name__ == "__main__":
+        with ProcessExecutor(2, "fork") as ex:
+            pids = sorted(set(ex.map(pid, range(6))))
+            os.kill(pids[0], signal.SIGSTOP)  # stopped while idle, between two maps
+            time.sleep(0.2)
+            out = ex.map(unit, list(range(20)))
+        print(json.dumps(out))
+""")
+
+
+@pytest.mark.slow  # a subprocess pool and a 1.5 s stall limit
+def test_a_worker_stopped_while_idle_neither_hangs_the_next_map_nor_the_close(tmp_path):
+    """An idle worker takes no unit once stopped; the other does the map, but the
+    pool's shutdown waited for the stopped one forever."""
+    script = tmp_path / "idle.py"
+    script.write_text(_IDLE)
+    try:
+        r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=90,
+                           env={**os.environ, "PYTHONPATH": str(ROOT), STALL_ENV: "1.5"})
+    except subprocess.TimeoutExpired:
+        pytest.fail("the map or the close hung on a worker stopped while idle")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert json.loads(r.stdout) == list(range(20))
+    assert "stopped (state T: SIGSTOP or Ctrl-Z)" in r.stderr, r.stderr

@@ -244,15 +244,20 @@ class ProcessExecutor:
                 continue
             unit = table.get(p.pid, -1)
             seen = _cpu_and_state(p.pid)
-            if unit < 0 or seen is None:
+            if seen is None:
                 self._watch.pop(p.pid, None)
                 continue
             ticks, state = seen
+            stopped = state in ("T", "t")
+            if unit < 0 and not stopped:  # idle: waiting for work uses no CPU, and that is fine
+                self._watch.pop(p.pid, None)
+                continue
             last = self._watch.get(p.pid)
             if last is None or last[0] != unit or last[1] != ticks:
                 self._watch[p.pid] = (unit, ticks, now)
                 continue
-            if now - last[2] >= self.stall_seconds:
+            if now - last[2] >= self.stall_seconds:  # busy without CPU time, or stopped while idle (it would
+                # never take work again, and the pool's shutdown would wait for it forever)
                 why = ("stopped (state T: SIGSTOP or Ctrl-Z)" if state in ("T", "t") else f"state {state}")
                 self._stalled[p.pid] = (f"made no progress for {now - last[2]:.0f} s, {why}: killed "
                                         f"(no CPU time for {self.stall_seconds:g} s; {STALL_ENV} sets the limit)")
@@ -392,6 +397,12 @@ class ProcessExecutor:
 
     def close(self) -> None:
         if self._pool is not None:
+            for p in self._processes():  # a stopped worker never exits: shutdown would wait for it forever
+                seen = _cpu_and_state(p.pid) if p.exitcode is None else None
+                if seen is not None and seen[1] in ("T", "t"):
+                    print(f"lgp.executor: worker process {p.pid} is stopped (state T: SIGSTOP or Ctrl-Z): killed at "
+                          "the end of the run", file=sys.stderr, flush=True)
+                    p.kill()
             self._pool.shutdown(wait=True)
             self._pool, self._procs = None, []
 
