@@ -8,7 +8,7 @@ and the first N candidates of a larger pool are the same N.
 
 | kind | B (every block a 1-inch cube, yaw 0) | continuous parameters |
 |---|---|---|
-| staircase | a column whose every level steps by dx in +x | dx in [0.05, 0.35] d |
+| staircase | a column whose every level steps by dx sideways | dx in [0.05, 0.35] d |
 | zigzag | a column whose levels alternate +a, -a | a in [0.1, 0.48] d |
 | bridge | two pillars of h, gap g, a lintel, 0-2 blocks on it | g in [0.1, 0.9] d, top offsets |
 | cantilever | a column, then blocks stepping out by o each, maybe a counterweight | o in [0.1, 0.5] d |
@@ -71,10 +71,24 @@ def _col(x: float, y: float, h: int, base: int = 0) -> list[tuple[float, float, 
     return [(x, y, base + k) for k in range(h)]
 
 
+#: Kinds drawn along x below and turned to run across the view (along y): the
+#: pictures look from the agent's side (-x), so an offset in depth would not show.
+ACROSS = ("staircase", "zigzag", "bridge", "cantilever", "arch", "precarious")
+
+
 def structure(kind: str, rng: np.random.Generator, budget: int = MAX_BLOCKS) -> tuple[list[tuple[float, float, int]], str, dict]:
     """Cells (dx, dy, level) of B relative to S, a description and the drawn
-    parameters; at most `budget` blocks (a draw over it is cut to the budget
-    by the caller's check, not here: kinds draw sizes within it)."""
+    parameters. Offsets, spans and overhangs run across the view (y), where a
+    person looking at the picture sees them."""
+    cells, text, params = _structure(kind, rng, budget)
+    if kind in ACROSS:
+        cells = [(y, x, lv) for x, y, lv in cells]
+    return cells, text, params
+
+
+def _structure(kind: str, rng: np.random.Generator, budget: int = MAX_BLOCKS) -> tuple[list[tuple[float, float, int]], str, dict]:
+    """`structure` as drawn (the ACROSS kinds along x); a draw may exceed the
+    budget (the screen's check discards it)."""
     b = max(1, int(budget))
 
     def n_in(lo: int, hi: int) -> int:  # a count in [lo, min(hi, b)]
@@ -84,7 +98,7 @@ def structure(kind: str, rng: np.random.Generator, budget: int = MAX_BLOCKS) -> 
     if kind == "staircase":
         h, dx = n_in(2, 10), float(rng.uniform(0.05, 0.35)) * d
         cells = [(k * dx - (h - 1) * dx / 2, 0.0, k) for k in range(h)]
-        return cells, f"staircase column of {h}, each level {dx / d:.2f} d further in +x", {"h": h, "step": dx / d}
+        return cells, f"staircase column of {h}, each level {dx / d:.2f} d further to the side", {"h": h, "step": dx / d}
     if kind == "zigzag":
         h, a = n_in(3, 10), float(rng.uniform(0.1, 0.48)) * d
         cells = [((a if k % 2 else 0.0), 0.0, k) for k in range(h)]
