@@ -32,7 +32,17 @@ from analysis.pairs import PAPER_NO_DIFFERENCE, TIE_REL, pair_table
 
 EASY_COLOUR = "tab:red"
 HARD_COLOUR = "tab:blue"
-MODEL_COLOURS = {"full": "black", "effort": "tab:green", "risk": "tab:orange"}
+MODEL_COLOURS = {"full": "black", "effort": "tab:green", "risk": "tab:orange",
+                 # heuristic baselines (analysis.spec): no physics; the composites in strong colours
+                 "height": "#9ecae1", "blocks": "#c6dbef", "stacked": "#6baed6", "distance": "#bcbddc",
+                 "actions": "#dadaeb", "depth": "#4292c6",
+                 "effort+height": "tab:purple", "effort+stacked": "tab:brown"}
+
+
+def _models_in(summary: pd.DataFrame) -> list[str]:
+    """The paper's models first (MODELS), then every other model of the table in its order."""
+    present = list(dict.fromkeys(summary["model"]))
+    return [m for m in MODELS if m in present] + [m for m in present if m not in MODELS]
 SIMULATED_TITLE = "SIMULATED participants (not human data)"
 DATASET_LABELS = {"difficulty": "Estimated Difficulty", "time": "Estimated Time",
                   "build": "Build Time"}
@@ -107,17 +117,18 @@ def plot_model_correlations(summary: pd.DataFrame, out_dir: str | Path,
     (`summarize_bootstrap`). Returns the PNG and PDF paths.
     """
     datasets = ordered_datasets(summary["dataset"].unique())
-    models = [m for m in MODELS if m in set(summary["model"])]
-    fig = Figure(figsize=(2.4 * len(datasets) + 3.0, 4.2), layout="constrained")
+    models = _models_in(summary)
+    fig = Figure(figsize=(2.4 * len(datasets) * min(max(1.0, len(models) / 4), 1.8) + 3.0, 4.2), layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.subplots()
-    offsets = np.linspace(-0.22, 0.22, len(models)) if len(models) > 1 else np.zeros(1)
+    spread = 0.22 if len(models) <= 3 else 0.4
+    offsets = np.linspace(-spread, spread, len(models)) if len(models) > 1 else np.zeros(1)
     for off, model in zip(offsets, models):
         s = summary[summary["model"] == model].set_index("dataset").reindex(datasets)
         xs = np.arange(len(datasets)) + off
         med = s["r_median"].to_numpy()
         err = np.vstack([med - s["r_low"].to_numpy(), s["r_high"].to_numpy() - med])
-        ax.errorbar(xs, med, yerr=err, fmt="o", ms=8, capsize=3, color=MODEL_COLOURS[model],
+        ax.errorbar(xs, med, yerr=err, fmt="o", ms=8 if len(models) <= 3 else 5, capsize=3, color=MODEL_COLOURS[model],
                     label=MODEL_LABELS[model])
     ax.axhline(0, color="0.85", lw=0.8, zorder=0)
     ax.set_xticks(np.arange(len(datasets)), [dataset_label(d) for d in datasets], fontsize=9)
@@ -304,7 +315,9 @@ def _finish(fig: Figure, title: str, datasets: Iterable[str], out_dir: str | Pat
 
 SCHEME_STYLE = {"in-sample": ("in-sample (fit and scored on all 24 trials)", 0.35, ""),
                 "leave-one-pair-out": ("out of sample: leave-one-pair-out", 1.0, ""),
-                "leave-one-trial-out": ("out of sample: leave-one-trial-out", 0.7, "//")}
+                "leave-one-trial-out": ("out of sample: leave-one-trial-out", 0.7, "//"),
+                "leave-one-structure-out": ("out of sample: folds by structure (identical B held out together)", 0.85,
+                                            "..")}
 
 
 def plot_model_comparison(summary: pd.DataFrame, out_dir: str | Path, stem: str = "fig4_model_comparison",
@@ -319,10 +332,11 @@ def plot_model_comparison(summary: pd.DataFrame, out_dir: str | Path, stem: str 
     from matplotlib.patches import Patch
 
     datasets = ordered_datasets(summary["dataset"].unique())
-    models = [m for m in MODELS if m in set(summary["model"])]
+    models = _models_in(summary)
     schemes = [s for s in SCHEME_STYLE if s in set(summary["scheme"])]
     panels = 2 if gain is not None else 1
-    fig = Figure(figsize=(2.9 * len(datasets) + 2.6, 4.2 * panels + 0.4), layout="constrained")
+    wide = min(max(1.0, len(models) * len(schemes) / 9), 2.0)
+    fig = Figure(figsize=(2.9 * len(datasets) * wide + 2.6, 4.2 * panels + 0.4), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(panels, 1, squeeze=False)[:, 0]
 
@@ -351,20 +365,25 @@ def plot_model_comparison(summary: pd.DataFrame, out_dir: str | Path, stem: str 
         ax.legend(handles=handles, fontsize=8, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
 
     ax = axes[0]
-    bars(ax, summary, "r", "r_low", "r_high", models)
+    centred = "r_low_centred" in summary
+    bars(ax, summary, "r", "r_low_centred" if centred else "r_low", "r_high_centred" if centred else "r_high", models)
     ax.set_ylabel("correlation with mean z-scores (r)")
     low = np.nanmin(summary["r_low"]) if "r_low" in summary else np.nanmin(summary["r"])
     ax.set_ylim(min(0.0, float(low) - 0.05), 1.02)
     ax.set_title("r of each model: fit and scored on all trials (pale) or predicting held-out trials", fontsize=9)
     if gain is not None:
         ax = axes[1]
-        bars(ax, gain, "gain", "gain_low", "gain_high", ["full"])  # Eq. 1 only: risk-only's losses dwarf the scale
+        # Eq. 1 and its two no-physics competitors with as many parameters (risk-only's losses dwarf the scale)
+        bars(ax, gain, "gain", "gain_low_centred" if "gain_low_centred" in gain else "gain_low",
+             "gain_high_centred" if "gain_high_centred" in gain else "gain_high",
+             [m for m in ("full", "effort+height", "effort+stacked") if m in set(gain["model"])])
         ax.set_ylabel("RMSE of effort-only minus\nthe model's (z units)")
-        ax.set_title("Eq. 1's gain over effort-only: above 0 it predicts better. In sample it cannot fall below 0; "
-                     "out of sample it can", fontsize=9)
+        ax.set_title("Gain over effort-only (Eq. 1 and effort + a heuristic): above 0 it predicts better. In sample it "
+                     "cannot fall below 0; out of sample it can. Whiskers: bootstrap interval centred on the gain",
+                     fontsize=9)
     n_boot = int(summary["n_boot"].max()) if "n_boot" in summary and summary["n_boot"].notna().any() else 0
     title = ("Models in sample and out of sample (sigma chosen inside each fold); bars: full sample, whiskers: 95% "
-             f"interval over {n_boot} bootstrap resamples")
+             f"interval over {n_boot} bootstrap resamples" + (", centred on the bar" if centred else ""))
     return _finish(fig, title, datasets, out_dir, stem)
 
 

@@ -25,6 +25,7 @@ about a second.
 """
 from __future__ import annotations
 
+import functools
 from typing import Sequence
 
 import numpy as np
@@ -99,3 +100,42 @@ def paper_features(samples: int = 30, seed: int = 0) -> pd.DataFrame:
     import stimuli
 
     return trial_features(stimuli.load_paper(), samples, seed)
+
+
+def target_key(target, decimals: int = 6) -> tuple:
+    """An order-free key of a target scene: its blocks' positions (m, relative to
+    the blocks' mean x and y: the same structure built elsewhere on the table is
+    the same structure), sizes and yaw (mod a quarter turn, cubes look the same)
+    rounded to `decimals`, sorted; with the fixed boxes a block rests on (same
+    frame; a bucket off to the side is not part of the structure). Colour is not
+    part of it. Two trials with the same key build the same B."""
+    from lgp.scene.support import support_graph
+    origin = np.zeros(3)
+    if len(target.blocks):
+        origin[:2] = np.mean([b.p_WB[:2] for b in target.blocks], axis=0)
+    blocks = sorted(tuple(np.round(np.concatenate([b.p_WB - origin, b.size, [np.mod(b.yaw, np.pi / 2)]]), decimals))
+                    for b in target.blocks)
+    under = {s for supporters in support_graph(target).values() for s in supporters}
+    fixed = sorted(tuple(np.round(np.concatenate([f.p_WO - origin, f.size]), decimals))
+                   for f in target.fixed if f.name in under)
+    return tuple(blocks), tuple(fixed)
+
+
+@functools.lru_cache(maxsize=4)
+def paper_identical_targets() -> tuple[tuple[str, ...], ...]:
+    """`identical_targets` of the paper's 24 trial files (read once per process)."""
+    import stimuli
+
+    return tuple(tuple(g) for g in identical_targets(stimuli.load_paper()))
+
+
+def identical_targets(trials: Sequence) -> list[list[str]]:
+    """Sets (of two or more trial ids) whose B is the same structure (`target_key`),
+    in order of first appearance: what folds by structure hold out together."""
+    import stimuli
+
+    groups: dict[tuple, list[str]] = {}
+    for t in trials:
+        trial = stimuli.load_trial(t) if isinstance(t, str) else t
+        groups.setdefault(target_key(trial.target), []).append(trial.id)
+    return [ids for ids in groups.values() if len(ids) > 1]

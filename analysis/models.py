@@ -30,7 +30,10 @@ from analysis.spec import RISK_BASES, ModelSpec, ModelSpecError
 #: Model names used in every table: Eq. 1, effort-only, risk-only.
 MODELS: tuple[str, ...] = ("full", "effort", "risk")
 #: Human-readable labels for figures.
-MODEL_LABELS = {"full": "Full (effort + risk)", "effort": "Effort only", "risk": "Risk only"}
+MODEL_LABELS = {"full": "Full (effort + risk)", "effort": "Effort only", "risk": "Risk only",
+                "height": "Height of B (levels)", "blocks": "Blocks in B", "stacked": "Stacked blocks in B",
+                "distance": "Transport distance", "actions": "Actions of the plan", "depth": "Support-graph depth",
+                "effort+height": "Effort + height (no risk)", "effort+stacked": "Effort + stacked (no risk)"}
 #: What b1, b2 multiply in each model (b0 is the intercept).
 MODEL_TERMS = {"full": ("E(1-R)", "E*R"), "effort": ("E",), "risk": ("R",)}
 #: Aggregates of risk through the build (models/risk/build.py, docs/results.md) that

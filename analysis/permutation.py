@@ -102,7 +102,9 @@ def cv_gain(Y: np.ndarray, E: np.ndarray, risk: np.ndarray, scheme: str = SCHEME
     (S, T) or (B, S, T); returns (B, D). `groups` the structure groups (default:
     from `risk` when it is one (S, T) table)."""
     if scheme == STRUCTURE_SCHEME and groups is None:
-        groups = structure_groups(TRIAL_IDS, np.asarray(risk))
+        from analysis.heuristics import paper_identical_targets
+
+        groups = structure_groups(TRIAL_IDS, np.asarray(risk), paper_identical_targets())
     preds, _, _ = cross_validate(Y, E, {"R": risk}, ["full", "effort"], scheme, pool=pool, groups=groups)
     return scores(Y, preds["effort"])["rmse"] - scores(Y, preds["full"])["rmse"]
 
@@ -128,7 +130,12 @@ def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_
     E = effort_per_trial(effort).to_numpy()
     datasets = ordered_datasets(means)
     Y = np.stack([np.asarray(means[d], float) for d in datasets])[None]     # (1, D, T)
-    groups = structure_groups(TRIAL_IDS, grid.risk) if scheme == STRUCTURE_SCHEME else None
+    if scheme == STRUCTURE_SCHEME:
+        from analysis.heuristics import paper_identical_targets
+
+        groups = structure_groups(TRIAL_IDS, grid.risk, paper_identical_targets())
+    else:
+        groups = None
     observed = cv_gain(Y, E, grid.risk, scheme, groups=groups)[0]            # (D,)
     X = np.column_stack([np.ones(len(E)), E])
     fit = (X @ np.linalg.lstsq(X, Y[0].T, rcond=None)[0]).T                  # (D, T) effort-only fit

@@ -215,7 +215,9 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
             from analysis.heuristics import FEATURES
 
             feats = {f: feature_vector(features, f) for f in FEATURES}
-        groups = structure_groups(TRIAL_IDS, source_R.risk)
+        from analysis.heuristics import paper_identical_targets
+
+        groups = structure_groups(TRIAL_IDS, source_R.risk, paper_identical_targets())
         results.update(_comparison(means, boot_means, E, grids, models, comparisons, in_sample, seed, n_perm, draw,
                                    feats, groups))
         results["settings"] = results["settings"].assign(

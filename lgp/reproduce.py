@@ -372,7 +372,8 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
                                 seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
                                 build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
                                 risk_measure=args.risk_measure, n_perm=args.n_perm,
-                                pair_names={t.pair: t.dimension for t in paper})
+                                pair_names={t.pair: t.dimension for t in paper},
+                                features=_heuristics(paper, args) if human is not None and len(paper) == len(TRIAL_IDS) else None)
         written += [Path(path) for path in analysis["files"]["path"]]
         if args.recovery:
             from lgp.app.recovery import list_files, recovery_outputs
@@ -457,6 +458,15 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
             print(f"  {path}")
     print(end_of_run(time.perf_counter() - t0, cache, final, len(files)))
     return 0
+
+
+def _heuristics(paper, args):
+    """The heuristic predictors of the paper's trials (analysis.heuristics), from the
+    layouts of A the effort stage planned (its M and seed): the comparison's
+    no-physics competitors."""
+    from analysis.heuristics import trial_features
+
+    return trial_features(paper, args.samples, args.seed)
 
 
 def end_of_run(seconds: float, cache, out: Path, n_files: int) -> str:

@@ -14,7 +14,7 @@ from scipy import stats
 
 from analysis import (TRIAL_IDS, bootstrap_model_correlations, resample_trial_means, risk_at_sigma,
                       run_analysis, simulate_participants, trial_means, zscore_responses)
-from analysis.crossval import (SCHEMES, CrossValidationError, RiskGrid, bootstrap_comparison, cross_validate,
+from analysis.crossval import (SCHEMES, STRUCTURE_SCHEME, CrossValidationError, RiskGrid, bootstrap_comparison, cross_validate,
                                make_folds, model_comparison, redraw_risk, risk_grid, scores, verdicts)
 from analysis.data import HumanDataError
 from analysis.permutation import KINDS, check_count, draw_permutations, permutation_test
@@ -331,10 +331,10 @@ def test_run_analysis_writes_in_and_out_of_sample_tables_the_same_whatever_jobs(
         out = run_analysis(sim, E, risk, tmp_path / f"j{jobs}", seed=3, n_boot=60, n_perm=40, jobs=jobs, figures=False)
         files[jobs] = {p: open(p, "rb").read() for p in out["files"]["path"] if "comparison" in p or "cv_" in p
                        or "permutation" in p}
-    assert len(files[1]) == 7
+    assert len(files[1]) == 8
     assert [v for _, v in sorted(files[1].items())] == [v for _, v in sorted(files[2].items())]
     mc = out["model_comparison"]
-    assert set(mc["scheme"]) == set(SCHEMES) and len(mc) == 3 * 3 * 3
+    assert set(mc["scheme"]) == set(SCHEMES) | {STRUCTURE_SCHEME} and len(mc) == 3 * 4 * 3
     assert (out["fits"]["scheme"] == "in-sample").all() and (out["bootstrap_tests"]["scheme"] == "in-sample").all()
     # the in-sample row is the paper's fit
     fits = out["fits"].set_index(["dataset", "model"])
@@ -342,6 +342,50 @@ def test_run_analysis_writes_in_and_out_of_sample_tables_the_same_whatever_jobs(
     np.testing.assert_allclose(ins["r"], fits.loc[ins.index, "r"], rtol=1e-10)
     assert (out["settings"]["risk_draw"] == "binomial").all()
     assert out["permutation_test"]["p_value"].between(1 / 41, 1).all()
+
+
+@pytest.mark.slow
+def test_run_analysis_fits_every_heuristic_model_like_effort_and_every_centred_interval_holds_its_point(tmp_path, E):
+    from analysis.heuristics import FEATURES
+    from analysis.spec import HEURISTIC_MODELS
+
+    risk = zero_heavy_risk(2)
+    rng = np.random.default_rng(1)
+    feats = pd.DataFrame({"trial": list(TRIAL_IDS), **{f: rng.integers(1, 9, 24).astype(float) for f in FEATURES}})
+    out = run_analysis(_sim(E, risk), E, risk, tmp_path / "h", seed=3, n_boot=60, n_perm=20, jobs=1, figures=False,
+                       features=feats)
+    mc = out["model_comparison"]
+    for scheme in (*SCHEMES, STRUCTURE_SCHEME):
+        assert set(HEURISTIC_MODELS) <= set(mc.loc[mc["scheme"] == scheme, "model"])
+    # in sample a heuristic model's r is its least-squares fit's (fit_models), as effort-only's
+    fits = out["fits"].set_index(["dataset", "model"])
+    ins = mc[mc["scheme"] == "in-sample"].set_index(["dataset", "model"])
+    np.testing.assert_allclose(ins["r"], fits.loc[ins.index, "r"], rtol=1e-10)
+    for table, score in ((mc, "r"), (mc, "rmse"), (out["bootstrap_summary"], "r"), (out["model_comparison_gain"], "gain")):
+        ok = table[np.isfinite(table[score])]
+        assert (ok[f"{score}_low_centred"] <= ok[score]).all() and (ok[score] <= ok[f"{score}_high_centred"]).all()
+    held = out["model_comparison_held_out_tests"]
+    assert {("full", "effort+height"), ("full", "effort+stacked")} <= set(zip(held["model_a"], held["model_b"]))
+    assert held["p_value"].between(0, 1).all() and (held.loc[held.scheme == STRUCTURE_SCHEME, "n_folds"] >= 2).all()
+    assert (out["model_comparison_tests"]["method"].str.contains("biased")).all()
+    assert set(out["permutation_test"]["kind"]) == set(KINDS)
+    assert out["permutation_test"].loc[out["permutation_test"]["kind"] == "shuffle", "calibration"].str.startswith(
+        "NOT CALIBRATED").all()
+
+
+def test_centred_interval_holds_its_point_where_the_percentile_interval_does_not():
+    from analysis.bootstrap import centred_interval
+
+    rng = np.random.default_rng(0)
+    boot = 0.9 - np.abs(rng.normal(0.05, 0.02, 500))   # every resample below the point, as r of resampled means
+    point = 0.99
+    assert np.percentile(boot, 97.5) < point           # the paper's interval misses the point
+    lo, hi = centred_interval(point, boot)
+    assert lo <= point <= hi
+    d = boot - np.median(boot)                          # by hand: the median-centred quantiles added to the point
+    assert lo == pytest.approx(point + np.quantile(d, 0.025)) and hi == pytest.approx(point + np.quantile(d, 0.975))
+    assert centred_interval(0.999, boot + 0.1, bounds=(-1, 1))[1] <= 1.0
+    assert all(np.isnan(centred_interval(np.nan, boot)))
 
 
 def test_run_analysis_refuses_bad_counts_and_partial_data_writing_nothing(tmp_path, E):
@@ -416,4 +460,4 @@ def test_reproduce_writes_the_comparison_the_permutations_and_the_recovery(tmp_p
     page = (out / "index.html").read_text()
     assert 'id="comparison"' in page and "SIMULATED participants, not human data" in page
     perm = pd.read_csv(out / "analysis" / "permutation_test.csv")
-    assert (perm["n_perm"] == 9).all() and len(perm) == 2 * 2
+    assert (perm["n_perm"] == 9).all() and len(perm) == len(KINDS) * 2

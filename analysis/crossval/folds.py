@@ -72,10 +72,12 @@ def make_folds(scheme: str, trials: Sequence[str] = TRIAL_IDS) -> tuple[np.ndarr
 def structure_groups(trials: Sequence[str], risk: np.ndarray | None = None,
                      same: Sequence[Sequence[str]] = ()) -> list[tuple[int, ...]]:
     """Groups of trial indices for STRUCTURE_SCHEME: the connected components of
-    "nE and nH are a pair", "identical risk curves" (every column of `risk` (S, T)
-    within SAME_CURVE_ATOL of another at every sigma: the same B, simulated with the
-    same random numbers) and any explicit `same` sets of trial ids (e.g. identical
-    B files). Sorted by first trial; trials in none of these are their own group."""
+    "nE and nH are a pair", the explicit `same` sets of trial ids (identical B:
+    analysis.heuristics.identical_targets) and "identical risk curves that vary
+    with sigma" (columns of `risk` (S, T) within SAME_CURVE_ATOL at every sigma
+    and not constant over sigma: the same B simulated with the same random
+    numbers; a curve that never or always falls says nothing about which B it
+    is). Sorted by first trial; trials in none of these are their own group."""
     T = len(trials)
     parent = list(range(T))
 
@@ -96,9 +98,10 @@ def structure_groups(trials: Sequence[str], risk: np.ndarray | None = None,
         R = np.asarray(risk, dtype=float)
         if R.ndim != 2 or R.shape[1] != T:
             raise CrossValidationError(f"{STRUCTURE_SCHEME}: risk must be (sigmas, {T} trials), got {R.shape}")
+        varies = np.ptp(R, axis=0) > SAME_CURVE_ATOL
         for i in range(T):
             for j in range(i + 1, T):
-                if np.all(np.abs(R[:, i] - R[:, j]) <= SAME_CURVE_ATOL):
+                if varies[i] and varies[j] and np.all(np.abs(R[:, i] - R[:, j]) <= SAME_CURVE_ATOL):
                     join(i, j)
     where = {t: k for k, t in enumerate(trials)}
     for names in same:

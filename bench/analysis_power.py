@@ -1,0 +1,123 @@
+"""Power and false-positive rates of the comparison on the paper's 24 trials
+(analysis.power), all on SIMULATED studies, written as two sections of
+docs/benchmarks.md and CSVs under --out:
+
+    python bench/analysis_power.py --cache results/cache              # both parts
+    python bench/analysis_power.py --only speed                       # the CLI's timing
+    python bench/analysis_power.py --only fpr --fpr-studies 1000      # false-positive rates
+
+* speed: ``python -m analysis.power --studies 200`` (six default worlds, default
+  tests, --jobs 2) in a fresh subprocess, its wall time against the issue's goal
+  (5 minutes on 2 cores), with the load average before and after; its
+  power.csv is kept (the docs' power table is read from it).
+* fpr: every test (analysis.power.TESTS: Freedman-Lane, sign-flip over folds,
+  within-pair, shuffle, direct bootstrap) in the effort-only and pure-noise
+  worlds, --fpr-studies studies each at n = 60, noise 1: the rate of p < .05
+  with its Wilson 95% interval.
+
+Effort, risk and heuristics come from lgp.reproduce's cache (--cache; the wide
+sigma grid, M = 30, N = 100): cached trials are read, missing ones computed.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench.common import machine, write_section  # noqa: E402
+
+
+def speed(cache: str, out: Path, studies: int) -> str:
+    load0 = os.getloadavg()
+    t0 = time.perf_counter()
+    cmd = [sys.executable, "-m", "analysis.power", "--studies", str(studies), "--jobs", "2", "--cache", cache,
+           "--out", str(out / "speed")]
+    r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    wall = time.perf_counter() - t0
+    load1 = os.getloadavg()
+    if r.returncode != 0:
+        raise SystemExit(f"analysis.power failed: {r.stderr.strip().splitlines()[-1:]}")
+    verdict = "within" if wall <= 300 else "NOT within"
+    return (f"`python -m analysis.power --studies {studies} --jobs 2` (six default worlds, default tests "
+            f"Freedman-Lane and sign-flip, 199 permutations): **{wall:.0f} s** wall, {verdict} the goal of 5 minutes "
+            f"on 2 cores. Load average before {load0[0]:.1f}, after {load1[0]:.1f} (1 min; other developers' "
+            f"jobs share the 2 cores). Effort and risk read from the cache.\n")
+
+
+def fpr(cache: str, out: Path, studies: int, slow_studies: int, jobs: int, seed: int, n_perm: int, n_boot: int
+        ) -> tuple[str, pd.DataFrame]:
+    """The cheap tests (Freedman-Lane, sign-flip) on `studies` studies per world; the
+    costly ones (within-pair, shuffle: risk tables per permutation; direct bootstrap:
+    a cross-validation per resample) on the first `slow_studies` of them (the same
+    studies: study s seeds itself)."""
+    from analysis import power as pw
+
+    t0 = time.perf_counter()
+    load0 = os.getloadavg()
+    table = pw.load_trial_table(None, cache, jobs=jobs)
+    kw = dict(participants=60, noise=1.0, seed=seed, jobs=jobs, n_perm=n_perm, n_boot=n_boot)
+    cheap = pw.power(table, ["effort-only", "noise"], studies=studies, tests=("freedman-lane", "sign-flip"), **kw)
+    costly = pw.power(table, ["effort-only", "noise"], studies=slow_studies,
+                      tests=("within-pair", "shuffle", "direct-bootstrap"), **kw)
+    costly = costly[costly["procedure"].str.split(" ").str[0].isin(["within-pair", "shuffle", "direct-bootstrap"])]
+    res = pd.concat([cheap, costly], ignore_index=True)
+    out.mkdir(parents=True, exist_ok=True)
+    res.to_csv(out / "fpr.csv", index=False)
+    cheap.attrs["studies"].to_csv(out / "fpr_studies.csv", index=False)
+    sig = res[res["verdict"].str.contains("beats")]
+    lines = [f"False-positive rates (p <= .05), SIMULATED studies (n = 60 participants, noise 1, {n_perm} "
+             f"permutations, {n_boot} bootstrap resamples), seed {seed}: {studies} studies per world for "
+             f"Freedman-Lane and sign-flip, the first {slow_studies} of them for the costly tests; "
+             f"{time.perf_counter() - t0:.0f} s wall on --jobs {jobs}, load average {load0[0]:.1f} before, "
+             f"{os.getloadavg()[0]:.1f} after. Folds by structure: {table.grouping}.", "",
+             "| test | comparison | studies | effort-only world | pure-noise world |", "|---|---|---|---|---|"]
+    for proc in dict.fromkeys(sig["procedure"]):
+        test, ab = proc.split(" ", 1)
+        cells = []
+        for world in ("effort-only", "noise"):
+            r = sig[(sig["procedure"] == proc) & (sig["world"] == world)].iloc[0]
+            cells.append(f"{100 * r['rate']:.1f}% [{100 * r['rate_low']:.1f}, {100 * r['rate_high']:.1f}]")
+        n = int(sig[sig["procedure"] == proc]["n_studies"].iloc[0])
+        lines.append(f"| {pw.TEST_LABELS[test]} | {ab.replace('>', ' beats ')} | {n} | {cells[0]} | {cells[1]} |")
+    return "\n".join(lines) + "\n", res
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--cache", default="results/cache")
+    p.add_argument("--out", default="results/bench_power")
+    p.add_argument("--only", choices=["speed", "fpr"])
+    p.add_argument("--studies", type=int, default=200)
+    p.add_argument("--fpr-studies", type=int, default=1000)
+    p.add_argument("--fpr-slow-studies", type=int, default=300)
+    p.add_argument("--n-perm", type=int, default=199)
+    p.add_argument("--n-boot", type=int, default=200)
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--docs", default=str(ROOT / "docs" / "benchmarks.md"))
+    args = p.parse_args(argv)
+    out = Path(args.out)
+    if args.only in (None, "speed"):
+        text = speed(args.cache, out, args.studies)
+        print(text)
+        write_section(Path(args.docs), "analysis.power: speed",
+                      f"## analysis.power: speed\n\nMachine: {machine()}.\n\n{text}")
+    if args.only in (None, "fpr"):
+        text, _ = fpr(args.cache, out, args.fpr_studies, args.fpr_slow_studies, args.jobs, args.seed, args.n_perm,
+                      args.n_boot)
+        print(text)
+        write_section(Path(args.docs), "analysis.power: false-positive rates",
+                      f"## analysis.power: false-positive rates\n\nMachine: {machine()}.\n\n{text}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
