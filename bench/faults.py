@@ -510,7 +510,7 @@ def api_cases():
 
     for value in (float("inf"), 1e308, float("nan"), 1.5, -0.1, "0.1"):
         yield f"physical_risk sigma={value!r}", risk(value)
-    for value in (2.5, "4", True, 0):
+    for value in (2.5, "4", True, 0, 10**12):
         yield f"physical_risk n_sims={value!r}", risk(n_sims=value)
     for value in (None, -1, 1.5):
         yield f"physical_risk seed={value!r}", risk(seed=value)

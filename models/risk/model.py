@@ -191,6 +191,11 @@ def check_n_sims(n_sims) -> int:
         raise InputError(f"n_sims must be a whole number >= 1 (runs per sigma; risk is falls / n_sims), got {n_sims!r}")
     if n_sims < 1:
         raise InputError(f"need n_sims >= 1 runs (risk is falls / n_sims), got {n_sims}")
+    from lgp.cli import MAX_N_SIMS
+
+    if n_sims > MAX_N_SIMS:  # the command line's limit: the noise alone would need n_sims x 24 bytes per block
+        raise InputError(f"n_sims {int(n_sims):,} is more than the {MAX_N_SIMS:,} allowed (lgp.cli.MAX_N_SIMS): "
+                         f"the noise of a 10-block scene alone would take {int(n_sims) * 240 / 2**30:.3g} GiB")
     return int(n_sims)
 
 
