@@ -420,3 +420,21 @@ def test_a_failed_build_leaves_the_earlier_study_byte_identical(tmp_path, quick_
     with pytest.raises(OSError):
         ex.build_study(ex.plan_study("difficulty", trials), tmp_path / "new" / "study", log=lambda m: None)
     assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.slow  # the command line's imports
+def test_a_run_inside_or_around_a_running_ones_folder_is_refused_before_it_writes(tmp_path):
+    from lgp import reproduce
+
+    tiny = ["--trials", "1E", "--samples", "1", "--n-sims", "2", "--jobs", "1", "--no-replays"]
+    (tmp_path / "rn" / "figures").mkdir(parents=True)
+    with OutputLock(tmp_path / "rn", f"{PROG} --out rn"):
+        with pytest.raises(OutputFolderBusy, match="lies inside"):
+            reproduce.main([*tiny, "--out", str(tmp_path / "rn" / "figures" / "new")])
+        assert not (tmp_path / "rn" / "figures" / "new").exists()  # the folder it made is gone again
+    earlier_run(tmp_path / "rn", {})  # rn: an earlier run's folder, so only the lock can stop the run
+    with OutputLock(tmp_path / "rn" / "figures", f"{PROG} --out rn/figures"):
+        with pytest.raises(OutputFolderBusy, match="holds"):
+            reproduce.main([*tiny, "--out", str(tmp_path / "rn")])
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*")) == \
+        ["rn", "rn/figures", "rn/manifest.json"]
