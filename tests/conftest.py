@@ -1,10 +1,41 @@
-"""Shared fixtures: the trials (loaded once per session, not at import time), the
-synthetic effort and risk tables of the analysis tests, and the rule that makes
-Drake-engine cases slow.
+"""Shared fixtures and the suite's conventions.
 
-    python -m pytest -q                 # everything
-    python -m pytest -q -m "not slow"   # the fast subset (README: how long each takes)
+    python -m pytest -q                 # everything (budget: 8 min on 2 quiet cores)
+    python -m pytest -q -m "not slow"   # the fast subset (budget: 40 s; README: how long each takes)
+
+Fixtures: the trials (loaded once per session, not at import time), the synthetic
+effort and risk tables of the analysis tests, and the session's one small
+`lgp.reproduce --quick` run (`quick_run`, QUICK_RUN) that end-to-end checks read
+instead of running their own; a test that must rerun copies its cache
+(`copy_of_run`: the cache is keyed by content, so a copy computes nothing again).
+Only the cache tests keep caches of their own.
+
+Slow (`@pytest.mark.slow`, in the full suite only): a case over ~0.5 CPU-s, a Drake or
+PhysX engine case (the rule below), a subprocess, pool or figure-heavy case; a case
+whose B copies an earlier trial's blocks (`trials_with_copies_slow`) when the fast
+subset already checks that B. A second engine runs on each distinct B once
+(`distinct_b_trials`, 17 of 24); MuJoCo on all 24. Measure with bench/pytest_cpu.py
+and bench/test_times.py (CPU seconds per test; wall times on a shared machine follow
+the load).
+
+Numbers must not depend on the CPU's BLAS kernel. A test of the numeric core runs
+the computation in a fresh interpreter under two OpenBLAS core types and compares
+(`under_blas_core`; tests/test_analysis_ties.py::test_two_blas_core_types_choose_the_same_sigmas):
+OPENBLAS_CORETYPE=SkylakeX (AVX-512 kernels) and Haswell (AVX2) round differently,
+and an x86-64 CPU with AVX-512 runs both. The whole fast subset passes under each:
+
+    OPENBLAS_CORETYPE=SkylakeX python -m pytest -q -m "not slow"
+    OPENBLAS_CORETYPE=Haswell python -m pytest -q -m "not slow"
+
+A tie the data leave open is broken by an explicit rule (e.g. the smaller sigma
+within 1e-9, analysis.sigma.least_sigma_index), never left to rounding.
 """
+import functools
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -22,13 +53,56 @@ def pytest_collection_modifyitems(items):
             item.add_marker(pytest.mark.slow)
 
 
-@pytest.fixture(scope="session")
-def trials():
-    """The paper's 24 trials by id (stimuli.load_all, once per session)."""
+@functools.lru_cache(maxsize=None)
+def _paper_trials() -> dict:
     import stimuli
 
     loaded = {t.id: t for t in stimuli.load_all()}
     return {tid: loaded[tid] for tid in TRIAL_IDS}
+
+
+def b_structure(scene, *, translated: bool = True) -> tuple:
+    """What the physics of a scene depends on: every block's centre, yaw and size and
+    every fixed box, in no order, without names or colours; `translated`: relative to
+    the lowest corner of the blocks' centres on the table (a copy moved on the table
+    is the same structure)."""
+    origin = np.zeros(3)
+    if translated:
+        origin[:2] = np.min([b.p_WB for b in scene.blocks], axis=0)[:2]
+    r = lambda v: tuple(np.round(np.asarray(v, float) - origin, 9) + 0.0)  # noqa: E731  (+0.0: no -0.0)
+    return (tuple(sorted((r(b.p_WB), round(float(b.yaw), 9) + 0.0, tuple(np.round(b.size, 9))) for b in scene.blocks)),
+            tuple(sorted((r(f.p_WO), tuple(np.round(f.size, 9))) for f in scene.fixed)))
+
+
+@functools.lru_cache(maxsize=None)
+def same_b_as(*, translated: bool = True) -> dict[str, str]:
+    """Each of the paper's 24 trials -> the first trial (in TRIAL_IDS order) whose
+    Finish state B has the same `b_structure`. Exact copies (B the same blocks at
+    the same places): 1H = 9E = 9H = 11E = 11H and 2E = 2H; moved copies as well
+    (`translated`): 4E = 10E = 10H. 24 trials, 17 distinct B structures."""
+    first: dict[tuple, str] = {}
+    return {tid: first.setdefault(b_structure(t.target, translated=translated), tid)
+            for tid, t in _paper_trials().items()}
+
+
+def distinct_b_trials(*, translated: bool = True) -> list[str]:
+    """The trials whose B is the first of its structure (`same_b_as`): a check that
+    depends only on B's physics runs once per structure."""
+    return [tid for tid, first in same_b_as(translated=translated).items() if tid == first]
+
+
+def trials_with_copies_slow(trial_ids=TRIAL_IDS) -> list:
+    """`trial_ids` as pytest params: each B structure's first trial as is, a trial
+    whose B is a copy of an earlier one (`same_b_as`) marked slow: the fast subset
+    checks every distinct B once, the full suite every trial."""
+    firsts = same_b_as()
+    return [tid if firsts[tid] == tid else pytest.param(tid, marks=pytest.mark.slow) for tid in trial_ids]
+
+
+@pytest.fixture(scope="session")
+def trials():
+    """The paper's 24 trials by id (stimuli.load_all, once per session)."""
+    return _paper_trials()
 
 
 # ----------------------------------------------------------------------------- synthetic model output (analysis tests)
@@ -59,3 +133,75 @@ def make_effort():
 def make_risk():
     """synthetic_risk(seed, sigmas): a tidy (trial, sigma, risk) table, logistic in sigma."""
     return synthetic_risk
+
+
+# ----------------------------------------------------------------------------- one small --quick run for the session
+
+#: The session's --quick run of the paper's 24 trials (2 layouts, 5 runs, 4 sigmas): the
+#: results page, the study's simulated participants and "every trial plans" read it.
+QUICK_RUN = ["--quick", "--samples", "2", "--n-sims", "5", "--sigmas", "0.05", "0.065", "0.08", "0.2"]
+
+
+class _Run:
+    """`python -m lgp.reproduce ARGS --out DIR` started in the background; `wait()`
+    checks it exited 0 (the tail of its stderr if not) and returns DIR."""
+
+    def __init__(self, args: list[str], out: Path, log: Path):
+        self.out, self.log = out, log
+        with open(log, "w") as err:
+            self.process = subprocess.Popen([sys.executable, "-m", "lgp.reproduce", *args, "--out", str(out)],
+                                            stdout=subprocess.DEVNULL, stderr=err)
+        self.code = None
+
+    def wait(self) -> Path:
+        if self.code is None:
+            self.code = self.process.wait()
+        assert self.code == 0, self.log.read_text()[-3000:]
+        return self.out
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+
+
+@pytest.fixture(scope="session")
+def quick_run_started(tmp_path_factory):
+    """The session's QUICK_RUN, started (a fixture that has other work to do meanwhile,
+    as the study build, asks for this one first and waits on `quick_run`)."""
+    run = _Run(QUICK_RUN, tmp_path_factory.mktemp("quick-run"), tmp_path_factory.mktemp("quick-run-log") / "stderr")
+    yield run
+    run.stop()
+
+
+@pytest.fixture(scope="session")
+def quick_run(quick_run_started) -> Path:
+    """The folder of the session's QUICK_RUN (read it, do not write into it: a test
+    that reruns copies it first, `copy_of_run`)."""
+    return quick_run_started.wait()
+
+
+def copy_of_run(run: Path, out: Path) -> Path:
+    """A fresh output folder `out` holding a copy of `run`'s cache only: a rerun with
+    the same trials and parameters computes nothing (the cache is keyed by content)."""
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.copytree(run / "cache", out / "cache")
+    return out
+
+
+#: The OpenBLAS core types a numeric-core test compares (both run on an AVX-512 x86-64 CPU).
+BLAS_CORE_TYPES = ("SkylakeX", "Haswell")
+
+
+def under_blas_core(core: str, script: str, timeout: float = 300) -> str:
+    """stdout of `python -c script` in a fresh interpreter with OPENBLAS_CORETYPE=core
+    (numpy and scipy read it when they load, so it cannot change in-process); fails
+    with the script's stderr if it exits non-zero."""
+    import os
+
+    root = str(Path(__file__).resolve().parents[1])
+    env = dict(os.environ, OPENBLAS_CORETYPE=core, PYTHONPATH=root + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    done = subprocess.run([sys.executable, "-c", script], cwd=root, env=env, capture_output=True, text=True, timeout=timeout)
+    assert done.returncode == 0, f"OPENBLAS_CORETYPE={core}: {done.stderr[-2000:]}"
+    return done.stdout
+

@@ -156,13 +156,10 @@ def test_run_analysis_refuses_a_csv_of_simulated_participants_as_human_data(tmp_
 
 
 @pytest.mark.slow
-def test_demo_labels_every_output_as_simulated(tmp_path):
+def test_demo_labels_every_output_as_simulated(tmp_path, quick_run):
     from analysis import demo
-    from lgp import reproduce
 
-    results = tmp_path / "results"
-    # a real (tiny) model run: every trial, one layout, few simulations
-    reproduce.main(["--out", str(results), "--samples", "1", "--n-sims", "4", "--sigmas", "0.065", "--jobs", "2", "--n-boot", "20"])
-    demo.main(["--results", str(results), "--out", str(tmp_path / "sim"), "--n-boot", "20"])
+    # a real (small) model run: the session's --quick run of every trial (conftest.QUICK_RUN), read only
+    demo.main(["--results", str(quick_run), "--out", str(tmp_path / "sim"), "--n-boot", "20"])
     written = list((tmp_path / "sim").iterdir())
     assert written and all(p.name.startswith("simulated_") for p in written)

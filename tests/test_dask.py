@@ -14,13 +14,20 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-distributed = pytest.importorskip("distributed")
-import cloudpickle  # noqa: E402  (comes with distributed)
+from lgp.executor import DaskExecutor, SchedulerUnreachable, SerialExecutor
 
-from lgp.executor import DaskExecutor, SchedulerUnreachable, SerialExecutor  # noqa: E402
+pytestmark = pytest.mark.slow  # every case starts a cluster or a subprocess
 
-# Workers unpickle functions by module name; this test file is not importable there.
-cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+@pytest.fixture(autouse=True, scope="module")
+def _distributed():
+    """dask.distributed, imported when a case runs, not at collection (the fast
+    subset, which has no case here, does not pay its ~0.5 s import)."""
+    pytest.importorskip("distributed")
+    import cloudpickle  # comes with distributed
+
+    # Workers unpickle functions by module name; this test file is not importable there.
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = ["--trials", "1E", "4H", "10E", "--samples", "2", "--n-sims", "4", "--sigmas", "0.05", "0.08", "--no-replays"]

@@ -9,8 +9,6 @@ offline. Skipped, saying why, only when the browser or playwright is missing
 from __future__ import annotations
 
 import io
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,13 +27,9 @@ def browser():
 
 
 @pytest.fixture(scope="module")
-def results(browser, tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("results")
-    cmd = [sys.executable, "-m", "lgp.reproduce", "--quick", "--samples", "2", "--n-sims", "5",
-           "--sigmas", "0.05", "0.065", "0.08", "0.2", "--out", str(out)]
-    run = subprocess.run(cmd, capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr[-3000:]
-    return out
+def results(browser, quick_run) -> Path:
+    """The session's small --quick run (conftest.QUICK_RUN: 24 trials, 4 sigmas up to 0.2)."""
+    return quick_run
 
 
 def _open(browser, path: Path):

@@ -46,7 +46,6 @@ def browser():
         Path(os.environ["LGP_BENCH_OUT"]).write_text(json.dumps(TIMINGS, indent=1) + "\n")
 
 
-QUICK = ["--quick", "--samples", "2", "--n-sims", "5", "--sigmas", "0.05", "0.065", "0.08"]
 
 
 class _Started:
@@ -63,19 +62,19 @@ class _Started:
 
 
 @pytest.fixture(scope="module")
-def _started(tmp_path_factory):
-    """The --quick run and the first study build, started together (they are
-    independent): (results folder, studies folder, the builds' env, {name: _Started})."""
-    out, root, logs = (tmp_path_factory.mktemp(name) for name in ("results", "studies", "logs"))
+def _started(quick_run_started, tmp_path_factory):
+    """The session's --quick run (conftest.QUICK_RUN) and the first study build,
+    started together (they are independent): (results folder, studies folder, the
+    builds' env, {name: _Started})."""
+    root, logs = (tmp_path_factory.mktemp(name) for name in ("studies", "logs"))
     env = {**os.environ, "LGP_RENDER_CACHE": str(root / "renders")}
     first = ex.TASKS[0]
-    started = {"results": _Started(["-m", "lgp.reproduce", *QUICK, "--out", str(out)], logs / "results.err"),
-               first: _Started(_build_argv(first, root), logs / f"{first}.err", env)}
-    yield out, root, env, started
-    for run in started.values():  # a fixture that failed early leaves nothing running
-        if run.process.poll() is None:
-            run.process.kill()
-            run.process.wait()
+    started = {"results": quick_run_started, first: _Started(_build_argv(first, root), logs / f"{first}.err", env)}
+    yield quick_run_started.out, root, env, started
+    run = started[first]  # a fixture that failed early leaves nothing running (the session's run: conftest)
+    if run.process.poll() is None:
+        run.process.kill()
+        run.process.wait()
 
 
 def _build_argv(task: str, root: Path) -> list[str]:
@@ -84,7 +83,8 @@ def _build_argv(task: str, root: Path) -> list[str]:
 
 @pytest.fixture(scope="module")
 def results(_started) -> Path:
-    """A small --quick run: the effort and risk tables the simulated participants answer from."""
+    """The session's small --quick run: the effort and risk tables the simulated
+    participants answer from (read only: the analysis below reruns into a copy)."""
     out, _, _, started = _started
     started["results"].wait()
     return out
@@ -306,6 +306,8 @@ def test_the_build_console_times_each_build_between_two_key_presses(build_runs, 
 
 
 def test_the_downloads_import_and_run_through_the_paper_analysis(estimation_runs, build_runs, results, tmp_path):
+    from conftest import QUICK_RUN, copy_of_run
+
     files = [str(run[3]) for run in estimation_runs.values()] + [str(run[1]) for run in build_runs.values()]
     human = tmp_path / "human.csv"
     run = subprocess.run([sys.executable, "-m", "analysis.import_study", *files, "--out", str(human)], capture_output=True, text=True)
@@ -314,10 +316,11 @@ def test_the_downloads_import_and_run_through_the_paper_analysis(estimation_runs
     assert table.groupby("dataset")["participant"].nunique().to_dict() == {
         "simulated-build": 2, "simulated-difficulty": 4, "simulated-time": 4}
     assert (table.groupby(["dataset", "participant"]).size() == 24).all()
-    run = subprocess.run([sys.executable, "-m", "lgp.reproduce", *QUICK, "--out", str(results), "--human-data", str(human),
+    out = copy_of_run(results, tmp_path / "results")  # the same run's cache: effort and risk are reused
+    run = subprocess.run([sys.executable, "-m", "lgp.reproduce", *QUICK_RUN, "--out", str(out), "--human-data", str(human),
                           "--allow-simulated"], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr[-3000:]
-    fits = pd.read_csv(results / "analysis" / "simulated_fits.csv")
+    fits = pd.read_csv(out / "analysis" / "simulated_fits.csv")
     assert set(fits["dataset"]) == {"simulated-difficulty", "simulated-time", "simulated-build"}
     # The answers came from Eq. 1 with little noise: the full model fits every dataset closely.
     full = fits[fits["model"] == "full"]

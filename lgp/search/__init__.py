@@ -40,7 +40,11 @@ them; it stops when the gap is closed (no open branch can beat the incumbent) or
 a `Budget` (KOMO solves, seconds, symbolic expansions) runs out. The paper's
 skeleton (Hungarian assignment, the paper's order), when it exists, is the first
 branch solved, with the same random generator as lgp.planner.plan: the search
-never returns more effort than the paper planner on the same layout.
+never returns more effort than the paper planner on the same layout. That is the
+guarantee it gives. A closed gap is weaker than least effort: a branch is a *set*
+of carries, solved in the first order found, and the order of the same carries
+changes KOMO's effort while the bound cannot tell orders apart (tests/test_search.py;
+docs/effort.md, "The search").
 
 The package, by idea: `bound` (the effort and its lower bounds), `problem` (the
 fixed data of one search and the bound still to come), `spots` (candidate

@@ -52,14 +52,22 @@ class Budget:
 
 @dataclass
 class SearchResult:
-    """The least-effort plan found and how far from optimal it may be.
+    """The least-effort plan found, and the gap to the best bound left open.
 
     `effort` (J s) is the plan's block kinetic energy (`kinetic_energy`, the same
     integral as models.effort.kinetic_energy); `bound` the lowest lower bound of
     any branch left unexplored (inf when none is left), capped at `effort`; `gap`
-    = effort - bound >= 0 (0: proved least-effort among the skeletons the search
-    admits). `paper` is the paper planner's skeleton when it exists and was
-    solved, with its effort; `solves`, `expansions`, `seconds` what it cost.
+    = effort - bound >= 0.
+
+    What is guaranteed (tests/test_search.py checks it): `effort` is never above
+    the paper planner's on the same layout (its skeleton is solved first). A
+    closed gap (0) says only that no other *set of carries* the search admits
+    (assignment, set-asides) has a bound below `effort`. It is not least effort
+    over skeletons: carries that differ only in order are one branch, solved in
+    the first order found, and the order changes KOMO's effort under an identical
+    bound (2H, layout 0: the same four carries in reverse order cost 0.23 % less).
+    `paper` is the paper planner's skeleton when it exists and was solved, with
+    its effort; `solves`, `expansions`, `seconds` what it cost.
     """
 
     plan: Plan
@@ -205,7 +213,8 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     symbolic_plan) is solved before the search starts, with the Generator in the
     state lgp.planner.plan would use: the result's effort is then never above
     the paper planner's. Stops when no open branch's bound is below the
-    incumbent (gap closed) or the budget runs out; raises SearchError (a
+    incumbent (gap closed: no other set of carries can beat it; other orders of
+    the same carries are not tried, see SearchResult) or the budget runs out; raises SearchError (a
     PlanningError) when no plan is found, saying whether the task has none or
     the budget ran out, with the best bound reached.
     """
