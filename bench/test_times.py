@@ -4,6 +4,7 @@
     python bench/test_times.py after.csv                  # totals, per module, the slowest tests
     python bench/test_times.py before.csv after.csv       # the same, side by side
     python bench/test_times.py after.csv --over 0.4       # fast-subset tests over 0.4 CPU-s (candidates for slow)
+    python bench/test_times.py after.csv --over 0.45 --write-slow   # ... added to tests/slow_cases.txt (conftest marks them)
     python bench/test_times.py --count                    # tests and asserts in tests/ (AST), for before/after notes
 
 CPU = the test's own CPU seconds plus its children's (subprocesses, pool workers it
@@ -61,12 +62,31 @@ def count_asserts(folder: Path = ROOT / "tests") -> tuple[int, int, int]:
     return functions, checked, asserts
 
 
+SLOW_CASES = ROOT / "tests" / "slow_cases.txt"
+
+
+def write_slow(over: list, source: str, path: Path = SLOW_CASES) -> None:
+    """Add the cases of `over` (node id, row) to `path`, one 'file.py::name[params]  # CPU s' line each."""
+    lines = path.read_text().splitlines() if path.exists() else [
+        "# Fast-subset cases measured over the fast subset's share of CPU seconds: tests/conftest.py marks",
+        "# them slow (they run in the full suite). Written by bench/test_times.py --write-slow; edit freely.",
+        "# file::case  # CPU s measured (its CSV)"]
+    known = {line.split("#", 1)[0].strip() for line in lines}
+    for nodeid, row in over:
+        key = nodeid.split("/")[-1]
+        if key not in known:
+            lines.append(f"{key}  # {row['cpu']:.2f} CPU-s ({source})")
+    path.write_text("\n".join(lines) + "\n")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("csv", nargs="*", type=Path, help="one or two CSVs of bench/pytest_cpu.py (before, after)")
     p.add_argument("--top", type=int, default=30)
     p.add_argument("--over", type=float, help="list the fast-subset tests over this many CPU seconds")
     p.add_argument("--count", action="store_true", help="count test functions and asserts in tests/")
+    p.add_argument("--write-slow", action="store_true",
+                   help="add the fast-subset cases over --over CPU-s to tests/slow_cases.txt (entries there are kept)")
     args = p.parse_args(argv)
     if args.count:
         f, c, a = count_asserts()
@@ -94,6 +114,8 @@ def main(argv=None) -> int:
         print(f"\nfast-subset tests over {args.over} CPU s: {len(over)}, {sum(v['cpu'] for _, v in over):.1f} CPU s")
         for k, v in over:
             print(f"{v['cpu']:8.2f}  {k}")
+        if args.write_slow:
+            write_slow(over, args.csv[-1].name)
     return 0
 
 

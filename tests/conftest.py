@@ -43,13 +43,34 @@ import pytest
 from lgp.paper import SIGMA_GRID, TRIAL_IDS
 
 
+#: Cases measured over the fast subset's share (CPU seconds beside each; written by
+#: `python bench/test_times.py CSV --over 0.45 --write-slow`): in the full suite only.
+SLOW_CASES = Path(__file__).with_name("slow_cases.txt")
+
+
+def slow_cases(path: Path = SLOW_CASES) -> set[str]:
+    """'test_file.py::test_name[params]' (or without [params]: every case) per line; '#' comments."""
+    if not path.exists():
+        return set()
+    return {line.split("#", 1)[0].strip() for line in path.read_text().splitlines()} - {""}
+
+
+def case_key(item) -> str:
+    """How SLOW_CASES names a case: its file's name, '::', its name with parameters."""
+    return f"{Path(str(item.fspath)).name}::{item.name}"
+
+
 def pytest_collection_modifyitems(items):
-    """A case run with the Drake or a PhysX engine (a parameter "drake", "physx",
-    "physx:...") is slow: Drake's hydroelastic contact at 1 ms steps costs seconds
-    per scene, and PhysX is an optional extra; the fast subset checks MuJoCo."""
+    """Slow: a case run with the Drake or a PhysX engine (a parameter "drake",
+    "physx", "physx:..."): Drake's hydroelastic contact at 1 ms steps costs seconds
+    per scene, and PhysX is an optional extra; the fast subset checks MuJoCo. And
+    every case SLOW_CASES lists (measured over the fast subset's share)."""
+    listed = slow_cases()
     for item in items:
         params = getattr(getattr(item, "callspec", None), "params", {})
-        if any(isinstance(v, str) and (v == "drake" or v.split(":")[0] == "physx") for v in params.values()):
+        key = case_key(item)
+        if (any(isinstance(v, str) and (v == "drake" or v.split(":")[0] == "physx") for v in params.values())
+                or key in listed or key.split("[", 1)[0] in listed):
             item.add_marker(pytest.mark.slow)
 
 
