@@ -300,8 +300,7 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
         model = args.risk_model
         check_targets(trials, model, cache)  # an unstable B fails now, not after the effort stage
         effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache, verbose=args.verbose,
-                                       approach_height=args.approach_height, slices_per_phase=args.slices,
-                                       **args.planner_choice())
+                                       spec=args.effort_spec)
         clock.lap("effort")
         effort = summarise_effort(effort_samples, trials)
         risk_runs: list = []
@@ -322,7 +321,7 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,
-            planner_options={"approach_height": args.approach_height, "slices_per_phase": args.slices, **args.planner_choice()})
+            spec=args.effort_spec)
         clock.lap("replays")
         pictures = None
         if isinstance(executor, (ProcessExecutor, SerialExecutor)):  # local, warm workers: render the page's pictures there

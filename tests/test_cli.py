@@ -235,14 +235,14 @@ def test_a_bug_keeps_its_traceback_and_a_known_error_is_one_line(capsys):
 
 def test_a_plain_value_error_from_the_projects_own_code_is_a_bug_with_its_traceback(capsys):
     """A ValueError raised in project code by a mistake (a tuple unpacked wrongly:
-    an effort unit with two fields instead of three) is a bug, not bad input: it
+    a replay job with two fields instead of four) is a bug, not bad input: it
     keeps its traceback. A check of input raises a class of the project."""
+    from lgp.app.replays import _replay_job
     from lgp.errors import InputError
     from lgp.executor import executor_for
-    from models.effort import effort_of_unit
 
     def bug(argv):
-        effort_of_unit(("7H", 0))  # not enough values to unpack, inside models/effort
+        _replay_job(("7H", 0))  # not enough values to unpack, inside lgp/app/replays
 
     with pytest.raises(ValueError, match="not enough values to unpack"):
         cli.run_cli(bug, [], prog="p")

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 import stimuli
-from lgp.planner import APPROACH, APPROACH_TIME, PHASE_DURATION, SLICES_PER_PHASE, Design, plan
+from lgp.planner import APPROACH, APPROACH_TIME, PHASE_DURATION, SLICES_PER_PHASE, Design, EffortSpec, plan
 from lgp.scene import OVERLAP_TOLERANCE
-from models.effort import BLOCK_MASS, effort_of_unit, effort_units, kinetic_energy, path_kinetic_energy, plan_of_sample
+from models.effort import (BLOCK_MASS, EffortUnit, effort_of_unit, effort_units, kinetic_energy, path_kinetic_energy,
+                           plan_of_sample)
 
 
 def _grasped_block_height_after(p, phase: float) -> float:
@@ -36,12 +37,13 @@ def test_slices_per_phase_sets_the_time_step_of_the_plan():
 
 def test_units_carry_the_design_to_the_workers():
     trial = stimuli.load_trial("9E")  # fixed A: one unit
-    (unit,) = effort_units(trial, 3, 0, approach_height=0.02, slices_per_phase=40)
-    assert unit[3] == Design(0.02, 40) and unit[3].approach_height == 0.02 and unit[3].slices_per_phase == 40
+    (unit,) = effort_units(trial, 3, 0, EffortSpec(Design(0.02, 40)))
+    assert unit.spec.design == Design(0.02, 40) and unit.spec.design.approach_height == 0.02
+    assert unit.spec.design.slices_per_phase == 40
     row = effort_of_unit(unit)
     assert row["effort"] == pytest.approx(kinetic_energy(plan_of_sample(trial, 0, 0, approach_height=0.02,
                                                                          slices_per_phase=40)), rel=1e-9)
-    default = effort_of_unit((trial, 0, 0))
+    default = effort_of_unit(EffortUnit(trial, 0, 0))
     assert default["effort"] == pytest.approx(kinetic_energy(plan_of_sample(trial, 0, 0)), rel=1e-9)
     assert abs(row["effort"] / default["effort"] - 1) > 1e-3  # the design reached the planner
 
@@ -61,7 +63,6 @@ def test_one_rule_for_the_design_in_the_planner_the_units_the_command_lines_and_
 
     from lgp import cli
     from lgp.planner import MAX_APPROACH_HEIGHT, DesignError, check_approach_height
-    from lgp.app.stages import effort_key
     from lgp.reproduce import parse_args
 
     assert MAX_APPROACH_HEIGHT == 0.5
@@ -71,9 +72,7 @@ def test_one_rule_for_the_design_in_the_planner_the_units_the_command_lines_and_
         with pytest.raises(DesignError, match=r"approach height .*\[0, 0.5\)"):
             Design(bad)
         with pytest.raises(DesignError):
-            effort_units(trial, 3, 0, approach_height=bad)
-        with pytest.raises(DesignError):
-            effort_key(trial, 3, 0, bad)
+            EffortSpec(Design(bad))
         with pytest.raises(argparse.ArgumentTypeError, match=r"\[0, 0.5\)"):
             cli.checked(check_approach_height, "approach height")(str(bad))
         with pytest.raises(SystemExit):
@@ -103,9 +102,10 @@ def test_the_design_is_part_of_the_effort_cache_key():
 
     trial = stimuli.load_trial("2E")
     default = effort_key(trial, 3, 0)
-    assert effort_key(trial, 3, 0, APPROACH, SLICES_PER_PHASE) == default
-    assert len({default, effort_key(trial, 3, 0, 0.0), effort_key(trial, 3, 0, 0.02),
-                effort_key(trial, 3, 0, slices_per_phase=40)}) == 4
+    assert effort_key(trial, 3, 0, EffortSpec(Design(APPROACH, SLICES_PER_PHASE))) == default
+    keys = {default, *(effort_key(trial, 3, 0, EffortSpec(design)) for design in (Design(0.0), Design(0.02),
+                                                                                   Design(slices_per_phase=40)))}
+    assert len(keys) == 4
 
 
 @pytest.mark.parametrize("argv, message", [(["--approach-height", "-0.1"], "approach height"),
@@ -271,7 +271,8 @@ def test_effort_sensitivity_section_ratios_and_order_changes(tmp_path):
     trials = [stimuli.load_trial(t) for t in TRIAL_IDS]
     calls = []
 
-    def effort_tables(trials, samples, seed, executor, cache, approach_height, slices_per_phase):
+    def effort_tables(trials, samples, seed, executor, cache, spec):
+        approach_height, slices_per_phase = spec.design.approach_height, spec.design.slices_per_phase
         calls.append((samples, approach_height, slices_per_phase))
         if approach_height == 0 and any(t.id == "3E" for t in trials):
             from lgp.planner import PlanningError
@@ -458,8 +459,8 @@ def test_effort_sensitivity_with_the_search_plans_each_design_as_physical_effort
     assert len(table) == len(sensitivity.effort_designs(args)) == 4
     failed = [line for line in section.lines if line.startswith("Failed: ")]
     for row in table.itertuples():
-        options = dict(samples=1, seed=3, approach_height=row.approach_height, slices_per_phase=row.slices_per_phase,
-                       planner="search", budget=args.budget)
+        options = dict(samples=1, seed=3, spec=EffortSpec(Design(row.approach_height, row.slices_per_phase), "search",
+                                                          args.budget))
         if np.isnan(row.effort):  # a design the search finds no plan for within the budget: the same error, said
             with pytest.raises(PlanningError) as e:
                 physical_effort(trials[0], **options)

@@ -12,6 +12,7 @@ import pytest
 
 import stimuli
 from lgp.scene import Block, FixedBox, Scene
+from lgp.planner import EffortSpec
 from lgp.search import Budget, SearchError, carry_bound, search, skeleton_bound
 from lgp.symbolic import Place
 from models.effort import kinetic_energy, sample_rng
@@ -247,10 +248,10 @@ def test_the_effort_cache_key_holds_the_planner_and_its_budget_only_for_the_sear
 
     trial = stimuli.load_trial("2E")
     paper = effort_key(trial, 3, 0)
-    assert effort_key(trial, 3, 0, planner="paper") == paper
-    searched = effort_key(trial, 3, 0, planner="search")
-    assert searched != paper and effort_key(trial, 3, 0, planner="search", budget=Budget()) == searched
-    assert effort_key(trial, 3, 0, planner="search", budget=Budget(solves=5)) != searched
+    assert effort_key(trial, 3, 0, EffortSpec(planner="paper")) == paper
+    searched = effort_key(trial, 3, 0, EffortSpec(planner="search"))
+    assert searched != paper and effort_key(trial, 3, 0, EffortSpec(planner="search", budget=Budget())) == searched
+    assert effort_key(trial, 3, 0, EffortSpec(planner="search", budget=Budget(solves=5))) != searched
 
 
 def test_lgp_plan_dispatches_on_planner_and_a_searched_plan_prints_its_bound_and_gap():
@@ -317,7 +318,8 @@ def test_show_replays_a_rearrangement_of_another_folder_with_the_search(tmp_path
                       "--html", str(html), "--png", str(png)]) == 0
     out = capsys.readouterr().out
     printed = float(next(line for line in out.splitlines() if line.startswith("effort ")).split()[1])
-    row = physical_effort(stimuli.load_file(REARRANGE / "REV.yaml"), samples=1, seed=0, planner="search").table.iloc[0]
+    row = physical_effort(stimuli.load_file(REARRANGE / "REV.yaml"), samples=1, seed=0,
+                          spec=EffortSpec(planner="search")).table.iloc[0]
     assert printed == pytest.approx(row["effort"], rel=1e-9)
     assert row["set_asides"] == 3 and "3 set-asides" in out
     assert html.stat().st_size > 0 and png.stat().st_size > 0

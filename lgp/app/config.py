@@ -17,7 +17,7 @@ from analysis.permutation import N_PERM
 from analysis.recovery import N_STUDIES
 from lgp.executor import default_jobs
 from lgp.paper import N_BOOT, N_SIMS, SAMPLES, SIGMA_GRID, SIGMA_GRIDS
-from lgp.planner.design import APPROACH, SLICES_PER_PHASE, Design
+from lgp.planner.design import APPROACH, SLICES_PER_PHASE, Design, EffortSpec, Planner
 from models.risk.model import DEFAULT_MODEL, FALL_THRESHOLD, RiskModel
 
 #: What --quick changes: a small version of the run, about a minute.
@@ -52,7 +52,7 @@ class RunConfig:
     noise_rule: str = DEFAULT_MODEL.noise_rule.value
     approach_height: float = APPROACH
     slices: int = SLICES_PER_PHASE
-    planner: str = "paper"
+    planner: str = Planner.PAPER.value
     budget_solves: int | None = None
     budget_seconds: float | None = None
     jobs: int = field(default_factory=default_jobs)
@@ -99,6 +99,11 @@ class RunConfig:
     def design(self) -> Design:
         """The planner's motion design of the effort stage (checked)."""
         return Design(self.approach_height, self.slices)
+
+    @property
+    def effort_spec(self) -> EffortSpec:
+        """The effort stage's motion design and planner (checked)."""
+        return EffortSpec(self.design, self.planner, self.budget)
 
     @property
     def risk_model(self) -> RiskModel:

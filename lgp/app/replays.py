@@ -38,10 +38,10 @@ def _replay_job(item) -> float:
     from lgp.app.view import replay_html
     from models.effort import plan_of_sample
 
-    trial, seed, path, *options = item
+    trial, seed, path, spec = item
     logging.getLogger("drake").setLevel(logging.WARNING)  # not a line per replay about Meshcat's port
     t0 = time.perf_counter()
-    plan = plan_of_sample(trial, seed, 0, **(options[0] if options else {}))
+    plan = plan_of_sample(trial, seed, 0, **spec.planner_options())
     title = f"{trial.id}: {trial.description} (sample 0 of seed {seed})"
     page, library = split_library(replay_html(plan, title, back=f"../index.html#trial-{trial.id}"))  # replays/<id>.html -> its card
     path = Path(path)
@@ -52,15 +52,17 @@ def _replay_job(item) -> float:
 
 
 def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, executor=None, log=None,
-                  planner_options: dict | None = None) -> dict[str, Path]:
+                  spec=None) -> dict[str, Path]:
     """``<out_dir>/<trial>.html`` for every trial: the replay of layout sample 0 of `seed`
-    (planned with `planner_options`, e.g. approach_height and slices_per_phase).
+    (planned with the lgp.planner.EffortSpec `spec`; None: the paper's).
 
     One plan per trial (the one behind row (trial, 0) of effort_samples.csv); a replay
     made before with the same trial, seed and code is copied from `cache`.
     """
     from lgp.executor import SerialExecutor
+    from lgp.planner import DEFAULT_EFFORT
 
+    spec = DEFAULT_EFFORT if spec is None else spec
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     drake = library_versions(("drake",))["drake"]
@@ -71,7 +73,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
     for trial in trials:
         paths[trial.id] = out_dir / f"{trial.id}.html"
         if cache is not None and cache.enabled:
-            key = input_key(trial=trial.id, digest=trial.digest, seed=seed, code=version, **(planner_options or {}))
+            key = input_key(trial=trial.id, digest=trial.digest, seed=seed, code=version, **spec.key())
             cached[trial.id] = cache.root / f"replay-{key}.html"
     lib = out_dir / REPLAY_LIBRARY
     lib_cache = cache.root / f"meshcat-{drake}.min.js" if cache is not None and cache.enabled else None
@@ -87,7 +89,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
         else:
             todo.append(trial)
     if todo:
-        times = (executor or SerialExecutor()).map(_replay_job, [(t, seed, str(paths[t.id]), dict(planner_options or {})) for t in todo])
+        times = (executor or SerialExecutor()).map(_replay_job, [(t, seed, str(paths[t.id]), spec) for t in todo])
         if log:
             log(f"[replays] {len(todo)} trials planned (sample 0) and recorded: {sum(times):.1f} s of work, "
                 f"{max(times):.1f} s the longest")

@@ -25,27 +25,20 @@ def effort_key_inputs() -> dict:
             "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
 
 
-def effort_key(trial, samples: int, seed: int, approach_height: float | None = None,
-               slices_per_phase: int | None = None, planner: str = "paper", budget=None, design=None) -> str:
+def effort_key(trial, samples: int, seed: int, spec=None) -> str:
     """The cache key of one trial's effort table: the trial file, M, the seed, the
-    planner's design (approach height, slices per phase: `design` or its two
-    values), for planner="search" the planner and its budget (lgp.search.Budget),
-    and effort_key_inputs()."""
-    from lgp.planner import Design
-    from lgp.search import Budget, check_planner
+    lgp.planner.EffortSpec (None: the paper's; EffortSpec.key: the design and,
+    for the search, the planner and its budget), and effort_key_inputs()."""
+    from lgp.planner import DEFAULT_EFFORT
 
-    design = Design.of(design, approach_height, slices_per_phase)
-    searched = {"planner": planner, "budget": repr(budget or Budget())} if check_planner(planner) == "search" else {}
-    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, approach_height=design.approach_height,
-                     slices_per_phase=design.slices_per_phase, **searched, **effort_key_inputs())
+    spec = DEFAULT_EFFORT if spec is None else spec
+    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, **spec.key(), **effort_key_inputs())
 
 
-def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, approach_height: float | None = None,
-                  slices_per_phase: int | None = None, log: bool = True, planner: str = "paper",
-                  budget=None, verbose: bool = True) -> pd.DataFrame:
-    """Per (trial, sample) effort, one cached file per trial (and design: the
-    planner's `approach_height` and `slices_per_phase`, defaults when None; the
-    `planner`, "paper" or "search" with its `budget`).
+def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, spec=None, log: bool = True,
+                  verbose: bool = True) -> pd.DataFrame:
+    """Per (trial, sample) effort, one cached file per trial and lgp.planner.EffortSpec
+    (None: the paper's pipeline with the default design).
 
     The layouts of every uncached trial are one stream of work units on the run's
     one executor (warm workers plan across trial boundaries); a trial's file is
@@ -54,19 +47,18 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, appro
     """
     from models.effort import effort_of_unit, effort_table, effort_units
 
-    from lgp.planner import Design
+    from lgp.planner import DEFAULT_EFFORT
 
-    design = Design.of(None, approach_height, slices_per_phase)  # checked once for the stage
-    searched = {"planner": planner, "budget": budget} if planner != "paper" else {}
-    keys = {t.id: effort_key(t, samples, seed, design=design, **searched) for t in trials}
+    spec = DEFAULT_EFFORT if spec is None else spec
+    keys = {t.id: effort_key(t, samples, seed, spec) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
         cached = cache.get("effort", keys[t.id])
         if cached is not None:
             tables[t.id] = cached
     todo = [t for t in trials if t.id not in tables]
-    units = [u for t in todo for u in effort_units(t, samples, seed, design=design, **searched)]
-    owner = [u[0] for u in units]
+    units = [u for t in todo for u in effort_units(t, samples, seed, spec)]
+    owner = [u.trial for u in units]
     pending = Counter(t.id for t in owner)
     rows: dict[str, list[dict]] = {t.id: [] for t in todo}
     t0 = time.perf_counter()

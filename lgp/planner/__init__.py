@@ -37,12 +37,14 @@ import numpy as np
 
 from lgp.assignment import assign_blocks
 from lgp.planner.design import (  # noqa: F401  (the planner's public names)
-    APPROACH, APPROACH_TIME, DEFAULT_DESIGN, MAX_APPROACH_HEIGHT, PHASE_DURATION, SLICES_PER_PHASE, Design,
-    DesignError, PlanningError, check_approach_height, check_slices_per_phase)
+    APPROACH, APPROACH_TIME, DEFAULT_DESIGN, DEFAULT_EFFORT, MAX_APPROACH_HEIGHT, PHASE_DURATION, PLANNERS,
+    SLICES_PER_PHASE, Budget, Design, DesignError, EffortSpec, Planner, PlanningError, check_approach_height,
+    check_planner, check_slices_per_phase)
 from lgp.scene import Scene
 from lgp.symbolic import SymbolicPlan, symbolic_plan
 
-# Arm (lgp.arm) and KomoResult (lgp.komo) appear in annotations only: both load Drake.
+# Arm (lgp.arm) and KomoResult (lgp.komo) appear in annotations only: both load Drake;
+# SearchResult (lgp.search) too: the search imports this module.
 _ARM = None
 
 
@@ -76,6 +78,9 @@ class Plan:
     komo: KomoResult | None = None
     arm: Arm | None = field(default=None, repr=False)
     planning_time: float = 0.0  # wall-clock s: assignment, symbolic plan, seeding, KOMO
+    #: what the search found (lgp.search.SearchResult: bound, gap, cost) when the
+    #: search made this plan; None for the paper's pipeline
+    search: SearchResult | None = field(default=None, repr=False)
 
     @property
     def actions(self):

@@ -15,6 +15,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
+
+from lgp.errors import InputError
 
 #: Duration of one phase (one action) in seconds: a reach-and-place of a block in
 #: about a second is human-like, and every phase has the same length, as in KOMO.
@@ -106,3 +109,87 @@ class Design:
 
 #: The paper-run default: 5 cm legs, 20 slices per phase.
 DEFAULT_DESIGN = Design()
+
+
+class Planner(StrEnum):
+    """Which logic layer plans a layout: the paper's pipeline (one assignment, one
+    order; the default, it reproduces the paper) or the search over skeletons
+    (lgp.search)."""
+
+    PAPER = "paper"
+    SEARCH = "search"
+
+
+#: The planners by name, the paper's first.
+PLANNERS: tuple[str, ...] = tuple(p.value for p in Planner)
+
+
+def check_planner(planner) -> Planner:
+    """`planner` as a Planner, else InputError naming the known ones."""
+    try:
+        return Planner(planner)
+    except ValueError:
+        raise InputError(f"planner must be one of {', '.join(PLANNERS)}, got {planner!r}") from None
+
+
+@dataclass(frozen=True)
+class Budget:
+    """When the search stops if the gap is still open: after `solves` KOMO solves,
+    `seconds` of wall-clock time, or `expansions` symbolic nodes expanded."""
+
+    solves: int = 3
+    seconds: float = 120.0
+    expansions: int = 20000
+
+    def __post_init__(self):
+        for name in ("solves", "seconds", "expansions"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise InputError(f"Budget.{name} must be a positive number, got {value!r}")
+        if not float(self.solves).is_integer() or not float(self.expansions).is_integer():
+            raise InputError(f"Budget.solves and .expansions must be whole numbers, got {self.solves!r}, {self.expansions!r}")
+
+
+@dataclass(frozen=True)
+class EffortSpec:
+    """How a layout's effort is planned: the motion `design`, the `planner` and,
+    for the search, its `budget` (None: Budget(); refused with the paper's
+    pipeline, which has none). Checked when made; what the effort units carry to
+    the workers and what the effort cache key is derived from."""
+
+    design: Design = DEFAULT_DESIGN
+    planner: Planner = Planner.PAPER
+    budget: Budget | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.design, Design):
+            raise TypeError(f"design must be an lgp.planner.Design, got {self.design!r}")
+        planner = check_planner(self.planner)
+        object.__setattr__(self, "planner", planner)
+        if planner is Planner.PAPER and self.budget is not None:
+            raise InputError("a budget applies to planner='search' only")
+        if planner is Planner.SEARCH:
+            budget = Budget() if self.budget is None else self.budget
+            if not isinstance(budget, Budget):
+                raise TypeError(f"budget must be an lgp.search.Budget, got {budget!r}")
+            object.__setattr__(self, "budget", budget)
+
+    @property
+    def searched(self) -> bool:
+        return self.planner is Planner.SEARCH
+
+    def planner_options(self) -> dict:
+        """The keywords of lgp.plan (lgp.search.plan) for this spec."""
+        searched = {"planner": self.planner.value, "budget": self.budget} if self.searched else {}
+        return {"design": self.design, **searched}
+
+    def key(self) -> dict:
+        """What an effort result depends on of the spec, for the cache key: the
+        design's two values and, for the search only, the planner and its budget."""
+        searched = {"planner": self.planner.value, "budget": repr(self.budget)} if self.searched else {}
+        return {"approach_height": self.design.approach_height, "slices_per_phase": self.design.slices_per_phase,
+                **searched}
+
+
+#: The paper's effort: its pipeline with the default design.
+DEFAULT_EFFORT = EffortSpec()

@@ -55,33 +55,22 @@ SearchResult, SearchError) and, here, `plan` (planner="paper" | "search").
 from __future__ import annotations
 
 from lgp.errors import InputError
-from lgp.planner import Plan
+from lgp.planner import PLANNERS, Budget, Plan, Planner, check_planner  # noqa: F401
 from lgp.scene import Scene
 from lgp.search.bound import BLOCK_MASS, carry_bound, kinetic_energy, skeleton_bound  # noqa: F401
 from lgp.search.spots import (SPOT_CLEARANCE, SPOT_PITCH, SPOT_REGION, SPOTS_PER_SET_ASIDE,  # noqa: F401
                               candidate_spots)
 from lgp.search.sweep import SWEEP_TOLERANCE, first_sweep  # noqa: F401
-from lgp.search.tree import Budget, SearchError, SearchResult, search  # noqa: F401
+from lgp.search.tree import NoPlan, SearchError, SearchResult, StopReason, search  # noqa: F401
 
 # ----------------------------------------------------------------------------- planner="paper" | "search"
-
-#: The planners `plan` dispatches to: the paper's pipeline (the default; it
-#: reproduces the paper) and this search.
-PLANNERS = ("paper", "search")
-
-
-def check_planner(planner: str) -> str:
-    """`planner` if it is one of PLANNERS, else InputError naming them."""
-    if planner not in PLANNERS:
-        raise InputError(f"planner must be one of {', '.join(PLANNERS)}, got {planner!r}")
-    return planner
 
 
 def plan(initial: Scene, target: Scene, rng_or_seed=0, *, planner: str = "paper", budget: Budget | None = None,
          **options) -> Plan:
     """lgp.plan: the paper's pipeline (planner="paper", lgp.planner.plan) or the
     search (planner="search", `search`; its SearchResult is the plan's `search`
-    attribute: skeleton, effort, bound, gap). `options` are the planner's
+    field: skeleton, effort, bound, gap). `options` are the planner's
     (formulation, solver, slices_per_phase, approach_height, arm)."""
     from lgp import planner as paper
 
@@ -89,19 +78,17 @@ def plan(initial: Scene, target: Scene, rng_or_seed=0, *, planner: str = "paper"
         if not isinstance(scene, Scene):
             raise InputError(f"lgp.plan: {name} must be an lgp.scene.Scene (e.g. a trial's sample_initial(rng) "
                              f"and .target), got {type(scene).__name__}")
-    if check_planner(planner) == "paper":
+    if check_planner(planner) is Planner.PAPER:
         if budget is not None:
             raise InputError("a budget applies to planner='search' only")
         return paper.plan(initial, target, rng_or_seed, **options)
-    result = search(initial, target, rng_or_seed, budget=budget, **options)
-    result.plan.search = result
-    return result.plan
+    return search(initial, target, rng_or_seed, budget=budget, **options).plan
 
 
 def describe_search(plan: Plan) -> str:
     """'' for a plan of the paper's pipeline; for a searched plan one line: its
     skeleton's bound, the best unexplored bound, the gap and what the search cost."""
-    result = getattr(plan, "search", None)
+    result = plan.search
     if result is None:
         return ""
     gap = 100 * result.gap / result.effort if result.effort > 0 else 0.0

@@ -7,12 +7,12 @@ import heapq
 import itertools
 import time
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
 from lgp.assignment import assign_blocks
-from lgp.errors import InputError
-from lgp.planner import APPROACH, SLICES_PER_PHASE, Design, Plan, PlanningError, default_arm, plan_symbolic
+from lgp.planner import Budget, Design, Plan, PlanningError, default_arm, plan_symbolic
 from lgp.scene import TABLE, Scene, support_graph, supported_by
 from lgp.search.bound import kinetic_energy, skeleton_bound
 from lgp.search.problem import _Problem
@@ -22,32 +22,32 @@ from lgp.symbolic import (Grasp, Place, PlanState, SymbolicPlan, SymbolicPlannin
                           _support_memo, apply, symbolic_plan)
 
 
+class StopReason(StrEnum):
+    """Why the search stopped: the gap closed (no open branch can beat the plan
+    found), every branch was explored without a plan, or a budget ran out."""
+
+    GAP_CLOSED = "gap closed"
+    EXHAUSTED = "exhausted"
+    SOLVE_BUDGET = "solve budget"
+    TIME_BUDGET = "time budget"
+    EXPANSION_BUDGET = "expansion budget"
+
+
+class NoPlan(StrEnum):
+    """Why the search found no plan: every branch explored or pruned and none
+    reaches B ("unsolvable"), or the budget ran out first ("budget")."""
+
+    UNSOLVABLE = "unsolvable"
+    BUDGET = "budget"
+
+
 class SearchError(PlanningError):
-    """The search found no plan: `reason` is "unsolvable" (every branch explored or
-    pruned, none reaches B) or "budget" (the budget ran out first); `bound` is the
-    best lower bound on effort (J s) reached, inf when no skeleton exists."""
+    """The search found no plan: `reason` a NoPlan; `bound` is the best lower
+    bound on effort (J s) reached, inf when no skeleton exists."""
 
-    def __init__(self, message: str, reason: str, bound: float):
+    def __init__(self, message: str, reason: NoPlan, bound: float):
         super().__init__(message)
-        self.reason, self.bound = reason, bound
-
-
-@dataclass(frozen=True)
-class Budget:
-    """When the search stops if the gap is still open: after `solves` KOMO solves,
-    `seconds` of wall-clock time, or `expansions` symbolic nodes expanded."""
-
-    solves: int = 3
-    seconds: float = 120.0
-    expansions: int = 20000
-
-    def __post_init__(self):
-        for name in ("solves", "seconds", "expansions"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-                raise InputError(f"Budget.{name} must be a positive number, got {value!r}")
-        if not float(self.solves).is_integer() or not float(self.expansions).is_integer():
-            raise InputError(f"Budget.solves and .expansions must be whole numbers, got {self.solves!r}, {self.expansions!r}")
+        self.reason, self.bound = NoPlan(reason), bound
 
 
 @dataclass
@@ -77,7 +77,7 @@ class SearchResult:
     solves: int
     expansions: int
     seconds: float
-    stopped: str
+    stopped: StopReason
     paper_effort: float | None = None
     paper_symbolic: SymbolicPlan | None = None
     tried: list = field(default_factory=list)  # (skeleton bound, effort or failure) per KOMO solve
@@ -201,9 +201,9 @@ def _symbolic(problem: _Problem, carries) -> SymbolicPlan:
 
 
 def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | None = None,
-           approach_height: float = APPROACH, slices_per_phase: int = SLICES_PER_PHASE, formulation: str = "reduced",
-           solver: str = "snopt", arm=None, spots_per_set_aside: int = SPOTS_PER_SET_ASIDE,
-           paper_first: bool = True) -> SearchResult:
+           approach_height: float | None = None, slices_per_phase: int | None = None, design: Design | None = None,
+           formulation: str = "reduced", solver: str = "snopt", arm=None,
+           spots_per_set_aside: int = SPOTS_PER_SET_ASIDE, paper_first: bool = True) -> SearchResult:
     """The least-effort plan the search finds for building `target` from `initial`.
 
     Best-first (A*) over symbolic states, ordered by the lower bound g + h (ties:
@@ -216,11 +216,12 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     incumbent (gap closed: no other set of carries can beat it; other orders of
     the same carries are not tried, see SearchResult) or the budget runs out; raises SearchError (a
     PlanningError) when no plan is found, saying whether the task has none or
-    the budget ran out, with the best bound reached.
+    the budget ran out, with the best bound reached. The motion design is
+    `design` or its two values (None: the default), as for lgp.planner.plan.
     """
     start = time.perf_counter()
     budget = budget or Budget()
-    design = Design.of(None, approach_height, slices_per_phase)
+    design = Design.of(design, approach_height, slices_per_phase)
     approach_height, slices_per_phase = design.approach_height, design.slices_per_phase
     arm = arm or default_arm()
     rng = rng_or_seed if isinstance(rng_or_seed, np.random.Generator) else np.random.default_rng(rng_or_seed)
@@ -284,15 +285,15 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     # bound cannot tell orders apart): the first order found is kept.
     seen: set = {frozenset()}
     expansions = 0
-    stopped = "gap closed"
+    stopped = StopReason.GAP_CLOSED
 
     def out_of_budget():
         if solves >= budget.solves:
-            return "solve budget"
+            return StopReason.SOLVE_BUDGET
         if time.perf_counter() - start >= budget.seconds:
-            return "time budget"
+            return StopReason.TIME_BUDGET
         if expansions >= budget.expansions:
-            return "expansion budget"
+            return StopReason.EXPANSION_BUDGET
         return None
 
     def entries(node):
@@ -338,22 +339,24 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
                 heapq.heappush(queue, other)
             entry = children[0] if children else None
     else:
-        stopped = "gap closed" if best is not None else "exhausted"
+        stopped = StopReason.GAP_CLOSED if best is not None else StopReason.EXHAUSTED
     # The bound of the best unexplored branch: the lowest lower bound left in the queue.
     open_bounds = [entry[3] for entry in queue if best is None or entry[3] < best[0]]
     lowest_open = min(open_bounds, default=np.inf)
 
     seconds = time.perf_counter() - start
     if best is None:
-        if stopped in ("exhausted", "gap closed"):
+        if stopped in (StopReason.EXHAUSTED, StopReason.GAP_CLOSED):
             why = "; ".join(str(t[1]) for t in tried) or "no sequence of carries reaches B"
             raise SearchError(f"{label}: no plan: every branch of the search explored ({expansions} expansions), "
-                              f"{why}", "unsolvable", float(lowest_open))
+                              f"{why}", NoPlan.UNSOLVABLE, float(lowest_open))
         solved = "".join(f"; {t[1]}" for t in tried)  # why each solve gave no plan (failed, or rejected by the sweep check)
         raise SearchError(f"{label}: {stopped} ran out before any plan was found ({solves} KOMO solves, "
                           f"{expansions} expansions, {seconds:.1f} s{solved}); best lower bound {lowest_open:.4f} J s",
-                          "budget", float(lowest_open))
+                          NoPlan.BUDGET, float(lowest_open))
     effort, result, bound = best
     result.planning_time = seconds
-    return SearchResult(result, effort, min(float(lowest_open), effort), bound, solves, expansions, seconds, stopped,
-                        paper_effort, paper_symbolic, tried, komo_seconds)
+    found = SearchResult(result, effort, min(float(lowest_open), effort), bound, solves, expansions, seconds, stopped,
+                         paper_effort, paper_symbolic, tried, komo_seconds)
+    result.search = found  # the plan carries what the search found (Plan.search)
+    return found

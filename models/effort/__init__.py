@@ -16,11 +16,12 @@ Each action takes one phase of 1 s (lgp.planner.PHASE_DURATION). The measure is
 p_WB; the planner only produces trajectories.
 
 Two modelling choices the paper leaves open make the planner's motion design
-(lgp.planner.Design), a parameter of every function here: `approach_height` (m;
-default lgp.planner.APPROACH = 0.05, the vertical leg at every grasp and place; 0
-plans each carry with a clearance constraint instead) and `slices_per_phase`
-(default lgp.planner.SLICES_PER_PHASE = 20), given as ``design=Design(h, S)`` or
-as the two keywords. docs/effort.md says how much each moves effort.
+(lgp.planner.Design): `approach_height` (m; default lgp.planner.APPROACH = 0.05,
+the vertical leg at every grasp and place; 0 plans each carry with a clearance
+constraint instead) and `slices_per_phase` (default lgp.planner.SLICES_PER_PHASE
+= 20). The design and the planner (the paper's pipeline or lgp.search with its
+budget) travel together as one lgp.planner.EffortSpec, the `spec` of every
+function here. docs/effort.md says how much each moves effort.
 
 The command line (the table of docs/effort.md) is models/effort/__main__.py,
 kept out of this module so that the effort cache key (lgp.app.cache.modules_digest of
@@ -39,8 +40,8 @@ import pandas as pd
 from lgp.paper import SAMPLES
 from lgp.errors import InputError
 from lgp.executor import borrowed
-from lgp.planner import PHASE_DURATION, Design, PlanningError
-from lgp.search import Budget, check_planner, describe_search, plan
+from lgp.planner import DEFAULT_EFFORT, PHASE_DURATION, EffortSpec, PlanningError
+from lgp.search import describe_search, plan
 
 COLUMNS = ["trial", "sample", "effort", "n_actions", "solve_time", "solver", "status"]
 #: planner="search" adds what the search found: the lower bound of the best
@@ -131,28 +132,19 @@ def plan_of_sample(trial, seed: int, sample: int, **planner_options):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): {e}", e.action) from e
 
 
-def effort_of_sample(trial, seed: int, sample: int, *, approach_height: float | None = None,
-                     slices_per_phase: int | None = None, design: Design | None = None, planner: str = "paper",
-                     budget: Budget | None = None) -> dict:
+def effort_of_sample(trial, seed: int, sample: int, spec: EffortSpec = DEFAULT_EFFORT) -> dict:
     """One row of the effort table: plan the sample's layout, integrate kinetic energy.
 
-    The motion design, `design` or its two values (None: the default), is the
-    planner's (lgp.planner.plan); `planner` "paper" (default) or "search"
-    (lgp.search, with `budget`).
-    Raises PlanningError naming the trial, the sample and the failing action.
+    `spec` (an lgp.planner.EffortSpec) is the motion design and the planner:
+    the paper's pipeline (lgp.planner.plan) or the search (lgp.search, within
+    its budget). Raises PlanningError naming the trial, the sample and the failing action.
     """
-    design = Design.of(design, approach_height, slices_per_phase)
-    if check_planner(planner) == "search":  # lgp.search takes the design's two values
-        options = {"planner": planner, "budget": budget, "approach_height": design.approach_height,
-                   "slices_per_phase": design.slices_per_phase}
-    else:
-        options = {"design": design}
-    result = plan_of_sample(trial, seed, sample, **options)
+    result = plan_of_sample(trial, seed, sample, **spec.planner_options())
     effort = kinetic_energy(result)
     if not np.isfinite(effort):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): effort is {effort}")
     komo = result.komo
-    searched = getattr(result, "search", None)
+    searched = result.search
     extra = {} if searched is None else {
         "bound": searched.bound, "gap": searched.gap, "set_asides": searched.set_asides, "solves": searched.solves,
         "paper_effort": searched.paper_effort}
@@ -188,27 +180,28 @@ class EffortResult(NamedTuple):
         return f"EffortResult(mean={self.mean:.6g} J*s over {len(self.table)} layouts)"
 
 
-def effort_units(trial, samples: int, seed: int, *, approach_height: float | None = None,
-                 slices_per_phase: int | None = None, design: Design | None = None, planner: str = "paper",
-                 budget: Budget | None = None) -> list[tuple]:
-    """The work units of a trial's effort, (trial, seed, sample, design), one per
-    layout that needs planning: every sample, or only sample 0 when A is not
-    random. `design` (an lgp.planner.Design, checked once here), and for
-    planner="search" also "search" and the budget after it, carried in the unit
-    so an executor's workers plan with the same choices."""
-    design = Design.of(design, approach_height, slices_per_phase)
-    if check_planner(planner) == "search":
-        return [(trial, seed, i, design, planner, budget or Budget())
-                for i in (range(samples) if trial.initial.is_random else [0])]
-    return [(trial, seed, i, design) for i in (range(samples) if trial.initial.is_random else [0])]
+class EffortUnit(NamedTuple):
+    """One layout to plan (what an executor's worker receives): trial, seed,
+    sample and the EffortSpec it is planned with."""
+
+    trial: object
+    seed: int
+    sample: int
+    spec: EffortSpec = DEFAULT_EFFORT
 
 
-def effort_of_unit(unit) -> dict:
-    """effort_of_sample for one unit of `effort_units` (what executors map); a
-    3-tuple (trial, seed, sample) plans with the default design."""
-    trial, seed, sample, *rest = unit
-    return effort_of_sample(trial, seed, sample, design=rest[0] if rest else Design(),
-                            **(dict(zip(("planner", "budget"), rest[1:3])) if len(rest) > 1 else {}))
+def effort_units(trial, samples: int, seed: int, spec: EffortSpec = DEFAULT_EFFORT) -> list[EffortUnit]:
+    """The work units of a trial's effort, one per layout that needs planning:
+    every sample, or only sample 0 when A is not random; each carries `spec` so
+    an executor's workers plan with the same choices."""
+    if not isinstance(spec, EffortSpec):
+        raise TypeError(f"spec must be an lgp.planner.EffortSpec, got {spec!r}")
+    return [EffortUnit(trial, seed, i, spec) for i in (range(samples) if trial.initial.is_random else [0])]
+
+
+def effort_of_unit(unit: EffortUnit) -> dict:
+    """effort_of_sample for one unit of `effort_units` (what executors map)."""
+    return effort_of_sample(unit.trial, unit.seed, unit.sample, unit.spec)
 
 
 def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
@@ -223,8 +216,7 @@ def effort_table(trial, samples: int, rows: list[dict]) -> pd.DataFrame:
 
 def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
                     progress: Callable[[int, int], None] | None = None, executor=None, *,
-                    approach_height: float | None = None, slices_per_phase: int | None = None,
-                    design: Design | None = None, planner: str = "paper", budget: Budget | None = None) -> EffortResult:
+                    spec: EffortSpec = DEFAULT_EFFORT) -> EffortResult:
     """Physical effort of `trial` over `samples` random layouts: an `EffortResult`
     with ``.mean`` (J s) and ``.table`` (one row per layout: trial, sample, effort,
     n_actions, solve_time, solver, status).
@@ -235,12 +227,12 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
     warm workers across trials). `progress(done, total)` is called after each
     sample. A trial whose layout is not random (a fixed structure in A) is planned
     once and its row repeated: every sample would draw the same layout.
-    The motion design, `design` or `approach_height` (m; 0.05 default, 0 =
-    clearance constraint instead of the legs) and `slices_per_phase` (20
-    default), is checked once and passed to the planner (lgp.planner.plan;
-    docs/effort.md, "Modelling choices"). `planner` is "paper"
-    (the paper's pipeline, default) or "search" (lgp.search within `budget`; the
-    table then has SEARCH_COLUMNS: bound, gap, set-asides, solves, paper_effort).
+    `spec` (lgp.planner.EffortSpec) is the motion design (a Design: approach
+    height, 0.05 m default, 0 = clearance constraint instead of the legs; slices
+    per phase, 20 default; docs/effort.md, "Modelling choices") and the planner:
+    Planner.PAPER (the paper's pipeline, default) or Planner.SEARCH (lgp.search
+    within its budget; the table then has SEARCH_COLUMNS: bound, gap,
+    set-asides, solves, paper_effort).
     """
     if isinstance(trial, str):
         import stimuli
@@ -248,8 +240,7 @@ def physical_effort(trial, samples: int = SAMPLES, seed: int = 0, jobs: int = 1,
         trial = stimuli.load_trial(trial)
     if samples < 1:
         raise InputError(f"physical_effort needs samples >= 1, got {samples}")
-    units = effort_units(trial, samples, seed, design=Design.of(design, approach_height, slices_per_phase),
-                         planner=planner, budget=budget)
+    units = effort_units(trial, samples, seed, spec)
     done = 0
 
     def record(_, row):

@@ -19,8 +19,7 @@ import pandas as pd
 
 from lgp import cli
 from lgp.paper import SAMPLES
-from lgp.planner import APPROACH, SLICES_PER_PHASE, check_approach_height
-from lgp.search import PLANNERS, Budget
+from lgp.planner import APPROACH, PLANNERS, SLICES_PER_PHASE, Budget, Design, EffortSpec, check_approach_height
 from models.effort import physical_effort
 
 PROG = "python -m models.effort"
@@ -54,15 +53,14 @@ def main(argv=None) -> int:
     if args.planner == "search":
         defaults = Budget()
         budget = Budget(solves=args.budget_solves or defaults.solves, seconds=args.budget_seconds or defaults.seconds)
+    spec = EffortSpec(Design(args.approach_height, args.slices), args.planner, budget)
 
     import stimuli
 
     trials = [stimuli.load_trial(t) for t in args.trials] if args.trials else stimuli.load_all()
     tables = []
     for trial in trials:
-        mean, table = physical_effort(trial, samples=args.samples, seed=args.seed, jobs=args.jobs,
-                                      approach_height=args.approach_height, slices_per_phase=args.slices,
-                                      planner=args.planner, budget=budget)
+        mean, table = physical_effort(trial, samples=args.samples, seed=args.seed, jobs=args.jobs, spec=spec)
         tables.append(table)
         searched = f"  gap {table['gap'].mean():7.4f} J s" if "gap" in table else ""
         print(f"{trial.id:>4}  effort {mean:8.4f} J s  sd {table['effort'].std(ddof=1) if len(table) > 1 else 0.0:7.4f}  "

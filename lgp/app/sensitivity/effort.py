@@ -10,6 +10,8 @@ effort_sensitivity_pairs.csv (one row per design and pair).
 """
 from __future__ import annotations
 
+import dataclasses
+
 import time
 
 import numpy as np
@@ -17,7 +19,7 @@ import pandas as pd
 
 from lgp.app.files import write_csv_atomic
 from lgp.app.sensitivity.section import Context, Section, markdown
-from lgp.planner.design import APPROACH
+from lgp.planner.design import APPROACH, Design
 
 #: Approach heights (m) of the effort section: the default legs, shorter legs, and
 #: none (the clearance design of lgp.planner).
@@ -55,15 +57,16 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
     rows, notes = [], []
     for label, h, S in effort_designs(args):
         t0 = time.perf_counter()
+        spec = dataclasses.replace(args.effort_spec, design=Design(h, S))
         try:
             table = ctx.effort_tables(ctx.trials, samples, args.seed, ctx.executor, ctx.cache,
-                                      approach_height=h, slices_per_phase=S, **args.planner_choice())
+                                      spec=spec)
         except Exception:  # a trial the planner cannot do with this design: the others, one by one (cached ones at once)
             parts = []
             for t in ctx.trials:
                 try:
                     parts.append(ctx.effort_tables([t], samples, args.seed, ctx.executor, ctx.cache,
-                                                   approach_height=h, slices_per_phase=S, **args.planner_choice()))
+                                                   spec=spec))
                 except Exception as e:  # said in the report and the table (effort NaN), not hidden
                     notes.append(f"{label}, {t.id}: {type(e).__name__}: {e}")
                     ctx.log(f"[sensitivity] effort, {label}, {t.id}: failed ({type(e).__name__})")

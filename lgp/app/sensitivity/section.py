@@ -28,7 +28,7 @@ class Context:
     out: Path
     risk_key: Callable[..., dict]
     log: Callable[[str], None] = field(default=lambda m: print(m, file=sys.stderr, flush=True))
-    #: lgp.app.stages.effort_tables (trials, samples, seed, executor, cache, approach_height=, slices_per_phase=)
+    #: lgp.app.stages.effort_tables (trials, samples, seed, executor, cache, spec=lgp.planner.EffortSpec)
     effort_tables: Callable[..., pd.DataFrame] | None = None
 
 
