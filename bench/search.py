@@ -36,7 +36,7 @@ import stimuli  # noqa: E402
 from bench.common import machine, write_section  # noqa: E402
 from lgp.planner import plan, plan_symbolic  # noqa: E402
 from lgp.search import candidate_spots, first_sweep, kinetic_energy, search  # noqa: E402
-from lgp.search.problem import _Problem  # noqa: E402
+from lgp.search.problem import Problem  # noqa: E402
 from lgp.symbolic import Place, PlanState, SymbolicPlan, apply  # noqa: E402
 from models.effort import sample_rng  # noqa: E402
 
@@ -88,7 +88,7 @@ def random_spots(name: str, draws: int = 5):
     r = search(A, trial.target)
     from lgp.planner import default_arm
 
-    problem = _Problem(A, trial.target, 0.05, 20, default_arm())
+    problem = Problem(A, trial.target, 0.05, 20, default_arm())
     rng = np.random.default_rng(1)
     efforts, rank_times = [], []
     for _ in range(draws):

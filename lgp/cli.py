@@ -472,12 +472,17 @@ def _interrupted(prog: str, message: str, debug: bool) -> int:
 COMMAND_TIMES = Path(__file__).resolve().parent.parent / "docs" / "command_times.csv"
 
 
-def _seconds(s: float) -> str:
+def duration_text(seconds: float) -> str:
+    """A wall time for a reader, the one format of every command line, progress
+    line and page: "4.2 s", "16 s", "2 min 06 s", "1 h 05 min"."""
+    s = max(0.0, float(seconds))
     if s < 10:
         return f"{s:.1f} s"
     if s < 120:
         return f"{s:.0f} s"
-    return f"{int(s // 60)} min {s % 60:02.0f} s"
+    if s < 3600:
+        return f"{int(s // 60)} min {s % 60:02.0f} s"
+    return f"{int(s // 3600)} h {s % 3600 // 60:02.0f} min"
 
 
 def measured_time(command: str, path: Path | str | None = None) -> str | None:
@@ -502,14 +507,14 @@ def measured_time(command: str, path: Path | str | None = None) -> str | None:
     parts = []
     if (most, "cold") in at:
         # CPU seconds beside the wall time: they hardly change with the machine's load
-        parts.append(_seconds(at[most, "cold"]) + (" cold" if (most, "warm") in at else "")
+        parts.append(duration_text(at[most, "cold"]) + (" cold" if (most, "warm") in at else "")
                      + (f" ({cpu[most, 'cold']:.0f} CPU-s)" if cpu[most, "cold"] >= 10 else ""))
     if (most, "warm") in at:
-        parts.append(_seconds(at[most, "warm"]) + " cached")
+        parts.append(duration_text(at[most, "warm"]) + " cached")
     text = ", ".join(parts) + (f" (--jobs {most})" if any(j != most for j, _ in at) else "")
     others = sorted({j for j, _ in at if j != most}, reverse=True)
     for j in others:
-        text += f"; {_seconds(at[j, 'cold'])} cold with --jobs {j}" if (j, "cold") in at else ""
+        text += f"; {duration_text(at[j, 'cold'])} cold with --jobs {j}" if (j, "cold") in at else ""
     loads = [float(r[k].split()[0]) for r in rows for k in ("load_before", "load_after")]
     load = f"{min(loads):.1f}" if max(loads) - min(loads) < 0.05 else f"{min(loads):.1f}-{max(loads):.1f}"
     return f"{text} [{rows[0]['cores']} cores, {rows[0]['cpu_model']}, load average {load}; bench/commands.py]"

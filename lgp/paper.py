@@ -24,7 +24,7 @@ DURATION = 4.0
 SIGMA_GRID: tuple[float, ...] = tuple(round(0.05 + 0.005 * k, 3) for k in range(11))
 #: The sigma the paper chose for all datasets ("sigma = 0.065").
 PAPER_SIGMA = 0.065
-#: A grid past the paper's (beyond the paper; issue 22): 0.05 d to 0.30 d in steps
+#: A grid past the paper's (beyond the paper): 0.05 d to 0.30 d in steps
 #: of 0.01 d, plus the paper's points, sorted. At the paper's grid most risks are 0;
 #: the paper's risk contrasts appear past it (docs/results.md, "Pairs over sigma").
 WIDE_SIGMA_GRID: tuple[float, ...] = tuple(sorted({round(0.05 + 0.01 * k, 3) for k in range(26)} | set(SIGMA_GRID)))
@@ -62,10 +62,6 @@ def canonical_trial_id(text: str) -> str:
     """
     return str(text).strip().upper()
 
-
-def pair_of(trial_id: str) -> int:
-    """Pair number of a trial id of the paper's form ("7H" -> 7)."""
-    return int(trial_id[:-1])
 
 #: The pairs whose easy and hard trials differ in risk by design (paper, Stimuli:
 #: 4 staircase vs aligned tower, 5 bridge vs pyramid, 7 tower vs line, 8): the

@@ -330,7 +330,7 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
     sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
     written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
                write_csv_atomic(risk, out / "risk.csv")]
-    from models.risk.precision import required_precision  # sigma* per trial (issue 22)
+    from models.risk.precision import required_precision  # sigma* per trial
 
     precision = required_precision(pd.concat(risk_runs, ignore_index=True), n_boot=args.n_boot, seed=args.seed)
     written.append(write_csv_atomic(precision, out / "risk_precision.csv"))
@@ -358,7 +358,7 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
         e_samples, e_mean, r = (df[df["trial"].isin(TRIAL_IDS)] for df in (effort_samples, effort, risk))
         pairs = pair_orderings(e_mean, r, sigma, {t.pair: t.dimension for t in paper})
         written.append(write_csv_atomic(pairs_csv_table(pairs), out / "pairs.csv"))
-        from lgp.app import over_sigma  # "Pairs over sigma" (issue 22)
+        from lgp.app import over_sigma  # "Pairs over sigma"
 
         over = over_sigma.pairs_over_sigma(e_mean, r)
         written.append(write_csv_atomic(over, out / "pairs_over_sigma.csv"))
@@ -384,13 +384,13 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
             list_files(analysis, paths)
         if args.sigma_from:
             from lgp.app.sigma_from import read_sigma_from, report_lines
-            from lgp.app.report import _markdown
+            from lgp.app.report import markdown_table
 
             link = read_sigma_from(args.sigma_from)
             at = pair_orderings(e_mean, r, link.sigma, {t.pair: t.dimension for t in paper}) if link.sigma > 0 else None
             choice = analysis.get("sigma_choice")
             fitted = float(choice["sigma"].iloc[0]) if isinstance(choice, pd.DataFrame) and len(choice) and "sigma" in choice else None
-            sections.append("\n".join(report_lines(link, sigma, fitted, None if at is None else _markdown(pairs_csv_table(at)))))
+            sections.append("\n".join(report_lines(link, sigma, fitted, None if at is None else markdown_table(pairs_csv_table(at)))))
         if args.per_participant_sigma:
             from lgp.app.participant_sigma import participant_sigma_outputs
 
@@ -475,10 +475,7 @@ def end_of_run(seconds: float, cache, out: Path, n_files: int) -> str:
     extra = getattr(cache, "files", {})  # the page's pictures and replays, beside the result tables
     computed = cache.misses + cache.recomputed + sum(n for (_, o), n in extra.items() if o == "miss")
     reused = cache.hits + sum(n for (_, o), n in extra.items() if o == "hit")
-    took = f"{seconds:.0f} s" if seconds >= 10 else f"{seconds:.1f} s"
-    if seconds >= 120:
-        took = f"{int(seconds // 60)} min {seconds % 60:02.0f} s"
-    return (f"done in {took} ({computed} results computed, {reused} reused from the cache); open {out / 'index.html'}\n"
+    return (f"done in {cli.duration_text(seconds)} ({computed} results computed, {reused} reused from the cache); open {out / 'index.html'}\n"
             f"the {n_files} files written are listed in {out / 'manifest.json'} (--verbose prints them)")
 
 

@@ -103,7 +103,7 @@ def apply(action: Action, state: PlanState, *, support=support_graph) -> PlanSta
             raise IllegalActionError(f"{action} in {scene.label}: the hand holds {state.held}, not {action.block}")
         moved = scene.block(action.block).moved_to(action.p_WB, action.yaw)
         new = scene.with_blocks(moved if b.name == action.block else b for b in scene.blocks)
-        for other in _near(moved, (*new.blocks, *new.fixed)):
+        for other in nearby_solids(moved, (*new.blocks, *new.fixed)):
             if other.name == moved.name:
                 continue
             depth = penetration(moved, other)
@@ -118,7 +118,7 @@ def apply(action: Action, state: PlanState, *, support=support_graph) -> PlanSta
     raise IllegalActionError(f"unknown action {action!r}")
 
 
-def _near(block, solids) -> list:
+def nearby_solids(block, solids) -> list:
     """The solids (in order) that `block` may interpenetrate by more than
     OVERLAP_TOLERANCE: their centres lie within the sum of the half diagonals
     (plus the tolerance). A superset; the exact test decides."""
@@ -130,7 +130,7 @@ def _near(block, solids) -> list:
     return [solids[i] for i in np.flatnonzero(near)]
 
 
-def _enters_any(block: Block, solids: list) -> bool:
+def enters_any(block: Block, solids: list) -> bool:
     """Whether `block` interpenetrates any of `solids` by more than OVERLAP_TOLERANCE
     (lgp.scene.penetration). The depths of all pairs at once only rule out the pairs
     well below the tolerance; the scalar test decides the rest."""
@@ -144,7 +144,7 @@ def _enters_any(block: Block, solids: list) -> bool:
     return any(penetration(block, solids[i]) > OVERLAP_TOLERANCE for i in maybe)
 
 
-def _support_memo():
+def support_memo():
     """support_graph(scene) computed once per Scene object (symbolic_plan asks for
     each state's graph up to three times: clear blocks, grasp, place), and for a
     scene one block away from the last one asked, updated from that one's graph."""
@@ -242,7 +242,7 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
         return tuple(s if s in fixed_names else block_of_target[s] for s in support_B[target_of[a].name])
 
     state, actions = PlanState(initial), []
-    support = _support_memo()
+    support = support_memo()
     while to_move:
         current = state.scene
         above = supported_by(support(current))
@@ -253,7 +253,7 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
             if not all(s in fixed_names or s in in_place for s in onto(a)):
                 continue
             goal_block = current.block(a).moved_to(goal.p_WB, goal.yaw)
-            if _enters_any(goal_block, [b for b in _near(goal_block, current.blocks) if b.name != a]):
+            if enters_any(goal_block, [b for b in nearby_solids(goal_block, current.blocks) if b.name != a]):
                 continue
             ready.append((goal.p_WB[2], order, a))
         legal = [r for r in ready if r[2] in clear]

@@ -199,7 +199,7 @@ def _covered_area(solids, box: np.ndarray) -> float:
     footprints cover: the footprints of a greedy set of solids whose bounding
     boxes (seen from above) do not overlap, each clipped to `box`."""
     from lgp.geometry import clip_convex, polygon_area
-    from lgp.scene import _box_pairs
+    from lgp.scene import box_pairs
 
     solids = list(solids)
     if not solids:
@@ -210,7 +210,7 @@ def _covered_area(solids, box: np.ndarray) -> float:
     inside = np.flatnonzero(np.all((lo < bhi) & (blo < hi), axis=1))
     if not len(inside):
         return 0.0
-    i, j = _box_pairs(lo[inside], hi[inside], lo[inside], hi[inside], True, margin=-1e-9)
+    i, j = box_pairs(lo[inside], hi[inside], lo[inside], hi[inside], True, margin=-1e-9)
     neighbours: dict[int, list[int]] = {}
     for a, b in zip(i.tolist(), j.tolist()):
         neighbours.setdefault(b, []).append(a)  # a < b

@@ -122,10 +122,10 @@ def test_checker_accepts_a_legal_place():
 
 def test_bounding_sphere_prefilter_keeps_every_overlap_the_exact_test_finds():
     # apply(Place) runs the exact overlap test only on solids whose bounding spheres
-    # meet (lgp.symbolic._near); brute force over random blocks and boxes: every
+    # meet (lgp.symbolic.nearby_solids); brute force over random blocks and boxes: every
     # solid the exact test flags is among them.
     from lgp.scene import OVERLAP_TOLERANCE, FixedBox, penetration
-    from lgp.symbolic import _near
+    from lgp.symbolic import nearby_solids
 
     rng = np.random.default_rng(2)
     flagged = 0
@@ -135,7 +135,7 @@ def test_bounding_sphere_prefilter_keeps_every_overlap_the_exact_test_finds():
                   for i in range(8)]
         solids.append(FixedBox("wall", [rng.uniform(0, 0.1), rng.uniform(0, 0.1), 0.02], [0.005, 0.1, 0.04]))
         exact = [s for s in solids if penetration(moved, s) > OVERLAP_TOLERANCE]
-        near = _near(moved, solids)
+        near = nearby_solids(moved, solids)
         assert all(any(s is t for t in near) for s in exact)
         assert [s.name for s in near] == [s.name for s in solids if any(s is t for t in near)]  # order kept
         flagged += len(exact)
@@ -146,7 +146,7 @@ def test_array_overlap_verdict_is_the_scalar_one():
     # The ready-move check rules pairs out with array depths; brute force with the
     # scalar penetration on random, touching and slightly overlapping blocks.
     from lgp.scene import OVERLAP_TOLERANCE, penetration
-    from lgp.symbolic import _enters_any
+    from lgp.symbolic import enters_any
 
     rng = np.random.default_rng(8)
     verdicts = set()
@@ -159,6 +159,6 @@ def test_array_overlap_verdict_is_the_scalar_one():
             others.append(Block(f"b{i}", [0.3 + gap * np.cos(angle), gap * np.sin(angle), d / 2 + rng.choice([0.0, d / 2, d])],
                                 rng.choice([0.0, rng.uniform(-3, 3)])))
         expected = any(penetration(block, o) > OVERLAP_TOLERANCE for o in others)
-        assert _enters_any(block, others) == expected
+        assert enters_any(block, others) == expected
         verdicts.add(expected)
     assert verdicts == {True, False}

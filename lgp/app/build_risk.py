@@ -1,4 +1,4 @@
-"""The build-risk stage of `python -m lgp.reproduce --build-risk` (issue 11): risk
+"""The build-risk stage of `python -m lgp.reproduce --build-risk`: risk
 through the build (models/risk/build.py) of every trial, cached per trial, its
 aggregates, the pair table of aggregates, the small-multiples figure of risk by
 stage and a report section.
@@ -16,7 +16,7 @@ from lgp.app.files import atomic_path, write_csv_atomic
 from lgp.app.progress import log as _log
 from lgp.paper import PAIRS, PAPER_SIGMA
 
-#: The noise levels the build-risk report uses (issue 11: the paper's sigma, 0.065 d, and 0.10 d).
+#: The noise levels the build-risk report uses: the paper's sigma, 0.065 d, and 0.10 d.
 BUILD_SIGMAS: tuple[float, ...] = (PAPER_SIGMA, 0.1)
 #: Layouts whose plan the sequential build (mode="sequential") is run on: one,
 #: sample 0 (a tower's plan is the same for every layout; a sequential build of

@@ -43,8 +43,10 @@ from lgp.app.files import write_bytes_atomic, write_csv_atomic  # noqa: F401  (t
 ROOT = Path(__file__).resolve().parents[2]  # lgp/app/cache.py -> the repository
 #: The project's top-level packages: imports of anything else are libraries.
 PACKAGES = ("lgp", "models", "stimuli", "analysis")
-#: Libraries whose version can change a number the pipeline computes.
+#: Libraries whose version can change a number the pipeline computes (the cache keys).
 LIBRARIES = ("mujoco", "drake", "numpy", "scipy", "pandas")
+#: Those and the libraries that only draw or read files: what a run's record names.
+RECORDED_LIBRARIES = (*LIBRARIES, "matplotlib", "pyyaml")
 
 
 # ----------------------------------------------------------------------------- what a result depends on

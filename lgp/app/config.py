@@ -127,7 +127,7 @@ class RunConfig:
 
     def planner_choice(self) -> dict:
         """The planner of the run's effort (--planner): {} for the paper's pipeline
-        (its cache keys and manifests as before the search existed), else
+        (so its manifests name no planner and stay comparable with older runs), else
         {"planner": "search", "budget": lgp.search.Budget}."""
         return {} if self.planner == "paper" else {"planner": self.planner, "budget": self.budget}
 

@@ -1,4 +1,4 @@
-"""Pairs over sigma (issue 22): the paper's risk contrasts over the whole sigma grid
+"""Pairs over sigma: the paper's risk contrasts over the whole sigma grid
 of a run, with their Monte Carlo error, and the required precision per trial.
 
 At the paper's grid (0.05..0.10 d) most faithful risks are 0; past it (about

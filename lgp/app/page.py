@@ -24,19 +24,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lgp.app.cache import Cache, library_versions
+from lgp.app.cache import RECORDED_LIBRARIES, Cache, library_versions
 from lgp.app.files import write_text_atomic
 from lgp.app.report import ratio_text, sigma_edge_warnings
 from lgp.app.charts import histogram_svg, num, risk_svg, risk_top
 from lgp.app.pictures import rendered_trial_pictures
+from lgp.cli import duration_text
 from lgp.errors import InputError
 
 #: A spread of effort over layouts below this fraction of the mean is round-off of
 #: one and the same plan (a fixed layout of A: 10E's 4.2e-17 on 0.1159 J s), not variation.
 PLAN_NOISE = 1e-9
-
-#: Libraries named on the page (the cache keys name their own).
-LIBRARIES = ("drake", "mujoco", "numpy", "scipy", "pandas", "matplotlib", "pyyaml")
 
 CAPTIONS = {
     "effort_risk_pairs": "Physical effort (J s, mean over layouts) and physical risk (fraction of noisy runs "
@@ -132,24 +130,19 @@ def cache_words(counts: dict) -> str:
     return "; ".join(parts) or "nothing looked up"
 
 
-def _seconds(s) -> str:
-    s = float(s)
-    return f"{num(s, 2)} s" if s < 10 else (f"{s:.0f} s" if s < 120 else f"{int(s // 60)} min {s % 60:02.0f} s")
-
-
 def _run_section(run: dict) -> str:
     key = run.get("key", {})
     rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in key.items())
     chips = " ".join(f"<code>{_e(k)}={_e(v)}</code>" for k, v in run.get("parameters", {}).items())
-    versions = pd.DataFrame(list(library_versions(LIBRARIES).items()), columns=["library", "version"])
+    versions = pd.DataFrame(list(library_versions(RECORDED_LIBRARIES).items()), columns=["library", "version"])
     stages = pd.DataFrame([(k, num(v, 3)) for k, v in run.get("stages", {}).items()], columns=["stage", "wall time (s)"])
     settings = pd.DataFrame(list(run.get("engine_settings", {}).items()), columns=["setting", "value"])
     cache = run.get("cache", {})
     total = sum(run.get("stages", {}).values())
     compute = run.get("compute_s")
-    times = f"this run took {_seconds(total)} of wall time"
+    times = f"this run took {duration_text(total)} of wall time"
     if compute is not None:
-        times += (f"; computing its effort and risk results took {_seconds(compute)} (the time each part took "
+        times += (f"; computing its effort and risk results took {duration_text(compute)} (the time each part took "
                   "when it was computed, cached parts included)")
     return f"""
 <section id="run"><h2>The run</h2>

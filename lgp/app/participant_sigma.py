@@ -1,5 +1,5 @@
 """Each participant's sigma, `python -m lgp.reproduce --human-data FILE
---per-participant-sigma` (issue 11): analysis.fit_participant_sigma, its table,
+--per-participant-sigma`: analysis.fit_participant_sigma, its table,
 histogram and a report section.
 """
 from __future__ import annotations

@@ -16,14 +16,7 @@ import threading
 import time
 from typing import TextIO
 
-
-def _duration(seconds: float) -> str:
-    seconds = max(0.0, seconds)
-    if seconds < 60:
-        return f"{seconds:.0f} s"
-    if seconds < 3600:
-        return f"{seconds // 60:.0f} min {seconds % 60:02.0f} s"
-    return f"{seconds // 3600:.0f} h {seconds % 3600 // 60:02.0f} min"
+from lgp.cli import duration_text
 
 
 def log(msg: str) -> None:
@@ -47,9 +40,9 @@ def _tqdm_class():
             rate = d.get("rate") or (d["n"] / d["elapsed"] if d.get("elapsed") else 0)
             left = (d["total"] - d["n"]) / rate if rate and d.get("total") else None
             if d.get("total") and d["n"] >= d["total"]:
-                d["eta"] = "done in " + _duration(d.get("elapsed", 0))
+                d["eta"] = "done in " + duration_text(d.get("elapsed", 0))
             else:
-                d["eta"] = "ETA " + _duration(left) if left is not None else "ETA ?"
+                d["eta"] = "ETA " + duration_text(left) if left is not None else "ETA ?"
             d["speed"] = f"{rate:.3g} {d.get('unit', '')}/s" if rate else "starting"
             return d
 

@@ -1,4 +1,4 @@
-"""Model recovery, `python -m lgp.reproduce --recovery` (issue 23): SIMULATED
+"""Model recovery, `python -m lgp.reproduce --recovery`: SIMULATED
 studies from each model on this run's effort and risk tables
 (analysis.recovery), written into recovery/ as ``simulated_*`` (never beside a
 human-data analysis), and the report section.
@@ -18,7 +18,7 @@ def recovery_outputs(analysis: dict | None, effort_samples: pd.DataFrame, risk: 
     from analysis.compare_report import recovery_lines
     from analysis.crossval import risk_grid
     from analysis.recovery import fitted_parameters, recovery, write_recovery
-    from lgp.app.report import _markdown
+    from lgp.app.report import markdown_table
 
     grid = risk_grid(risk)
     fitted = None
@@ -26,7 +26,7 @@ def recovery_outputs(analysis: dict | None, effort_samples: pd.DataFrame, risk: 
         fitted = fitted_parameters(analysis["zscored"], effort_samples, grid, float(analysis["settings"]["sigma"].iloc[0]))
     confusion, summary = recovery(effort_samples, grid, n_studies=n_studies, fitted=fitted, seed=seed, jobs=jobs)
     paths = write_recovery(confusion, summary, out / "recovery")
-    return paths, "\n".join(recovery_lines(summary, confusion, _markdown))
+    return paths, "\n".join(recovery_lines(summary, confusion, markdown_table))
 
 
 def list_files(analysis: dict, paths: list[Path]) -> None:

@@ -86,7 +86,7 @@ def engine_description(engine: str | None, settings: dict | None = None) -> str:
         (" [UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md]" if settings.get("faithful") is False else "")
 
 
-def _markdown(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
+def markdown_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
     cols = list(df.columns)
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for _, row in df.iterrows():
@@ -131,18 +131,18 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         "",
         "## Physical effort (J*s: integral of the carried blocks' kinetic energy over time, 1 kg blocks)",
         "",
-        _markdown(effort),
+        markdown_table(effort),
         "",
         "## Physical risk (fraction of noisy runs that fall)",
         "",
-        _markdown(wide.reset_index(), ".2f"),
+        markdown_table(wide.reset_index(), ".2f"),
         "",
     ]
     if pairs is not None:
         lines += [
             f"## Easy/hard pairs (risk at sigma = {pairs['sigma'].iloc[0]:g} d)",
             "",
-            _markdown(pairs_csv_table(pairs).drop(columns=["sigma"])),
+            markdown_table(pairs_csv_table(pairs).drop(columns=["sigma"])),
             "",
             f"Tie rule (one rule for this table, pairs.csv, the figures and docs/results.md): E and H are tied when "
             f"|H - E| <= {TIE_REL:g} x max(E, H), the plan-to-plan noise of effort (analysis.pairs.TIE_REL); "
@@ -168,10 +168,10 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         for key in ("sigma_choice", "fits", "bootstrap_summary", "bootstrap_tests"):
             if key in analysis and isinstance(analysis[key], pd.DataFrame) and len(analysis[key]):
                 label = " (in-sample)" if key != "sigma_choice" else ""
-                lines += [f"## {key.replace('_', ' ')}{label}", "", _markdown(analysis[key]), ""]
-        lines += comparison_lines(analysis, _markdown)
+                lines += [f"## {key.replace('_', ' ')}{label}", "", markdown_table(analysis[key]), ""]
+        lines += comparison_lines(analysis, markdown_table)
         if "orderings" in analysis:
-            lines += ["## Pair orderings by source (orderings.csv)", "", _markdown(analysis["orderings"]), ""]
+            lines += ["## Pair orderings by source (orderings.csv)", "", markdown_table(analysis["orderings"]), ""]
     if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers
         lines += ["## Software", "", "Libraries: " + ", ".join(f"{k} {v}" for k, v in software["libraries"].items()) + ".",
                   "", f"Risk engine settings: `{json.dumps(software['engine'], sort_keys=True, default=str)}`.", ""]

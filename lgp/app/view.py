@@ -157,7 +157,7 @@ def caption_html(plan, title: str, back: str | None = None) -> str:
 def _quiet_meshcat(Meshcat):
     """A Meshcat server without its "Meshcat listening for connections at
     http://localhost:7000" log line: the replay is saved as a static HTML file and
-    needs no server, so the line would only mislead (issue 26)."""
+    needs no server, so the line would only mislead."""
     import logging
 
     logger = logging.getLogger("drake")

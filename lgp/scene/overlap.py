@@ -21,10 +21,9 @@ def horizontal_penetration(a, b) -> float:
     Separating-axis test on the two rectangles (lgp.geometry.rectangle_overlap):
     the shortest push along one of the four edge axes that separates them; <= 0
     means separated (its magnitude is the gap along that axis only when the
-    rectangles are aligned). (Until issue 9 this was the length shared by the two
-    projections, which is smaller only when one projection contains the other;
-    both then exceed the smallest block edge, so no verdict against a tolerance
-    below it changes.)
+    rectangles are aligned). Not the length shared by the two projections: that
+    is smaller only when one projection contains the other, and then both exceed
+    the smallest block edge, so no verdict against a tolerance below it differs.
     """
     (c_a, half_a, u_a), (c_b, half_b, u_b) = a.outline(), b.outline()
     depth, _ = rectangle_overlap(c_a[None], half_a[None], u_a[None], c_b[None], half_b[None], u_b[None])
@@ -39,10 +38,10 @@ def penetration(a, b) -> float:
 
 def bounding_boxes(solids) -> tuple[np.ndarray, np.ndarray]:
     """Axis-aligned bounds (lo, hi), each (n, 3), of the solids' footprints x heights."""
-    return _outlines(solids)[1:]
+    return solid_outlines(solids)[1:]
 
 
-def _outlines(solids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def solid_outlines(solids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Footprint corners (n, 4, 2) and bounds lo, hi (n, 3) of the solids."""
     solids = list(solids)
     if not solids:
@@ -54,7 +53,7 @@ def _outlines(solids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return corners, lo, hi
 
 
-def _box_pairs(lo_a, hi_a, lo_b, hi_b, same: bool, margin: float = 0.0, rows: int = 1024) -> tuple[np.ndarray, np.ndarray]:
+def box_pairs(lo_a, hi_a, lo_b, hi_b, same: bool, margin: float = 0.0, rows: int = 1024) -> tuple[np.ndarray, np.ndarray]:
     """Index arrays (i, j) of the boxes that touch or overlap when grown by `margin`
     (i < j when `same`), in row-major order; memory O(rows x n)."""
     I, J = [], []
@@ -81,13 +80,13 @@ def near_pairs(a_solids, b_solids=None, margin: float = 0.0, rows: int = 1024) -
     under a second.
     """
     same = b_solids is None
-    _, lo_a, hi_a = _outlines(a_solids)
-    lo_b, hi_b = (lo_a, hi_a) if same else _outlines(b_solids)[1:]
-    i, j = _box_pairs(lo_a, hi_a, lo_b, hi_b, same, margin, rows)
+    _, lo_a, hi_a = solid_outlines(a_solids)
+    lo_b, hi_b = (lo_a, hi_a) if same else solid_outlines(b_solids)[1:]
+    i, j = box_pairs(lo_a, hi_a, lo_b, hi_b, same, margin, rows)
     return list(zip(i.tolist(), j.tolist()))
 
 
-def _sat_depths(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+def sat_depths(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """horizontal_penetration for many pairs of outlines at once, A and B (P, 4, 2).
 
     Used only to discard pairs far from a threshold: a pair near it is decided by
@@ -118,7 +117,7 @@ def rests_on(upper: Block, lower, tol: float = CONTACT_TOLERANCE) -> bool:
     return abs(upper.bottom - lower.top) <= tol and footprint_overlap_area(upper, lower) > MIN_SUPPORT_AREA
 
 
-def _resting_candidates(blocks: list, fixed: list, tol: float) -> list[list]:
+def resting_candidates(blocks: list, fixed: list, tol: float) -> list[list]:
     """Per block, the solids it might rest on (blocks in scene order, then fixed
     boxes): its top is within `tol` (m) of the block's bottom and their outline
     boxes share more than MIN_SUPPORT_AREA (the outlines share at most that).
@@ -126,12 +125,12 @@ def _resting_candidates(blocks: list, fixed: list, tol: float) -> list[list]:
     out: list[list] = [[] for _ in blocks]
     if not blocks:
         return out
-    _, lob, hib = _outlines(blocks)
+    _, lob, hib = solid_outlines(blocks)
     for others, is_block in ((blocks, True), (fixed, False)):
         if not others:
             continue
-        lo, hi = (lob, hib) if is_block else _outlines(others)[1:]
-        i, j = _box_pairs(lob, hib, lo, hi, False, margin=tol)
+        lo, hi = (lob, hib) if is_block else solid_outlines(others)[1:]
+        i, j = box_pairs(lob, hib, lo, hi, False, margin=tol)
         shared = np.prod(np.clip(np.minimum(hib[i, :2], hi[j, :2]) - np.maximum(lob[i, :2], lo[j, :2]), 0, None), axis=1)
         keep = (np.abs(lob[i, 2] - hi[j, 2]) <= tol + _SLACK) & (shared > MIN_SUPPORT_AREA - _SLACK * 1e-3)
         if is_block:

@@ -2,7 +2,7 @@
 block moves, and inverted (what rests on each solid)."""
 from __future__ import annotations
 
-from lgp.scene.overlap import _resting_candidates, rests_on
+from lgp.scene.overlap import resting_candidates, rests_on
 from lgp.scene.solids import CONTACT_TOLERANCE, TABLE, Block
 
 
@@ -14,7 +14,7 @@ def support_graph(scene: Scene, tol: float = CONTACT_TOLERANCE) -> dict[str, lis
     supporter's top face and the outlines share more than MIN_SUPPORT_AREA.
     """
     graph: dict[str, list[str]] = {}
-    below = _resting_candidates(list(scene.blocks), list(scene.fixed), tol)
+    below = resting_candidates(list(scene.blocks), list(scene.fixed), tol)
     for i, b in enumerate(scene.blocks):
         near = below[i]
         under = [o.name for o in near if isinstance(o, Block) and rests_on(b, o, tol)]
@@ -35,7 +35,7 @@ def support_graph_after_move(scene: Scene, previous: dict[str, list[str]], moved
     lists keep support_graph's order (blocks in scene order, fixed names sorted, table).
     """
     blocks = list(scene.blocks)
-    below = _resting_candidates(blocks, list(scene.fixed), tol)
+    below = resting_candidates(blocks, list(scene.fixed), tol)
     block_names = {b.name for b in blocks}
     graph: dict[str, list[str]] = {}
     for i, b in enumerate(blocks):

@@ -8,7 +8,7 @@ from collections import Counter
 import numpy as np
 
 from lgp.paper import COLOURS
-from lgp.scene.overlap import _box_pairs, _outlines, _resting_candidates, _sat_depths, may_penetrate, penetration, rests_on
+from lgp.scene.overlap import box_pairs, solid_outlines, resting_candidates, sat_depths, may_penetrate, penetration, rests_on
 from lgp.scene.solids import CONTACT_TOLERANCE, OVERLAP_TOLERANCE, SOLID_SIZE, WORKSPACE_XY, WORKSPACE_Z, StimulusError
 
 
@@ -49,22 +49,22 @@ def validate_scene(scene: Scene) -> None:
         if b.bottom < -CONTACT_TOLERANCE:
             raise StimulusError(f"{label} block {b.name}: lies under the table (bottom at z = {b.bottom * 1000:.1f} mm)")
     blocks, fixed = list(scene.blocks), list(scene.fixed)
-    cb, lob, hib = _outlines(blocks)
-    cf, lof, hif = _outlines(fixed)
+    cb, lob, hib = solid_outlines(blocks)
+    cf, lof, hif = solid_outlines(fixed)
     # The first overlap in the order of a pairwise scan (block i against blocks
     # j > i, then against fixed boxes), over the pairs the broad phase lets
     # through and a vectorised depth does not rule out; the scalar check decides.
     overlaps = []
     for kind, others, C, lo, hi, same in (("", blocks, cb, lob, hib, True), ("fixed ", fixed, cf, lof, hif, False)):
-        i, j = _box_pairs(lob, hib, lo, hi, same)
+        i, j = box_pairs(lob, hib, lo, hi, same)
         vertical = np.minimum(hib[i, 2], hi[j, 2]) - np.maximum(lob[i, 2], lo[j, 2])
-        keep = may_penetrate(vertical, _sat_depths(cb[i], C[j]) if len(i) else vertical)
+        keep = may_penetrate(vertical, sat_depths(cb[i], C[j]) if len(i) else vertical)
         overlaps += [((a, int(kind != ""), c), blocks[a], others[c], kind) for a, c in zip(i[keep].tolist(), j[keep].tolist())]
     for _, a, b, kind in sorted(overlaps, key=lambda o: o[0]):
         depth = penetration(a, b)
         if depth > OVERLAP_TOLERANCE:
             raise StimulusError(f"{label} block {a.name} overlaps {kind}{b.name} by {depth * 1000:.1f} mm")
-    below = _resting_candidates(blocks, fixed, CONTACT_TOLERANCE)
+    below = resting_candidates(blocks, fixed, CONTACT_TOLERANCE)
     for i, b in enumerate(blocks):
         on_table = abs(b.bottom) <= CONTACT_TOLERANCE
         if not on_table and not any(rests_on(b, o) for o in below[i]):

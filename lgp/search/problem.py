@@ -1,4 +1,4 @@
-"""The fixed data of one search (`_Problem`): blocks of A, slots of B and their
+"""The fixed data of one search (`Problem`): blocks of A, slots of B and their
 supports, the set-aside spots created so far, where each block stands in a
 symbolic state, the pose level (closed-form IK of a carry's keyframes, memoised)
 and the bound on the effort still to come (`remaining_bound`)."""
@@ -10,10 +10,10 @@ from scipy.optimize import linear_sum_assignment
 from lgp.planner import SEED_MARGIN, SWIVELS
 from lgp.scene import CONTACT_TOLERANCE, MIN_SUPPORT_AREA, TABLE, Scene, footprint_overlap_area, support_graph
 from lgp.search.bound import carry_bound
-from lgp.symbolic import _enters_any, _near, same_pose
+from lgp.symbolic import enters_any, nearby_solids, same_pose
 
 
-class _Problem:
+class Problem:
     """The fixed data of one search: blocks of A, slots of B and their supports,
     the spots created so far, and memoised geometry."""
 
@@ -114,7 +114,7 @@ class _Problem:
         unfilled = [s for j, s in enumerate(self.slots) if (1 + j) not in where]
         if not unfilled:
             return True
-        return not any(_enters_any(scene.blocks[i], _near(scene.blocks[i], unfilled)) for i in movers)
+        return not any(enters_any(scene.blocks[i], nearby_solids(scene.blocks[i], unfilled)) for i in movers)
 
     def remaining_bound(self, where, settled: bool = False) -> tuple[float, float]:
         """Two estimates of the effort still to come, by minimum-cost assignment of

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from lgp.scene import Scene
-from lgp.search.problem import _Problem
+from lgp.search.problem import Problem
 
 #: Candidate set-aside spots: a grid of this pitch (m) over the table region below.
 SPOT_PITCH = 0.02
@@ -19,7 +19,7 @@ SPOT_CLEARANCE = 0.01
 SPOTS_PER_SET_ASIDE = 3
 
 
-def candidate_spots(problem: _Problem, scene: Scene, block: int, free_slots: list[int]) -> list[tuple[float, np.ndarray]]:
+def candidate_spots(problem: Problem, scene: Scene, block: int, free_slots: list[int]) -> list[tuple[float, np.ndarray]]:
     """Table spots where block `block` may be set aside, best first by bound:
     (bound of the carry there plus the cheapest carry on to a free slot of its
     colour, p_WB). A spot is on the grid of SPOT_PITCH over SPOT_REGION, its

@@ -15,11 +15,11 @@ from lgp.assignment import assign_blocks
 from lgp.planner import Budget, Design, Plan, PlanningError, default_arm, plan_symbolic
 from lgp.scene import TABLE, Scene, support_graph, supported_by
 from lgp.search.bound import kinetic_energy, skeleton_bound
-from lgp.search.problem import _Problem
+from lgp.search.problem import Problem
 from lgp.search.spots import SPOTS_PER_SET_ASIDE, candidate_spots
 from lgp.search.sweep import first_sweep
-from lgp.symbolic import (Grasp, Place, PlanState, SymbolicPlan, SymbolicPlanningError, _enters_any, _near,
-                          _support_memo, apply, symbolic_plan)
+from lgp.symbolic import (Grasp, Place, PlanState, SymbolicPlan, SymbolicPlanningError, enters_any, nearby_solids,
+                          support_memo, apply, symbolic_plan)
 
 
 class StopReason(StrEnum):
@@ -123,13 +123,13 @@ class _Node:
     where: tuple[int, ...]
     carries: tuple[tuple[int, int], ...]
     g: float
-    settled: bool  # no state below can be stuck (_Problem.settled), so no set-aside is to come
+    settled: bool  # no state below can be stuck (Problem.settled), so no set-aside is to come
 
 
 # ----------------------------------------------------------------------------- the search
 
 
-def _children(problem: _Problem, node: _Node, spots_per_set_aside: int):
+def _children(problem: Problem, node: _Node, spots_per_set_aside: int):
     """(child node, its g) for every legal carry from `node`: clear blocks into
     ready slots of their colour; set-asides only when no such carry exists."""
     where = node.where
@@ -147,7 +147,7 @@ def _children(problem: _Problem, node: _Node, spots_per_set_aside: int):
             if problem.colour[i] != slot.colour:
                 continue
             moved = scene.blocks[i].moved_to(slot.p_WB, slot.yaw)
-            if _enters_any(moved, [o for o in _near(moved, (*scene.blocks, *scene.fixed)) if o.name != moved.name]):
+            if enters_any(moved, [o for o in nearby_solids(moved, (*scene.blocks, *scene.fixed)) if o.name != moved.name]):
                 continue
             if not problem.reachable(slot.p_WB, slot.yaw):
                 continue
@@ -175,7 +175,7 @@ def _children(problem: _Problem, node: _Node, spots_per_set_aside: int):
     return children
 
 
-def _symbolic(problem: _Problem, carries) -> SymbolicPlan:
+def _symbolic(problem: Problem, carries) -> SymbolicPlan:
     """The skeleton (Grasp, Place) of a sequence of carries, checked by lgp.symbolic.apply."""
     where = list(problem.final_from_start())
     names = [b.name for b in problem.blocks]
@@ -194,7 +194,7 @@ def _symbolic(problem: _Problem, carries) -> SymbolicPlan:
         where[i] = w
     assignment = {names[i]: problem.slots[j].name for i, j in slot_of.items()}
     plan = SymbolicPlan(problem.initial, problem.target, assignment, tuple(actions))
-    state, support = PlanState(problem.initial), _support_memo()
+    state, support = PlanState(problem.initial), support_memo()
     for action in plan.actions:  # every action legal (lgp.symbolic.apply), or IllegalActionError
         state = apply(action, state, support=support)
     return plan
@@ -226,7 +226,7 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     arm = arm or default_arm()
     rng = rng_or_seed if isinstance(rng_or_seed, np.random.Generator) else np.random.default_rng(rng_or_seed)
     label = f"{initial.label} -> {target.label}"
-    problem = _Problem(initial, target, approach_height, slices_per_phase, arm)
+    problem = Problem(initial, target, approach_height, slices_per_phase, arm)
     options = dict(formulation=formulation, solver=solver, slices_per_phase=slices_per_phase,
                    approach_height=approach_height, arm=arm)
     best: tuple[float, Plan, float] | None = None  # (effort, plan, skeleton bound)

@@ -26,7 +26,7 @@ sigma give a nearby scene (common random numbers) and sigma = 0 changes nothing:
    supports'), but the top of a 10-tower can start a few mm up.
 
    That is the default noise rule, ``noise_rule="lift"``. The other,
-   ``noise_rule="settle"`` (beyond the paper; issue 22), keeps step 1 and the
+   ``noise_rule="settle"`` (beyond the paper), keeps step 1 and the
    horizontal noise but sets every block's height to the rest height on what lies
    beneath its new outline (or the table), dropping its own vertical noise: no
    block starts in the air and nothing drops when simulated, so what falls is

@@ -1,4 +1,4 @@
-"""Required precision (beyond the paper; issue 22): per trial, the noise level
+"""Required precision (beyond the paper): per trial, the noise level
 sigma* at which its risk first reaches a level (0.5 and 0.1 by default). It
 answers "how careful must one be to build this" without choosing a sigma.
 
