@@ -239,18 +239,8 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
             unique.setdefault(st.key, st)
     target = trial.target
     z_B = draw_normals(n_sims, len(target), seed)
-    # Stack blocks are blocks A fixes (scattered blocks lie alone), so their
-    # index among A's fixed blocks is the same in every layout.
-    fixed_A = [b.name for b in trial.initial.blocks]
-    z_A = draw_normals(n_sims, max(len(fixed_A), 1), np.random.default_rng([seed, 1]))
-    a_index = {}
-    for stages in plans.values():
-        for st in stages:
-            for a in st.stack:
-                if a not in fixed_A:
-                    raise BuildStageError(f"trial {trial.id} sample {st.sample} stage {st.stage}: block {a} "
-                                          "is in a stack but is not one of A's fixed blocks")
-                a_index[a] = fixed_A.index(a)
+    z_A = draw_normals(n_sims, max(len(trial.initial.blocks), 1), np.random.default_rng([seed, 1]))
+    a_index = _stack_index(trial, plans)
     keys = list(unique)
     for key in keys:
         st = unique[key]
@@ -281,6 +271,22 @@ def build_risk(trial, sigma, n_sims: int = N_SIMS, samples: int = SAMPLES, seed:
                              len(st.structure) + len(st.stack), f / n_sims, f, n_sims, st.work_share, model.engine,
                              "stages", n_sims, model.noise_rule.value))
     return pd.DataFrame(rows, columns=STAGE_COLUMNS)
+
+
+def _stack_index(trial, plans: dict) -> dict[str, int]:
+    """Each stack block's index among A's fixed blocks: the row of its normals in
+    z_A. Stack blocks are blocks A fixes (scattered blocks lie alone), so the
+    index is the same in every layout."""
+    fixed_A = [b.name for b in trial.initial.blocks]
+    index = {}
+    for stages in plans.values():
+        for st in stages:
+            for a in st.stack:
+                if a not in fixed_A:
+                    raise BuildStageError(f"trial {trial.id} sample {st.sample} stage {st.stage}: block {a} "
+                                          "is in a stack but is not one of A's fixed blocks")
+                index[a] = fixed_A.index(a)
+    return index
 
 
 def _sources(st: Stage, target: Scene, a_index: dict[str, int]) -> list[tuple[str, int]]:
