@@ -68,7 +68,7 @@ def test_each_run_lists_and_leaves_only_its_own_outputs_and_reports_true_times(t
     assert reproduce.main([*TINY, "--trials", "1e", "--out", str(out), "--verbose"]) == 0
     subset = capsys.readouterr()
     assert "removed the outputs of an earlier run" in subset.err
-    assert _listed(out) == _on_disk(out) == {"effort_samples.csv", "effort.csv", "risk.csv", "risk_precision.csv", "report.md", "index.html", "page/1E.png"}
+    assert _listed(out) == _on_disk(out) == {"effort_samples.csv", "effort.csv", "risk.csv", "risk_precision.csv", "report.md", "index.html", "page/1E.png", "page/risk.html"}
     assert _printed(subset.out, out) == _listed(out) | {"manifest.json"}
 
     # The full run again, from the cache: compute time is the first run's, this run's time its own.

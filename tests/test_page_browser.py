@@ -249,3 +249,79 @@ def test_the_page_fits_a_laptop_and_a_phone(browser, results, width, name):
     assert page.locator("#quick").is_visible()  # a --quick page says it is a preview
     keep_screenshot(page, name)
     page.close()
+
+
+def _wood_lean(shot: np.ndarray) -> float:
+    """Sideways lean of the wooden tower in a picture (pixels): the mean column of its
+    top block's rows minus that of its bottom block's rows (4 blocks)."""
+    wood = (shot[:, :, 0] - shot[:, :, 2] > 25 / 255) & (shot[:, :, 0] > 60 / 255)
+    vs, us = np.nonzero(wood)
+    assert len(us) > 100, "no tower found in the picture"
+    block = (vs.max() - vs.min()) / 4
+    return float(us[vs < vs.min() + 0.6 * block].mean() - us[vs > vs.max() - 0.6 * block].mean())
+
+
+def test_the_cards_of_4E_and_4H_show_a_column_and_a_staircase_large_enough_to_tell_apart(browser, results):
+    """The Finish picture on each card is at least 250 px wide at 1280x800, and 4H's
+    staircase (each block d/5 further in x) leans sideways where 4E's column does not,
+    by more than 4 screen pixels."""
+    from PIL import Image
+
+    page, errors, _ = _open(browser, results / "index.html")
+    lean, widths = {}, {}
+    for tid in ("4E", "4H"):
+        img = page.locator(f"#trial-{tid} img")
+        img.scroll_into_view_if_needed()
+        assert img.evaluate("i => i.complete && i.naturalWidth") > 0
+        shot = np.asarray(Image.open(io.BytesIO(img.screenshot())).convert("RGB"), dtype=float) / 255.0
+        half = shot.shape[1] // 2
+        widths[tid] = half
+        lean[tid] = _wood_lean(shot[int(0.1 * shot.shape[0]):, half:])  # B, below the label
+    assert min(widths.values()) >= 250, widths
+    assert lean["4H"] - lean["4E"] > 4, lean
+    assert errors == []
+    page.close()
+
+
+def test_every_risk_mini_plot_spans_0_to_1_and_its_labels_are_readable(browser, results):
+    page, errors, _ = _open(browser, results / "index.html")
+    plots = page.evaluate("""Array.from(document.querySelectorAll('article.card svg.risk')).map(s =>
+        [s.dataset.ymin, s.dataset.ymax, Array.from(s.querySelectorAll('text')).map(t => t.textContent)])""")
+    assert len(plots) == 24
+    assert all(lo == "0" and hi == "1" and "0" in texts and "1" in texts for lo, hi, texts in plots)
+    sizes = page.evaluate("Array.from(document.querySelectorAll('article.card svg text')).map(t => parseFloat(getComputedStyle(t).fontSize))")
+    assert min(sizes) >= 11
+    text = page.locator("#trial-7H").inner_text()
+    assert "riskruns" not in page.content()
+    if "required precision" in text:
+        assert "sigma*: the least noise" in text
+    assert errors == []
+    page.close()
+
+
+def test_the_folder_works_when_copied_elsewhere(browser, results, tmp_path):
+    """Every link of the page stays inside the output folder: a copy opens with every
+    picture and the risk explanation it links (docs/risk.md carried as page/risk.html)."""
+    import shutil
+
+    copy = tmp_path / "elsewhere" / "results-copy"
+    shutil.copytree(results, copy, ignore=shutil.ignore_patterns("cache"))
+    page, errors, refused = _open(browser, copy / "index.html")
+    hrefs = page.evaluate("Array.from(document.querySelectorAll('a[href], img[src]')).map(a => a.getAttribute('href') || a.getAttribute('src'))")
+    local = [h.split("#")[0] for h in hrefs if not h.startswith("#") and h.split("#")[0]]
+    assert [h for h in local if h.startswith("..") or h.startswith("/")] == []
+    assert [h for h in local if not (copy / h).exists()] == []
+    doc = page.evaluate("document.querySelector('.explain a').getAttribute('href')")
+    assert doc == "page/risk.html"
+    page.goto((copy / doc).resolve().as_uri())
+    assert "common random numbers" in page.content().lower()
+    assert errors == [] and refused == []
+    page.close()
+
+
+def test_a_replay_fits_a_phone(browser, results):
+    page = browser.new_page(viewport={"width": 390, "height": 844}, is_mobile=True, has_touch=True)
+    page.goto((results / "replays" / "7H.html").resolve().as_uri())
+    assert page.evaluate("document.querySelector('meta[name=viewport]').content") == "width=device-width, initial-scale=1"
+    assert page.evaluate("window.innerWidth") == 390  # the layout width is the screen's, not a 980 px desktop
+    page.close()

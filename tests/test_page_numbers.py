@@ -1,12 +1,14 @@
 """Numbers as the results page writes them (lgp.app.page, lgp.app.charts): at most 4
 significant digits, round-off of a fixed layout not printed as a spread, no raw nan,
-a bootstrap p of 0 as "< 1/n", risk axes scaled to the data, and a chosen sigma at
-the edge of its grid warned about."""
+a bootstrap p of 0 as "< 1/n", every risk plot on one axis 0..1 with its Wilson band,
+and a chosen sigma at the edge of its grid warned about."""
+import re
+
 import numpy as np
 import pandas as pd
 import pytest
 
-from lgp.app.charts import num, risk_svg, risk_top
+from lgp.app.charts import num, risk_svg
 from lgp.app.page import p_value, percent, plus_minus
 from lgp.app.report import sigma_edge_warnings
 
@@ -36,13 +38,23 @@ def test_relative_differences_are_percent_and_a_tie_says_so():
     assert percent(1.1e-16) == "0 %"
 
 
-def test_the_risk_axis_is_scaled_to_the_curve_and_its_top_written():
-    assert risk_top([0, 0.02, 0.015]) == 0.02 and risk_top([0, 0.3]) == 0.5 and risk_top([0, 0]) == 1.0
-    svg = risk_svg([0.05, 0.1], [0.0, 0.02], 0.065)
-    assert ">0.02</text>" in svg  # the top of the axis, written
-    # the 0.02 point is drawn at the top of the frame, not near the bottom as on a 0..1 axis
-    ys = [float(p.split(",")[1]) for p in svg.split('points="')[1].split('"')[0].split()]
-    assert ys[1] == pytest.approx(4.0, abs=0.1)
+def test_every_risk_plot_shares_one_axis_from_0_to_1_with_its_wilson_band():
+    """One fall in 20 (0.05) stays near the floor of a 0..1 axis instead of filling a
+    plot scaled to its own curve; the band spans each point's interval."""
+    from models.risk.core import wilson_interval
+
+    lo, hi = zip(*(wilson_interval(k, 20) for k in (0, 1, 0)))
+    svg = risk_svg([0.05, 0.065, 0.08], [0.0, 0.05, 0.0], 0.065, lo, hi)
+    assert 'data-ymin="0" data-ymax="1"' in svg and ">1</text>" in svg and ">0</text>" in svg
+    frame = re.search(r'class="frame" x="[\d.]+" y="([\d.]+)" width="[\d.]+" height="([\d.]+)"', svg)
+    top, height = float(frame.group(1)), float(frame.group(2))
+    ys = [float(p.split(",")[1]) for p in svg.split('points="')[-1].split('"')[0].split()]
+    # the 0.05 point sits 5 % of the frame above the floor
+    assert ys[1] == pytest.approx(top + height * 0.95, abs=0.1) and ys[0] == pytest.approx(top + height, abs=0.1)
+    band = [tuple(map(float, p.split(","))) for p in re.search(r'class="band" points="([^"]+)"', svg).group(1).split()]
+    # upper edge at the three upper bounds, then the lower edge back
+    assert [y for _, y in band[:3]] == pytest.approx([top + height * (1 - h) for h in hi], abs=0.1)
+    assert [y for _, y in band[3:]] == pytest.approx([top + height * (1 - v) for v in lo[::-1]], abs=0.1)
 
 
 def test_a_sigma_chosen_at_the_edge_of_the_grid_is_warned_about():
@@ -52,3 +64,25 @@ def test_a_sigma_chosen_at_the_edge_of_the_grid_is_warned_about():
     (warning,) = sigma_edge_warnings(edge)
     assert "upper edge of the grid (0.05 to 0.1 d)" in warning and "--sigmas" in warning
     assert sigma_edge_warnings(inside) == [] and sigma_edge_warnings(None) == []
+
+
+def test_the_page_reads_only_the_runs_own_tables_and_never_waits_on_a_pipe(tmp_path):
+    """A FIFO notes.csv (not the run's) and a FIFO under one of the run's names are
+    not opened: a blocking open would hang the page. A run's table that cannot be
+    read is an error naming it, not skipped in silence."""
+    import os
+
+    from bench.common import deadline
+    from lgp.app.page import _extra_tables
+    from lgp.errors import InputError
+
+    os.mkfifo(tmp_path / "notes.csv")
+    os.mkfifo(tmp_path / "build_risk.csv")
+    pd.DataFrame({"trial": ["7H"], "x": [1]}).to_csv(tmp_path / "risk_sensitivity.csv", index=False)
+    pd.DataFrame({"trial": ["7H"], "x": [2]}).to_csv(tmp_path / "mine.csv", index=False)  # not a name of the run
+    with deadline(5):
+        tables = _extra_tables(tmp_path, {"risk.csv"})
+    assert list(tables) == ["risk_sensitivity"]
+    (tmp_path / "effort_sensitivity.csv").write_bytes(b'trial,x\n"7H,1\n')  # an unclosed quote
+    with deadline(5), pytest.raises(InputError, match="effort_sensitivity.csv"):
+        _extra_tables(tmp_path, {"risk.csv"})

@@ -26,7 +26,7 @@ def num(v, digits: int = DIGITS) -> str:
     return f"{x:.{digits}g}"
 
 
-def histogram_svg(values, width: int = 150, height: int = 44, bins: int = 10) -> str:
+def histogram_svg(values, width: int = 180, height: int = 56, bins: int = 10) -> str:
     """A tiny histogram of `values` as inline SVG (axis: min and max printed below)."""
     v = np.asarray(values, dtype=float)
     lo, hi = float(v.min()), float(v.max())
@@ -34,7 +34,7 @@ def histogram_svg(values, width: int = 150, height: int = 44, bins: int = 10) ->
         counts, edges = np.array([len(v)]), np.array([lo, hi])
     else:
         counts, edges = np.histogram(v, bins=bins, range=(lo, hi))
-    plot_h = height - 12
+    plot_h = height - 15
     bw = width / len(counts)
     top = counts.max()
     bars = "".join(
@@ -45,25 +45,15 @@ def histogram_svg(values, width: int = 150, height: int = 44, bins: int = 10) ->
             f'<text x="0" y="{height - 1}">{lo:.3g}</text><text x="{width}" y="{height - 1}" text-anchor="end">{hi:.3g}</text></svg>')
 
 
-#: Tops of the risk mini-plot's y axis: the smallest that holds the curve.
-RISK_TOPS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
-
-
-def risk_top(risks) -> float:
-    """The y-axis top of a risk curve: the smallest of RISK_TOPS at or above its
-    maximum (a curve of 0.02 is not drawn flat on 0..1); 1 for an all-zero curve."""
-    peak = float(np.nanmax(np.asarray(risks, dtype=float))) if len(risks) else 0.0
-    return 1.0 if peak <= 0 else next(t for t in RISK_TOPS if t >= peak - 1e-12)
-
-
-def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height: int = 70) -> str:
-    """Risk over sigma as inline SVG: y from 0 to the curve's `risk_top` (written on
-    the axis), x over the run's sigma grid."""
+def risk_svg(sigmas, risks, mark: float | None = None, low=None, high=None, width: int = 220, height: int = 92) -> str:
+    """Risk over sigma as inline SVG on one axis for every trial, 0 to 1 (a risk of
+    0.05, one fall in 20, stays near the floor), x over the run's sigma grid; the
+    95% Wilson interval of each point (`low`, `high`) as a shaded band; `mark`: the
+    sigma of the pairs (a dashed line)."""
     s = np.asarray(sigmas, dtype=float)
     r = np.asarray(risks, dtype=float)
-    y_top = risk_top(r)
-    left, bottom, top = 22, 14, 4
-    pw, ph = width - left - 4, height - bottom - top
+    left, bottom, top = 24, 16, 6
+    pw, ph = width - left - 8, height - bottom - top
     s0, s1 = float(s.min()), float(s.max())
     span = s1 - s0 if s1 > s0 else 1.0
 
@@ -71,15 +61,28 @@ def risk_svg(sigmas, risks, mark: float | None = None, width: int = 170, height:
         return left + pw * ((x - s0) / span if s1 > s0 else 0.5)
 
     def Y(y):
-        return top + ph * (1 - y / y_top)
+        return top + ph * (1 - y)
 
+    band = ""
+    if low is not None and high is not None:
+        lo, hi = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
+        if len(s) == 1:  # one sigma: the interval as a bar
+            band = f'<rect class="band" x="{X(s[0]) - 4:.1f}" y="{Y(hi[0]):.1f}" width="8" height="{Y(lo[0]) - Y(hi[0]):.1f}"/>'
+        else:
+            ring = [(X(a), Y(b)) for a, b in zip(s, hi)] + [(X(a), Y(b)) for a, b in zip(s[::-1], lo[::-1])]
+            band = '<polygon class="band" points="' + " ".join(f"{x:.1f},{y:.1f}" for x, y in ring) + '"/>'
     pts = " ".join(f"{X(a):.1f},{Y(b):.1f}" for a, b in zip(s, r))
-    dots = "".join(f'<circle cx="{X(a):.1f}" cy="{Y(b):.1f}" r="2"><title>sigma {a:g} d: risk {b:.2f}</title></circle>' for a, b in zip(s, r))
+    dots = "".join(f'<circle cx="{X(a):.1f}" cy="{Y(b):.1f}" r="2.2"><title>sigma {a:g} d: risk {b:.2f}</title></circle>'
+                   for a, b in zip(s, r))
     marker = ""
     if mark is not None and s0 <= mark <= s1:
         marker = f'<line class="mark" x1="{X(mark):.1f}" x2="{X(mark):.1f}" y1="{top}" y2="{top + ph}"/>'
-    return (f'<svg class="risk" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img" aria-label="risk over sigma">'
-            f'<rect class="frame" x="{left}" y="{top}" width="{pw}" height="{ph}"/>{marker}'
+    grid = "".join(f'<line class="grid" x1="{left}" x2="{left + pw}" y1="{Y(g):.1f}" y2="{Y(g):.1f}"/>' for g in (0.5,))
+    return (f'<svg class="risk" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img" '
+            f'aria-label="risk over sigma, axis 0 to 1" data-ymin="0" data-ymax="1">'
+            f'<rect class="frame" x="{left}" y="{top}" width="{pw}" height="{ph}"/>{grid}{band}{marker}'
             f'<polyline points="{pts}"/>{dots}'
-            f'<text x="{left - 2}" y="{top + 7}" text-anchor="end">{num(y_top)}</text><text x="{left - 2}" y="{top + ph}" text-anchor="end">0</text>'
+            f'<text x="{left - 3}" y="{top + 8}" text-anchor="end">1</text>'
+            f'<text x="{left - 3}" y="{Y(0.5) + 4:.1f}" text-anchor="end">0.5</text>'
+            f'<text x="{left - 3}" y="{top + ph}" text-anchor="end">0</text>'
             f'<text x="{left}" y="{height - 2}">{s0:g}</text><text x="{left + pw}" y="{height - 2}" text-anchor="end">{s1:g} d</text></svg>')

@@ -27,7 +27,7 @@ import pandas as pd
 from lgp.app.cache import RECORDED_LIBRARIES, Cache, library_versions
 from lgp.app.files import write_text_atomic
 from lgp.app.report import ratio_text, sigma_edge_warnings
-from lgp.app.charts import histogram_svg, num, risk_svg, risk_top
+from lgp.app.charts import histogram_svg, num, risk_svg
 from lgp.app.pictures import rendered_trial_pictures
 from lgp.cli import duration_text
 from lgp.errors import InputError
@@ -117,7 +117,10 @@ def table_html(df: pd.DataFrame, cls: str = "sortable", row_attrs=None, max_rows
 
 #: What a cache entry of each kind is, in words (the page's run section).
 CACHE_WORDS = {"effort": "effort tables (one per trial)", "risk": "risk curves (one per trial)",
-               "stable": "checks that B stands", "picture": "trial pictures", "replay": "3-D replays"}
+               "riskruns": "risk tables (the noisy runs of one trial)", "buildrisk": "risks through the build (one per trial)",
+               "sensitivity": "sensitivity tables", "stable": "checks that B stands",
+               "picture": "trial pictures (kept in the render cache shared by every run)",
+               "replay": "3-D replays"}
 
 
 def cache_words(counts: dict) -> str:
@@ -170,19 +173,33 @@ def _quick_banner(run: dict) -> str:
             "numbers are noisier than the paper's; run without <code>--quick</code> for the full reproduction.</p>")
 
 
-def _docs_link(name: str, out: Path, text: str) -> str:
-    """A link to docs/<name> of this checkout, relative to the page (text only when
-    the page lives where the docs cannot be reached, e.g. an installed copy)."""
+def carry_doc(name: str, out: Path) -> Path | None:
+    """docs/<name> of this checkout written as ``<out>/page/<stem>.html`` (the text,
+    escaped, in a readable page), so the output folder holds what the page links;
+    None when the checkout's docs are not here (an installed copy)."""
     from lgp.app.cache import ROOT
 
-    target = ROOT / "docs" / name
-    from lgp.owned import STAGING_PREFIX
+    source = ROOT / "docs" / name
+    if not source.is_file():
+        return None
+    text = source.read_text(encoding="utf-8")
+    page = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
+<title>{_e(name)}</title><style>body{{font:15px/1.5 system-ui,sans-serif;margin:0 auto;max-width:50em;padding:10px 16px;color:#1d1d1f}}
+pre{{white-space:pre-wrap;word-wrap:break-word;font:14px/1.5 ui-monospace,monospace}}</style></head>
+<body><p><a href="../index.html">&larr; results page</a> &middot; docs/{_e(name)} of the checkout that wrote this folder,
+as it read then (Markdown)</p><pre>{_e(text)}</pre></body></html>
+"""
+    return write_text_atomic(page, Path(out) / "page" / f"{Path(name).stem}.html")
 
-    if Path(out).name.startswith(STAGING_PREFIX):  # a run's staging folder (lgp/owned.py): the page will live one up
-        out = Path(out).parent
-    if not target.exists():
-        return f"{_e(text)} (docs/{_e(name)})"
-    return f'<a href="{_e(os.path.relpath(target, out))}">{_e(text)}</a>'
+
+def _docs_link(name: str, out: Path, text: str) -> str:
+    """A link to docs/<name>, carried into the output folder (`carry_doc`) so that
+    the link holds when the folder is copied; text only when the docs are not here."""
+    carried = carry_doc(name, out)
+    if carried is None:
+        return f"{_e(text)} (docs/{_e(name)} of the source)"
+    return f'<a href="{_e(os.path.relpath(carried, out))}">{_e(text)}</a>'
 
 
 def risk_explanation(risk: pd.DataFrame, sigma: float, trials, out: Path) -> str:
@@ -327,19 +344,51 @@ def _figures_section(figures: list[Path], out: Path, sigma: float | None = None,
     return f'<section id="figures"><h2>Figures</h2>{"".join(items)}</section>'
 
 
+#: The largest per-trial table the page reads (bytes) and the rows it reads of it.
+EXTRA_TABLE_BYTES = 64 * 1024 * 1024
+EXTRA_TABLE_ROWS = 20000
+
+
 def _extra_tables(out: Path, known: set[str]) -> dict[str, pd.DataFrame]:
-    """Other per-trial CSVs of the run (e.g. build-stage risks, sensitivity rows)."""
+    """The run's other per-trial tables (build-stage risks, sensitivity rows): only
+    the pipeline's own names (lgp.app.manifest.OUTPUT_NAMES), only regular files
+    (a pipe or a link by such a name is not read), at most EXTRA_TABLE_ROWS rows of
+    a file of at most EXTRA_TABLE_BYTES. A table of the run that cannot be read is
+    an error naming it."""
+    import stat
+
+    from lgp.app.manifest import OUTPUT_NAMES
+
     tables = {}
-    for path in sorted(out.glob("*.csv")):
-        if path.name in known:
+    for name in sorted(n for n in OUTPUT_NAMES if n.endswith(".csv") and n not in known):
+        path = out / name
+        try:
+            st = path.lstat()
+        except FileNotFoundError:
+            continue
+        if not stat.S_ISREG(st.st_mode) or st.st_size > EXTRA_TABLE_BYTES:
+            print(f"lgp.reproduce: results page: {path} is not a regular file of at most {EXTRA_TABLE_BYTES >> 20} MB: "
+                  "not shown on the cards", file=sys.stderr, flush=True)
             continue
         try:
-            df = pd.read_csv(path, dtype={"trial": str}, nrows=20000)
-        except Exception:  # not a table this page can show
-            continue
+            df = pd.read_csv(path, dtype={"trial": str}, nrows=EXTRA_TABLE_ROWS)
+        except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as e:
+            raise InputError(f"results page: cannot read the run's table {path}: {e}") from e
         if "trial" in df.columns:
             tables[path.stem] = df
     return tables
+
+
+def _png_size(path: Path) -> tuple[int, int] | None:
+    """(width, height) of a PNG from its header (24 bytes), None if it is not one."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(24)
+    except OSError:
+        return None
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n":
+        return None
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
 
 
 def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, picture: Path | None,
@@ -360,8 +409,16 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
         n_actions = samples.sort_values("sample")["n_actions"].to_numpy()
         plan_len = (f"{int(n_actions[0])} actions" if len(set(n_actions)) == 1
                     else f"{int(n_actions.min())} to {int(n_actions.max())} actions (sample 0: {int(n_actions[0])})")
-    pic = (f'<img src="{_e(os.path.relpath(picture, out))}" alt="{_e(trial.id)}: A and B" width="440" height="220">'
-           if picture is not None else "")
+    pic = ""
+    if picture is not None:
+        size = _png_size(picture)
+        wh = f' width="{size[0]}" height="{size[1]}"' if size else ""
+        rel = _e(os.path.relpath(picture, out))
+        pic = (f'<a class="pic" href="{rel}" title="{_e(trial.id)}: the picture at full size">'
+               f'<img src="{rel}" alt="{_e(trial.id)}: Start (A) and Finish (B)"{wh}></a>')
+    has_band = {"risk_low", "risk_high"} <= set(curve.columns)
+    band = (curve["risk_low"], curve["risk_high"]) if has_band else ()
+    band_note = "; shaded: 95% Wilson interval" if has_band else ""
     link = (f'<a class="replay" href="{_e(os.path.relpath(replay, out))}">3-D replay of sample 0 &#9654;</a>'
             if replay is not None else '<span class="replay none">no replay (--no-replays)</span>')
     more = ""
@@ -369,7 +426,10 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
         from models.risk.precision import precision_text
 
         more += ('<p class="precision"><b>required precision</b> ' + " &middot; ".join(
-            f"risk {r['level']:g} at sigma* {_e(precision_text(r))}" for _, r in precision.iterrows()) + "</p>")
+            f"risk {r['level']:g} at sigma* {_e(precision_text(r))}" for _, r in precision.iterrows()) + "<br>"
+            "<small>sigma*: the least noise (sd of each block's displacement, in block widths d) at which B falls in "
+            "that fraction of the noisy runs, read off the risk curve, with a 95% bootstrap interval; "
+            "&gt; the grid's top: it never did on this run's grid; a smaller sigma* means more precision is needed.</small></p>")
     for title, df in extras.items():
         rows = df[df["trial"] == trial.id]
         if len(rows):
@@ -382,7 +442,7 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
 {pic}
 <div class="stats">
 <div><b>effort</b> {effort_text}<br><small>{effort_note}</small><br>{histogram_svg(e)}</div>
-<div><b>risk</b> {_risk_at(curve, sigma)} at sigma {num(sigma)} d<br><small>over sigma (line: {num(sigma)}; top of the axis: {num(risk_top(curve["risk"]))})</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma)}</div>
+<div><b>risk</b> {_risk_at(curve, sigma)} at sigma {num(sigma)} d<br><small>over sigma, 0 to 1{band_note} (dashed: {num(sigma)} d)</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma, *band)}</div>
 </div>
 <p><b>plan</b> {plan_len} &middot; {link}</p>
 {more}
@@ -526,8 +586,9 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
 {_figures_section([Path(f) for f in figures], out, *(figure_sigma or (None, None)))}
 <section id="trials"><h2>Trials</h2><p class="trialnav">{nav}</p>
 <p>A is the layout of sample 0 (the one the replay plays); effort is over all {effort_samples.groupby("trial").size().max()} layouts.
-Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over the run's sigma grid
-(each mini-plot's axis is scaled to its curve, its top written on it).</p>
+Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over the run's sigma grid, every
+mini-plot on the same axis from 0 to 1 (a risk of 0.05, one fall in 20, stays near the floor), with the 95% Wilson
+interval of each point shaded where the table has it. Click a picture for its full size.</p>
 <p class="explain">{risk_explanation(risk, sigma, trials, out)}</p>
 <div class="cards">{"".join(cards)}</div></section>
 {_human_section(analysis, out)}

@@ -26,7 +26,7 @@ def trial_picture(trial, seed: int, path: Path) -> Path:
     FigureCanvasAgg(fig)
     # one world frame for A and B (the table, the build site as a dashed ring): a moved structure is seen to
     # move; B shows the blocks A leaves (stimuli.sheet.finished_scene)
-    draw_trial(fig, trial, A, ("A: start (sample 0)", "B: finish"))
+    draw_trial(fig, trial, A, ("Start (A, sample 0)", "Finish (B)"))
     fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.92, wspace=0.0)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=100)
@@ -63,12 +63,12 @@ CARD_PICTURE = (480, 320)
 
 def _label_font():
     """(font, header height in px) of a card's A/B labels: Pillow's own scalable font
-    at 22 px, legible when the page shows the card at half size; the old bitmap
-    font (11 px) where Pillow is older than 10.1."""
+    at 26 px, 14 px or more where the page shows the card (560 px wide and up); the
+    old bitmap font (11 px) where Pillow is older than 10.1."""
     from PIL import ImageFont
 
     try:
-        return ImageFont.load_default(size=22), 32
+        return ImageFont.load_default(size=26), 36
     except TypeError:  # Pillow < 10.1: no size
         return ImageFont.load_default(), 18
 
@@ -104,7 +104,7 @@ def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | Non
     for trial in trials:
         card = Image.new("RGB", (2 * w + 4, h + top), "white")
         draw = ImageDraw.Draw(card)
-        for j, (state, label) in enumerate((("A", "A: start (sample 0)"), ("B", "B: finish"))):
+        for j, (state, label) in enumerate((("A", "Start (A, sample 0)"), ("B", "Finish (B)"))):
             card.paste(Image.open(where / f"{trial.id}-{state}.png").convert("RGB"), (j * (w + 4), top))
             draw.text((j * (w + 4) + 6, 4), label, fill="black", font=font)
         path = Path(out_dir) / f"{trial.id}.png"

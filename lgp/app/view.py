@@ -222,6 +222,10 @@ def replay_html(plan, title: str = "", back: str | None = None) -> str:
     page = meshcat.StaticHtml()
     title = title or f"{plan.initial.label} -> {plan.target.label}"
     page = page.replace("<title>Drake MeshCat</title>", f"<title>{html.escape(title)}</title>", 1)
+    if 'name="viewport"' not in page:  # readable on a phone: the page's width is the screen's
+        head = page.lower().find("<head>")
+        meta = '\n<meta name="viewport" content="width=device-width, initial-scale=1">'
+        page = page[:head + 6] + meta + page[head + 6:] if head >= 0 else meta.strip() + "\n" + page
     cut = page.rfind("</body>")
     return page[:cut] + caption_html(plan, title, back) + page[cut:]
 
