@@ -45,7 +45,7 @@ def main(argv=None) -> int:
                 effort, n_actions, status = float("nan"), 0, f"{type(e).__name__}: {e}"
             rows.append({"trial": trial.id, "slices_per_phase": slices, "effort": effort,
                          "plan_time": time.perf_counter() - t0, "n_actions": n_actions, "status": status})
-            print(f"{trial.id:>4} {slices:3d} slices: effort {effort:.6f} J*s in {rows[-1]['plan_time']:.2f} s  {status}", flush=True)
+            print(f"{trial.id:>4} {slices:3d} slices: effort {effort:.6f} J s in {rows[-1]['plan_time']:.2f} s  {status}", flush=True)
         pd.DataFrame(rows).to_csv(args.out, index=False)
     print(f"# {machine()}", flush=True)
     df = pd.DataFrame(rows)

@@ -18,6 +18,7 @@ half way resumes with nothing lost.
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import signal
 import sys
@@ -39,6 +40,7 @@ from lgp.app.config import RunConfig
 from lgp import owned
 from lgp.app.manifest import (MANIFEST, OutputLock, TimedCache, check_output_folder, file_sha256, input_hash,
                               write_manifest)
+from lgp.app.charts import num
 from lgp.app.page import write_index
 from lgp.app.pictures import rendered_trial_pictures
 from lgp.app.progress import Stopwatch
@@ -317,7 +319,7 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
 
             stages = build_risk.build_risk_tables(trials, args.build_sigmas or build_risk.BUILD_SIGMAS, args.n_sims,
                                                    args.samples, args.seed, model, executor, cache,
-                                                   approach_height=args.approach_height)
+                                                   approach_height=args.approach_height, verbose=args.verbose)
             clock.lap("build risk")
         replays = None if args.no_replays else write_replays(
             trials, args.seed, out / "replays", cache, executor, _log,
@@ -455,6 +457,8 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
         print(f"Outputs of this run in {final.resolve()} (listed in {MANIFEST}):")
         for path in files + [final / MANIFEST]:
             print(f"  {path}")
+    if human is not None and analysis is not None:
+        print(human_data_summary(analysis))
     print(end_of_run(time.perf_counter() - t0, cache, final, len(files)))
     return 0
 
@@ -468,14 +472,53 @@ def _heuristics(paper, args):
     return trial_features(paper, args.samples, args.seed)
 
 
+def human_data_summary(analysis: dict) -> str:
+    """One line on the fit of the human data: the chosen sigma, and Eq. 1 (full)
+    against effort-only on held-out pairs (leave-one-pair-out RMSE of z-scored
+    judgments per dataset, lower is better; in sample Eq. 1 cannot lose)."""
+    from analysis.data import ordered_datasets
+
+    settings = analysis["settings"].iloc[0]
+    simulated = " (SIMULATED participants)" if bool(settings.get("simulated", False)) else ""
+    text = f"human data{simulated}: sigma = {num(settings['sigma'])} d ({settings.get('sigma_rule', 'chosen by RMSE')})"
+    comparison = analysis.get("model_comparison")
+    if isinstance(comparison, pd.DataFrame) and len(comparison):
+        held = comparison[comparison["scheme"] == "leave-one-pair-out"].set_index(["dataset", "model"])["rmse"]
+        parts = []
+        for d in ordered_datasets(comparison["dataset"].unique()):
+            if (d, "full") in held.index and (d, "effort") in held.index:
+                full, effort = float(held[d, "full"]), float(held[d, "effort"])
+                verdict = "Eq. 1 better" if full < effort else "effort-only better" if effort < full else "tie"
+                parts.append(f"{d} {full:.3f} vs {effort:.3f} ({verdict})")
+        if parts:
+            text += "; held-out pairs, RMSE of Eq. 1 vs effort-only: " + ", ".join(parts)
+    return text + "; details in index.html#human"
+
+
+def _home(path) -> str:
+    """A path with the user's home written ~ (shorter, and the same on every account)."""
+    p, home = str(path), str(Path.home())
+    return "~" + p[len(home):] if home != "/" and (p == home or p.startswith(home + os.sep)) else p
+
+
 def end_of_run(seconds: float, cache, out: Path, n_files: int) -> str:
-    """The two lines a run ends with: how long, what was computed or reused, and
-    where to look ("done in 16 s (120 results computed, 0 reused from the cache);
-    open results/index.html")."""
+    """The two lines a run ends with: how long, what was computed, what was reused
+    and from where, and where to look ("done in 16 s (120 results computed, 48
+    reused: 48 trial pictures from the render cache shared by every run,
+    ~/.cache/lgp-difficulty/renders); open results/index.html")."""
+    from stimuli.render import render_cache_dir
+
     extra = getattr(cache, "files", {})  # the page's pictures and replays, beside the result tables
     computed = cache.misses + cache.recomputed + sum(n for (_, o), n in extra.items() if o == "miss")
-    reused = cache.hits + sum(n for (_, o), n in extra.items() if o == "hit")
-    return (f"done in {cli.duration_text(seconds)} ({computed} results computed, {reused} reused from the cache); open {out / 'index.html'}\n"
+    pictures = sum(n for (kind, o), n in extra.items() if o == "hit" and kind == "picture")
+    own = cache.hits + sum(n for (kind, o), n in extra.items() if o == "hit" and kind != "picture")
+    where = []
+    if own:
+        where.append(f"{own} from this folder's cache {getattr(cache, 'root', out / 'cache')}")
+    if pictures:
+        where.append(f"{pictures} trial pictures from the render cache shared by every run, {_home(render_cache_dir())}")
+    reused = f"{own + pictures} reused" + (": " + "; ".join(where) if where else "")
+    return (f"done in {cli.duration_text(seconds)} ({computed} results computed, {reused}); open {out / 'index.html'}\n"
             f"the {n_files} files written are listed in {out / 'manifest.json'} (--verbose prints them)")
 
 

@@ -48,7 +48,7 @@ def main(argv=None) -> int:
         parser.error("--budget-solves and --budget-seconds apply to --planner search only")
 
     import stimuli
-    from models.effort import describe, kinetic_energy, plan_of_sample
+    from models.effort import describe, plan_of_sample
 
     trial = stimuli.select_trials([args.trial], args.stimuli)[0][0]
     design = {k: v for k, v in (("approach_height", args.approach_height), ("slices_per_phase", args.slices)) if v is not None}
@@ -60,11 +60,10 @@ def main(argv=None) -> int:
     result = plan_of_sample(trial, args.seed, args.sample, formulation=args.formulation, solver=args.solver, **design)
     komo = result.komo
     print(f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})")
-    print(describe(result))
+    print(describe(result, digits=12))  # the effort to 12 digits: equal to the row of effort_samples.csv
     if komo is not None:
         print(f"KOMO {komo.formulation} / {komo.solver}: {komo.status}, cost {komo.cost:.4f}, {komo.n_variables} variables, "
               f"{komo.solve_time:.3f} s solving, planned in {result.planning_time:.3f} s")
-    print(f"effort {kinetic_energy(result):.12g} J*s")
     title = f"{trial.id}: {trial.description} (seed {args.seed}, sample {args.sample})"
     if args.html or args.png:
         from lgp.app.view import write_html, write_png

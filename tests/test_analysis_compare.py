@@ -437,7 +437,7 @@ def test_recovery_cli_writes_only_simulated_files_and_refuses_bad_counts(tmp_pat
 
 
 @pytest.mark.slow
-def test_reproduce_writes_the_comparison_the_permutations_and_the_recovery(tmp_path):
+def test_reproduce_writes_the_comparison_the_permutations_and_the_recovery(tmp_path, capsys):
     # Random responses in the human-data format stand in for a file (no claim is tested on them).
     from lgp import reproduce
 
@@ -449,7 +449,17 @@ def test_reproduce_writes_the_comparison_the_permutations_and_the_recovery(tmp_p
     args = ["--samples", "1", "--n-sims", "4", "--sigmas", "0.065", "0.1", "--jobs", "1", "--n-boot", "20",
             "--no-replays", "--out", str(out), "--human-data", str(path), "--n-perm", "9", "--recovery",
             "--recovery-studies", "4"]
+    capsys.readouterr()
     assert reproduce.main(args) == 0
+    # the run ends with one line on the fit: the chosen sigma, and Eq. 1 against effort-only on held-out
+    # pairs, the numbers of model_comparison.csv
+    summary = capsys.readouterr().out.strip().splitlines()[-3]
+    comparison = pd.read_csv(out / "analysis" / "model_comparison.csv")
+    held = comparison[comparison["scheme"] == "leave-one-pair-out"].set_index(["dataset", "model"])["rmse"]
+    sigma = pd.read_csv(out / "analysis" / "settings.csv")["sigma"].iloc[0]
+    assert summary.startswith(f"human data: sigma = {sigma:g} d (")
+    for d in ("difficulty", "time"):
+        assert f"{d} {held[d, 'full']:.3f} vs {held[d, 'effort']:.3f} (" in summary, summary
     for name in ("model_comparison", "model_comparison_tests", "cv_predictions", "permutation_test"):
         assert (out / "analysis" / f"{name}.csv").exists()
     assert sorted(p.name for p in (out / "recovery").iterdir()) == [

@@ -314,7 +314,8 @@ def test_show_replays_the_effort_of_a_run_with_another_design(capsys):
     main(["9E", "--approach-height", "0.02", "--slices", "40"])
     printed = capsys.readouterr().out
     expected = kinetic_energy(plan_of_sample(trial, 0, 0, approach_height=0.02, slices_per_phase=40))
-    assert f"effort {expected:.12g} J*s" in printed
+    assert f"physical effort: {expected:.12g} J s over" in printed and "J*s" not in printed
+    assert printed.count(f"{expected:.12g}") == 1  # the effort is printed once
 
 
 @pytest.mark.slow  # plans 10E with both designs

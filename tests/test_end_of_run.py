@@ -10,7 +10,7 @@ import pytest
 from lgp import cli, reproduce
 
 SMALL = ["--trials", "1E", "9E", "--samples", "2", "--n-sims", "2", "--sigmas", "0.05", "--no-replays", "--jobs", "1"]
-END = re.compile(r"^done in [0-9.]+ s \((\d+) results computed, (\d+) reused from the cache\); open (.+index\.html)$")
+END = re.compile(r"^done in [0-9.]+ s \((\d+) results computed, (\d+) reused(?:: ([^;]+?(?:; [^;]+?)?))?\); open (.+index\.html)$")
 
 
 def _run(argv, capsys):
@@ -28,7 +28,9 @@ def test_a_run_ends_with_two_lines_and_a_rerun_says_everything_was_reused(tmp_pa
     m = END.match(lines[0])
     # nothing of the results reused; the pictures of A and B may come from the renderer's own cache (stimuli.render)
     assert m and int(m.group(1)) > 0 and int(m.group(2)) <= 2 * 2, lines[0]
-    assert m.group(3) == str(out / "index.html") and (out / "index.html").exists()
+    assert m.group(4) == str(out / "index.html") and (out / "index.html").exists()
+    if int(m.group(2)):  # reused: the pictures, from the render cache shared by every run (not this folder's)
+        assert m.group(3).startswith(f"{m.group(2)} trial pictures from the render cache shared by every run, "), lines[0]
     files = json.loads((out / "manifest.json").read_text())["files"]
     assert lines[1] == f"the {len(files)} files written are listed in {out / 'manifest.json'} (--verbose prints them)"
     # the stage headers say what is counted: 1E's A is fixed (planned once), 9E's random
@@ -46,6 +48,7 @@ def test_a_run_ends_with_two_lines_and_a_rerun_says_everything_was_reused(tmp_pa
     m = END.match(again.out.strip().splitlines()[-2])
     first = END.match(lines[0])
     assert m and int(m.group(1)) == 0 and int(m.group(2)) == int(first.group(1)) + int(first.group(2)), again.out
+    assert f"from this folder's cache {out / 'cache'}" in m.group(3), again.out
     listed = [line.strip() for line in again.out.splitlines() if line.startswith("  ")]
     assert str(out / "index.html") in listed and len(listed) == len(files) + 1  # + manifest.json
 

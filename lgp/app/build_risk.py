@@ -39,18 +39,20 @@ def build_key_inputs(model) -> dict:
 
 def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, model, executor, cache: Cache, *,
                       approach_height: float | None = None,
-                      sequential_samples: int = SEQUENTIAL_SAMPLES) -> pd.DataFrame:
+                      sequential_samples: int = SEQUENTIAL_SAMPLES, verbose: bool = False) -> pd.DataFrame:
     """The stage table of every trial (models.risk.build_risk) under the RiskModel
     `model`, one cached file per trial and mode keyed by the trial file, the
     parameters and the code it depends on: mode "stages" over `samples` layouts
     and mode "sequential" over the first `sequential_samples` (the `sequential`
-    aggregate). `approach_height`: the effort run's (work shares only)."""
+    aggregate). `approach_height`: the effort run's (work shares only). Ends with
+    one line; `verbose` also prints a line per trial (its risks, labelled by sigma)."""
     from models.risk import RiskModel
     from models.risk.build import build_risk
 
     model = RiskModel.of(model)
     depends = {**build_key_inputs(model), "approach_height": approach_height}
     out = []
+    computed = 0
     for k, trial in enumerate(trials, 1):
         t0 = time.perf_counter()
         hows, tables = [], []
@@ -65,15 +67,21 @@ def build_risk_tables(trials, sigmas, n_sims: int, samples: int, seed: int, mode
                                                             model=model, executor=executor, mode=mode,
                                                             approach_height=approach_height))
                 how = f"{time.perf_counter() - t1:.1f} s"
+                computed += 1
             hows.append(f"{mode} {how}")
             tables.append(df)
         df, seq = tables
-        final = df[df["stage"] == df.groupby("sample")["stage"].transform("max")]
-        curve = " ".join(f"{r:.2f}" for r in final.groupby("sigma")["risk"].mean())
-        collapsed = " ".join(f"{r:.2f}" for r in seq.groupby("sigma")["risk"].sum() / seq.groupby("sigma")["sample"].nunique())
-        _log(f"[build  {k:2d}/{len(trials)}] {trial.id:>3}: {df['stage'].max()} stages, final-stage risk {curve}, "
-             f"sequential build collapses {collapsed}  ({', '.join(hows)})")
+        if verbose:
+            final = df[df["stage"] == df.groupby("sample")["stage"].transform("max")]
+            at = ", ".join(f"{s:g}" for s in sorted(final["sigma"].unique()))
+            curve = ", ".join(f"{r:.2f}" for r in final.groupby("sigma")["risk"].mean())
+            collapsed = ", ".join(f"{r:.2f}" for r in seq.groupby("sigma")["risk"].sum() / seq.groupby("sigma")["sample"].nunique())
+            _log(f"[build  {k:2d}/{len(trials)}] {trial.id:>3}: {df['stage'].max()} stages; at sigma {at} d: "
+                 f"risk of the finished stage {curve}; sequential build collapses {collapsed} ({', '.join(hows)})")
         out += tables
+    n = 2 * len(trials)
+    _log(f"build risk: {len(trials)} trial(s) at sigma {', '.join(f'{s:g}' for s in sigmas)} d; {computed} of {n} tables "
+         f"computed, {n - computed} reused from this folder's cache" + ("" if verbose else " (--verbose: a line per trial)"))
     return pd.concat(out, ignore_index=True)
 
 

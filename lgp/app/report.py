@@ -129,7 +129,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         f"Risk engine: {engine or args.engine or 'default'}.",
         compute_text,
         "",
-        "## Physical effort (J*s: integral of the carried blocks' kinetic energy over time, 1 kg blocks)",
+        "## Physical effort (J s: integral of the carried blocks' kinetic energy over time, 1 kg blocks)",
         "",
         markdown_table(effort),
         "",

@@ -79,12 +79,12 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, spec=
             tables[trial.id] = cache.put("effort", keys[trial.id], effort_table(trial, samples, rows[trial.id]))
             df = tables[trial.id]
             if log and verbose:
-                _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J*s over {len(df)} layouts"
+                _log(f"[effort {len(tables):2d}/{len(trials)}] {trial.id:>3}: {df['effort'].mean():9.4f} J s over {len(df)} layouts"
                      f"  (planned, {time.perf_counter() - t0:.1f} s into the stage)")
 
     for t in trials:
         if log and verbose and t.id in tables and t.id not in rows:
-            _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J*s"
+            _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J s"
                  f" over {len(tables[t.id])} layouts  (cached)")
     with bar:
         executor.map(effort_of_unit, units, arrived)

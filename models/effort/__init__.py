@@ -100,12 +100,14 @@ def cumulative_effort(plan) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(per_step)])
 
 
-def describe(plan) -> str:
+def describe(plan, digits: int | None = None) -> str:
     """The plan's action list (its skeleton) with times and per-action energies, one
-    line each, and its effort; a searched plan also its bound and gap."""
+    line each, and its effort (4 decimals, or `digits` significant digits); a
+    searched plan also its bound and gap."""
     energies = kinetic_energy_by_action(plan) if plan.actions else []
     lines = [f"{k + 1:3d}  t = {k + 1:5.1f} s  {a}   E = {e:.4f} J s" for k, (a, e) in enumerate(zip(plan.actions, energies))]
-    lines.append(f"physical effort: {kinetic_energy(plan):.4f} J s over {len(plan.actions)} actions")
+    effort = f"{kinetic_energy(plan):.4f}" if digits is None else f"{kinetic_energy(plan):.{digits}g}"
+    lines.append(f"physical effort: {effort} J s over {len(plan.actions)} actions")
     if describe_search(plan):
         lines.append(describe_search(plan))
     return "\n".join(lines)
@@ -177,7 +179,7 @@ class EffortResult(NamedTuple):
     table: pd.DataFrame
 
     def __repr__(self) -> str:
-        return f"EffortResult(mean={self.mean:.6g} J*s over {len(self.table)} layouts)"
+        return f"EffortResult(mean={self.mean:.6g} J s over {len(self.table)} layouts)"
 
 
 class EffortUnit(NamedTuple):

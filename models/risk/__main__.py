@@ -89,12 +89,14 @@ def main(argv=None) -> int:
         p.exit(2, f"{p.prog}: error: {e}\n")
     t0 = time.perf_counter()
     last = [0.0]
+    simulated = [0]
 
-    def progress(done, total):
+    def progress(done, total):  # runs simulated: a trial whose B repeats an earlier one's shares its runs
         now = time.perf_counter()
+        simulated[0] = total
         if now - last[0] > 5 or done == total:
             last[0] = now
-            print(f"  {done}/{total} runs, {now - t0:.0f} s", file=sys.stderr, flush=True)
+            print(f"  {done}/{total} runs simulated, {now - t0:.0f} s", file=sys.stderr, flush=True)
 
     runs = risk_table(trials, args.sigmas, args.n_sims, args.seed, args.model, args.jobs, progress, runs=True)
     table = summarise(runs)
@@ -114,7 +116,8 @@ def main(argv=None) -> int:
     print(wide.to_string(float_format=lambda x: f"{x:.2f}"))
     engine = args.model.engine
     label = engine if ENGINES[engine].faithful else f"{engine} (UNFAITHFUL profile: fails the faithfulness suite, docs/risk.md)"
-    print(f"{len(runs)} runs with {label}, {args.model.describe()}, "
+    shared = f" ({simulated[0]} simulated; trials with the same B share their runs)" if simulated[0] != len(runs) else ""
+    print(f"{len(runs)} runs{shared} with {label}, {args.model.describe()}, "
           f"in {time.perf_counter() - t0:.1f} s -> {args.table}", file=sys.stderr)
     return 0
 

@@ -55,6 +55,10 @@ JSPSYCH_FILES = {
 TIME_MAX_S = 180
 
 
+#: How this package names itself on the terminal.
+PROG = "python -m stimuli.experiment"
+
+
 class StudyError(ValueError):
     """A study cannot be built from these inputs (anchors, stimuli, output folder)."""
 
@@ -174,7 +178,7 @@ def ensure_jspsych(log=None) -> Path:
         prefix.mkdir(parents=True, exist_ok=True)
         for name in ("package.json", "package-lock.json"):
             shutil.copyfile(HERE / name, prefix / name)
-    log(f"stimuli.experiment: installing jsPsych {jspsych_version()} from the npm registry (npm ci --prefix {prefix})")
+    log(f"{PROG}: installing jsPsych {jspsych_version()} from the npm registry (npm ci --prefix {prefix})")
     run = subprocess.run([npm, "ci", "--prefix", str(prefix), "--no-audit", "--no-fund"], capture_output=True, text=True)
     if run.returncode != 0 or not _installed(nm):
         last = (run.stderr or run.stdout).strip().splitlines()[-1:] or ["no output"]
@@ -260,7 +264,7 @@ def _render(plan: StudyPlan, size, jobs: int, log) -> tuple[Path, dict]:
     # A of a trial of pair p is sample p - 1 of the seed: a pair's two trials share
     # their Start, no two pairs do (docs/experiment.md, section 8).
     where = cache_folder(every, plan.seed, size, "pair")
-    return where, render_trials(every, where, plan.seed, size, jobs, log=log, layout="pair")
+    return where, render_trials(every, where, plan.seed, size, jobs, log=lambda m: log(f"{PROG}: pictures: {m}"), layout="pair")
 
 
 #: What every build writes at the top of a study folder (besides study.json, lib/ and img/).

@@ -118,7 +118,9 @@ class Renderer:
 
         if camera is not None and camera != self.camera:
             if (camera.width, camera.height, camera.fov_y_deg) != (self.camera.width, self.camera.height, self.camera.fov_y_deg):
-                raise ValueError(f"a camera of {camera.width}x{camera.height} px, fov {camera.fov_y_deg}: this renderer draws "
+                from lgp.errors import InputError
+
+                raise InputError(f"a camera of {camera.width}x{camera.height} px, fov {camera.fov_y_deg}: this renderer draws "
                                  f"{self.camera.width}x{self.camera.height} px, fov {self.camera.fov_y_deg}")
             self.engine.UpdateViewpoint(self._RigidTransform(self._RotationMatrix(camera.rotation()), np.asarray(camera.eye)))
             self.camera = camera

@@ -32,7 +32,9 @@ LAYOUTS = ("sample0", "pair")
 def layout_sample(trial, layout: str = "sample0") -> int:
     """The sample of the seed whose layout of A the picture of `trial` shows."""
     if layout not in LAYOUTS:
-        raise ValueError(f"layout {layout!r}: expected one of {', '.join(LAYOUTS)}")
+        from lgp.errors import InputError
+
+        raise InputError(f"layout {layout!r}: expected one of {', '.join(LAYOUTS)}")
     return trial.pair - 1 if layout == "pair" and trial.pair is not None else 0
 
 
@@ -108,7 +110,7 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
     processes are started (worth it for many pictures only)."""
     import pickle
 
-    log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    log = log or (lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
     out = Path(out_dir)
     pictures = pictures_of(trials, seed, layout)
     scenes: dict[str, list] = {}
@@ -146,7 +148,9 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
             jobs = max(1, min(getattr(executor, "jobs", 1), len(todo)))
         else:  # a fresh process costs a second or two to start (pydrake, shaders): worth it for many pictures only
             jobs = max(1, min(jobs, len(todo) // 8))
-        log(f"{PROG}: rendering {len(todo)} of {len(rows)} pictures ({size[0]}x{size[1]}, RenderEngineVtk) with {jobs} process(es)")
+        kept = len(rows) - len(todo)
+        log(f"rendering {len(todo)} of {len(rows)} pictures ({size[0]}x{size[1]}, RenderEngineVtk) with {jobs} process(es)"
+            + (f"; {kept} reused from {_where(out)}" if kept else ""))
         chunks = [todo[i::jobs] for i in range(jobs)]
         if executor is not None:
             import functools
@@ -163,7 +167,7 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
                 for s in pool.map(_render_chunk, chunks):
                     seconds += s
     else:
-        log(f"{PROG}: all {len(rows)} pictures are up to date in {out}")
+        log(f"all {len(rows)} pictures reused from {_where(out)}")
     scratch.cleanup()
     for r in rows:
         r["sha256"] = _sha256(out / r["file"])
@@ -180,6 +184,19 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
     tmp.write_text(json.dumps(record, indent=1) + "\n")
     os.replace(tmp, record_path)
     return record
+
+
+def _where(folder: Path) -> str:
+    """A render folder in words: the shared render cache (which every run and every
+    checkout of this user reads) or the folder given."""
+    try:
+        inside = Path(folder).resolve().is_relative_to(render_cache_dir().resolve())
+    except OSError:
+        inside = False
+    home = str(Path.home())
+    text = str(folder)
+    text = "~" + text[len(home):] if home != "/" and text.startswith(home + os.sep) else text
+    return f"the render cache shared by every run and checkout ({text})" if inside else text
 
 
 def render_cache_dir() -> Path:
