@@ -18,7 +18,7 @@ import yaml
 
 from lgp.paper import TRIAL_IDS, canonical_trial_id
 from lgp.scene import StimulusError
-from stimuli.reading import (MAX_TRIAL_BYTES, _safe_load, read_trial_bytes,  # noqa: F401
+from stimuli.reading import (MAX_TRIAL_BYTES, safe_load_yaml, read_trial_bytes,  # noqa: F401
                              yaml_error_line)
 from stimuli.start import (MAX_REGION_EXTENT, SCATTER_SECONDS, ScatterRegion, StartState,  # noqa: F401
                            room_check)
@@ -37,7 +37,7 @@ def load_file(path: str | Path, data: bytes | None = None) -> Trial:
     except UnicodeDecodeError as e:
         raise StimulusError(f"{path}: cannot read the trial file as UTF-8 text ({e})") from None
     try:
-        fields = _safe_load(text, str(path))
+        fields = safe_load_yaml(text, str(path))
     except yaml.YAMLError as e:
         raise StimulusError(f"{path}: {yaml_error_line(e)}") from None
     if not isinstance(fields, dict):

@@ -80,7 +80,7 @@ def yaml_error_line(e: yaml.YAMLError) -> str:
     return text
 
 
-def _safe_load(text: str, where: str):
+def safe_load_yaml(text: str, where: str):
     """yaml.safe_load without anchors, aliases or duplicate keys; libyaml's C parser
     when present (a first pass over the parse events refuses them before anything
     is built)."""

@@ -19,7 +19,7 @@ Everything is importable from ``lgp.scene`` itself.
 from __future__ import annotations
 
 from lgp.paper import BLOCK_SIZE, COLOURS  # noqa: F401  (re-exported: one import for callers)
-from lgp.scene.overlap import (_SLACK, box_pairs, solid_outlines, resting_candidates, sat_depths,  # noqa: F401
+from lgp.scene.overlap import (box_pairs, solid_outlines, resting_candidates, sat_depths,  # noqa: F401
                                bounding_boxes, footprint_overlap_area, horizontal_penetration, may_penetrate,
                                near_pairs, penetration, rests_on)
 from lgp.scene.solids import (CONTACT_TOLERANCE, MIN_SUPPORT_AREA, OVERLAP_TOLERANCE, SOLID_SIZE, TABLE,  # noqa: F401
