@@ -27,6 +27,7 @@ import pandas as pd
 from lgp.app.cache import RECORDED_LIBRARIES, Cache, library_versions
 from lgp.app.files import write_text_atomic
 from lgp.app.report import ratio_text, sigma_edge_warnings
+from lgp.app.config import QUICK
 from lgp.app.charts import histogram_svg, num, risk_svg
 from lgp.app.pictures import rendered_trial_pictures
 from lgp.cli import duration_text
@@ -168,8 +169,8 @@ def _quick_banner(run: dict) -> str:
     if not run.get("quick"):
         return ""
     key = run.get("key", {})
-    return (f'<p class="banner" id="quick">Low-precision preview (<code>--quick</code>: M = {_e(key.get("M, layouts of A per trial", 3))} '
-            f'layouts, N = {_e(key.get("N, noisy runs per trial and sigma", 20))} runs, sigmas {_e(key.get("sigmas (units of d)", ""))}): '
+    return (f'<p class="banner" id="quick">Low-precision preview (<code>--quick</code>: M = {_e(key.get("M, layouts of A per trial", QUICK["samples"]))} '
+            f'layouts, N = {_e(key.get("N, noisy runs per trial and sigma", QUICK["n_sims"]))} runs, sigmas {_e(key.get("sigmas (units of d)", ""))}): '
             "numbers are noisier than the paper's; run without <code>--quick</code> for the full reproduction.</p>")
 
 
