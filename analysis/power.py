@@ -612,6 +612,32 @@ def load_trial_table(stimuli_dir: str | Path | None = None, cache_dir: str | Pat
     return trial_table(effort, risk, features, [t.id for t in trials], identical_targets(trials))
 
 
+def read_trial_table(results: str | Path, stimuli_dir: str | Path | None = None, samples: int = 30,
+                     seed: int = 0) -> TrialTable:
+    """A TrialTable from a finished `lgp.reproduce` run's effort_samples.csv and
+    risk.csv in `results` (no physics), the heuristics from the trial files of
+    `stimuli_dir` (default the paper's) at the run's M and seed. Raises
+    PowerInputError naming --results for a missing or unreadable table."""
+    import stimuli
+    from analysis.heuristics import identical_targets, trial_features
+
+    tables = []
+    for name, columns in (("effort_samples.csv", ("trial", "effort")), ("risk.csv", ("trial", "sigma", "risk"))):
+        path = Path(results) / name
+        try:
+            df = pd.read_csv(path, dtype={"trial": str})
+        except (OSError, ValueError, UnicodeDecodeError) as e:
+            raise PowerInputError("--results", f"{path}: cannot read ({type(e).__name__})") from None
+        missing = [c for c in columns if c not in df.columns]
+        if missing:
+            raise PowerInputError("--results", f"{path}: missing column(s) {', '.join(missing)}")
+        tables.append(df)
+    trials = stimuli.load_paper() if stimuli_dir is None else stimuli.load_all(stimuli_dir)
+    ids = [t.id for t in trials if t.id in set(tables[0]["trial"])]
+    kept = [t for t in trials if t.id in ids]
+    return trial_table(tables[0], tables[1], trial_features(kept, samples, seed), ids, identical_targets(kept))
+
+
 def plot_confusion(table: pd.DataFrame, path: Path, models: Sequence[str] = MODELS, note: str = "") -> Path:
     """World x held-out verdict rates as a heatmap (SIMULATED in the title)."""
     import matplotlib
@@ -644,13 +670,18 @@ def plot_confusion(table: pd.DataFrame, path: Path, models: Sequence[str] = MODE
     return path
 
 
-def _precheck(worlds: Sequence[World], stimuli_dir) -> None:
-    """Before any physics: every full world's sigma on the grid load_trial_table uses,
-    every csv world's trials among the trial files."""
+def _precheck(worlds: Sequence[World], stimuli_dir, results=None) -> None:
+    """Before any physics: every full world's sigma on the grid load_trial_table uses
+    (or --results' risk.csv has), every csv world's trials among the trial files."""
     import stimuli
     from lgp.paper import WIDE_SIGMA_GRID
 
     grid = np.asarray(WIDE_SIGMA_GRID, float)
+    if results is not None:
+        try:
+            grid = np.unique(np.round(pd.read_csv(Path(results) / "risk.csv", usecols=["sigma"])["sigma"].to_numpy(float), 9))
+        except (OSError, ValueError) as e:
+            raise PowerInputError("--results", f"{Path(results) / 'risk.csv'}: cannot read ({type(e).__name__})") from None
     ids = [t.id for t in (stimuli.load_paper() if stimuli_dir is None else stimuli.load_all(stimuli_dir))]
     for w in worlds:
         if w.kind == "full":
@@ -672,6 +703,8 @@ def main(argv=None) -> int:
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--stimuli", metavar="DIR", type=cli.input_dir, help="trial files (default: the paper's 24)")
     p.add_argument("--cache", default="results/cache", help="lgp.reproduce's cache folder (default %(default)s)")
+    p.add_argument("--results", metavar="DIR", type=cli.input_dir,
+                   help="instead of the cache: a finished lgp.reproduce run's effort_samples.csv and risk.csv")
     p.add_argument("--participants", type=int, default=PARTICIPANTS, help="per simulated study (>= 2; default %(default)s)")
     p.add_argument("--noise", type=float, default=NOISE,
                    help="per-participant noise SD / SD of the true cost over trials (default %(default)s)")
@@ -697,10 +730,13 @@ def main(argv=None) -> int:
             if t not in TESTS:
                 raise PowerInputError("--tests", f"unknown test {t!r}; expected one of {', '.join(TESTS)}")
         worlds = [parse_world(w) for w in args.world]
-        _precheck(worlds, args.stimuli)
+        _precheck(worlds, args.stimuli, args.results)
         t0 = time.perf_counter()
         with executor_for_scheduler(args.scheduler, args.jobs) as ex:
-            table = load_trial_table(args.stimuli, args.cache, args.samples, args.n_sims, seed=args.seed, executor=ex)
+            if args.results:
+                table = read_trial_table(args.results, args.stimuli, args.samples or 30, args.seed)
+            else:
+                table = load_trial_table(args.stimuli, args.cache, args.samples, args.n_sims, seed=args.seed, executor=ex)
             worlds = [parse_world(w, table) for w in args.world]
             done = [0]
             total = len(worlds) * math.ceil(args.studies / BLOCK)

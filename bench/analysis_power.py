@@ -35,10 +35,14 @@ sys.path.insert(0, str(ROOT))
 from bench.common import machine, write_section  # noqa: E402
 
 
-def speed(cache: str, out: Path, studies: int) -> str:
+def _source(cache: str, results: str | None) -> list[str]:
+    return ["--results", results] if results else ["--cache", cache]
+
+
+def speed(cache: str, out: Path, studies: int, results: str | None = None) -> str:
     load0 = os.getloadavg()
     t0 = time.perf_counter()
-    cmd = [sys.executable, "-m", "analysis.power", "--studies", str(studies), "--jobs", "2", "--cache", cache,
+    cmd = [sys.executable, "-m", "analysis.power", "--studies", str(studies), "--jobs", "2", *_source(cache, results),
            "--out", str(out / "speed")]
     r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
     wall = time.perf_counter() - t0
@@ -49,11 +53,11 @@ def speed(cache: str, out: Path, studies: int) -> str:
     return (f"`python -m analysis.power --studies {studies} --jobs 2` (six default worlds, default tests "
             f"Freedman-Lane and sign-flip, 199 permutations): **{wall:.0f} s** wall, {verdict} the goal of 5 minutes "
             f"on 2 cores. Load average before {load0[0]:.1f}, after {load1[0]:.1f} (1 min; other developers' "
-            f"jobs share the 2 cores). Effort and risk read from the cache.\n")
+            f"jobs share the 2 cores). Effort and risk read from {'--results ' + results if results else 'the cache'}.\n")
 
 
-def fpr(cache: str, out: Path, studies: int, slow_studies: int, jobs: int, seed: int, n_perm: int, n_boot: int
-        ) -> tuple[str, pd.DataFrame]:
+def fpr(cache: str, out: Path, studies: int, slow_studies: int, jobs: int, seed: int, n_perm: int, n_boot: int,
+        results: str | None = None) -> tuple[str, pd.DataFrame]:
     """The cheap tests (Freedman-Lane, sign-flip) on `studies` studies per world; the
     costly ones (within-pair, shuffle: risk tables per permutation; direct bootstrap:
     a cross-validation per resample) on the first `slow_studies` of them (the same
@@ -62,7 +66,7 @@ def fpr(cache: str, out: Path, studies: int, slow_studies: int, jobs: int, seed:
 
     t0 = time.perf_counter()
     load0 = os.getloadavg()
-    table = pw.load_trial_table(None, cache, jobs=jobs)
+    table = pw.read_trial_table(results) if results else pw.load_trial_table(None, cache, jobs=jobs)
     kw = dict(participants=60, noise=1.0, seed=seed, jobs=jobs, n_perm=n_perm, n_boot=n_boot)
     cheap = pw.power(table, ["effort-only", "noise"], studies=studies, tests=("freedman-lane", "sign-flip"), **kw)
     costly = pw.power(table, ["effort-only", "noise"], studies=slow_studies,
@@ -93,6 +97,7 @@ def fpr(cache: str, out: Path, studies: int, slow_studies: int, jobs: int, seed:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--cache", default="results/cache")
+    p.add_argument("--results", help="a finished lgp.reproduce run (effort_samples.csv, risk.csv) instead of the cache")
     p.add_argument("--out", default="results/bench_power")
     p.add_argument("--only", choices=["speed", "fpr"])
     p.add_argument("--studies", type=int, default=200)
@@ -106,13 +111,13 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     out = Path(args.out)
     if args.only in (None, "speed"):
-        text = speed(args.cache, out, args.studies)
+        text = speed(args.cache, out, args.studies, args.results)
         print(text)
         write_section(Path(args.docs), "analysis.power: speed",
                       f"## analysis.power: speed\n\nMachine: {machine()}.\n\n{text}")
     if args.only in (None, "fpr"):
         text, _ = fpr(args.cache, out, args.fpr_studies, args.fpr_slow_studies, args.jobs, args.seed, args.n_perm,
-                      args.n_boot)
+                      args.n_boot, args.results)
         print(text)
         write_section(Path(args.docs), "analysis.power: false-positive rates",
                       f"## analysis.power: false-positive rates\n\nMachine: {machine()}.\n\n{text}")
