@@ -181,11 +181,13 @@ def analyse(repo, experiment: int, out, sigmas=DEFAULT_GRID, n_runs: int = 100, 
     repo, out = Path(repo), Path(out)
     scenes = read_scenes(repo, experiment)  # bad input raises here, before anything is written
     pred = read_predictions(repo, experiment)
+    answered = set(pred.trial)
+    skipped = [{"trial": s.trial, "reason": "no human predictions"} for s in scenes if s.trial not in answered]
+    scenes = [s for s in scenes if s.trial in answered]  # a scene nobody judged is reported, not fitted
+    if not scenes:
+        raise MentalJengaError(f"{repo}: no scene of experiment {experiment} has human predictions")
     trials = [s.trial for s in scenes]
-    missing = sorted(set(trials) - set(pred.trial))
-    if missing:
-        raise MentalJengaError(f"{repo}: no human predictions for trial(s) {missing}")
-    wide = pred.pivot_table(index="participant", columns="trial", values="response", aggfunc="mean")[trials]
+    wide = pred[pred.trial.isin(trials)].pivot_table(index="participant", columns="trial", values="response", aggfunc="mean")[trials]
     complete = wide.dropna()
     human = wide.mean(axis=0)  # per scene, over every participant who answered it
     out.mkdir(parents=True, exist_ok=True)
@@ -196,8 +198,8 @@ def analyse(repo, experiment: int, out, sigmas=DEFAULT_GRID, n_runs: int = 100, 
     runs["scene"] = runs["trial"].map(label_of)
     means = runs.groupby(["rule", "sigma", "scene"]).fallen.agg(["mean", "std"]).reset_index()
     sig = np.array(sorted(map(float, sigmas)))
-    fit_rows, summary = [], {"experiment": experiment, "scenes_used": len(scenes), "scenes_skipped": 0,
-                             "skipped": [], "participants": int(wide.shape[0]), "runs_per_sigma": n_runs,
+    fit_rows, summary = [], {"experiment": experiment, "scenes_used": len(scenes), "scenes_skipped": len(skipped),
+                             "skipped": skipped, "participants": int(wide.shape[0]), "runs_per_sigma": n_runs,
                              "seed": seed, "engine": "mujoco", "linear_map": False, "rules": {}}
     for rule in rules:
         M = np.array([[means[(means.rule == rule) & (means.sigma == s) & (means.scene == t)]["mean"].iloc[0]
