@@ -36,7 +36,8 @@ from models.risk.precision import PRECISION_LEVELS
 PROG = "python -m models.risk"
 
 
-def main(argv=None) -> int:
+def _parser():
+    """The command line of `main`."""
     p = cli.parser(PROG, description=__doc__.splitlines()[0])
     p.add_argument("--table", type=cli.output_file, help="CSV to write: trial, sigma, risk, falls, n, the model's columns, risk_low, risk_high")
     p.add_argument("--runs", type=cli.output_file, help="also write the per-run CSV here")
@@ -66,6 +67,11 @@ def main(argv=None) -> int:
                    help="print the stage curve of these trials ('all': the 24)")
     p.add_argument("--samples", type=cli.bounded_count("MAX_SAMPLES"), default=SAMPLES, help="layouts of A per trial for --build-risk (default %(default)s)")
     p.add_argument("--out", type=cli.output_file, help="with --build-risk: write the stage table (CSV) here")
+    return p
+
+
+def main(argv=None) -> int:
+    p = _parser()
     args = p.parse_args(argv)
     args.jobs = cli.capped_jobs(args.jobs, p.prog, args.oversubscribe)
     args.sigmas = list(SIGMA_GRIDS[args.sigma_grid] if args.sigma_grid else args.sigmas or SIGMA_GRID)
