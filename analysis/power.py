@@ -767,11 +767,6 @@ def main(argv=None) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    from lgp import cli
-
-    raise SystemExit(cli.run_cli(main, prog=PROG))
-
 
 def power_markdown(table: pd.DataFrame) -> list[str]:
     """The docs' power table: per world, the held-out verdict's top picks and each
@@ -804,3 +799,9 @@ def power_markdown(table: pd.DataFrame) -> list[str]:
         lines.append(f"| {w} | " + " | ".join(cell(w, p, v) for _, p, v in cols) + " |")
     lines += ["", f"{n} SIMULATED studies per world; rates with their Wilson 95% interval (Monte Carlo error)."]
     return lines
+
+
+if __name__ == "__main__":
+    from lgp import cli
+
+    raise SystemExit(cli.run_cli(main, prog=PROG))
