@@ -183,3 +183,25 @@ def test_pairs_match_effort_and_put_the_riskier_trial_as_hard():
                            "candidate": [1, 2, 3, 4, 5, 6]})
     # by effort: (0.1, 0.12) -> pair 1, (0.5, 0.55) -> pair 2, (0.9, 0.95) -> pair 3; E = lower risk
     assert pair_ids(chosen) == ["3E", "1H", "2H", "1E", "2E", "3H"]
+
+
+@pytest.mark.slow
+def test_the_same_seed_writes_the_same_set_end_to_end(tmp_path):
+    # two fresh runs (no shared cache) at once; a small pool, the faithful check kept tiny
+    args = ["--candidates", "120", "--trials", "4", "--finalists", "5", "--samples", "1", "--n-sims", "3",
+            "--no-paper", "--no-power", "--no-render", "--jobs", "1", "--seed", "3"]
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    runs = [subprocess.Popen([sys.executable, "-m", "stimuli.design", "--out", str(tmp_path / k), *args], cwd=ROOT,
+                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for k in "ab"]
+    for r in runs:
+        _, err = r.communicate()
+        assert r.returncode == 0, err[-2000:]
+    import stimuli
+
+    a = sorted(p.name for p in (tmp_path / "a").glob("*.yaml"))
+    assert a == ["D01.yaml", "D02.yaml", "D03.yaml", "D04.yaml"]
+    for name in a + ["design.csv", "finalists.csv", "discards.csv"]:
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+    for name in a:
+        trial = stimuli.load_file(tmp_path / "a" / name)  # valid under the project's trial rules
+        assert "designed: objective" in trial.provenance["designed"][0] and "seed 3" in trial.provenance["designed"][0]
