@@ -2,6 +2,7 @@
 
     python bench/commands.py            # the pipeline, lgp.show and stimuli.sheet, side by side in one run
     python bench/commands.py --only tests     # the fast test subset too (run it after the README quotes these rows)
+    python bench/commands.py --only suite     # the whole suite (budget 8 min on 2 quiet cores; the fast subset's is 40 s)
     python bench/commands.py --only quick show sheet   # a subset (the other rows are kept)
 
 Each command runs in a fresh subprocess and a fresh scratch folder, once cold (an
@@ -41,8 +42,9 @@ COMMANDS = {
     "show": ("python -m lgp.show 7H --seed 0 --sample 0 --html 7H.html --png 7H.png", [(1, "cold")]),
     "sheet": ("python -m stimuli.sheet --out stimuli.png", [(1, "cold")]),
     "tests": ('python -m pytest -q -m "not slow"', [(2, "cold")]),
+    "suite": ("python -m pytest -q", [(2, "cold")]),
 }
-#: What a plain `python bench/commands.py` runs: not the tests (tests/test_readme.py checks
+#: What a plain `python bench/commands.py` runs: not the tests nor the suite (tests/test_readme.py checks
 #: that the README quotes this file, so they pass only once it does).
 DEFAULT = ("quick", "full", "show", "sheet")
 FIELDS = ["command", "jobs", "cache", "wall_s", "cpu_s", "cores", "cpu_model", "load_before", "load_after", "date"]
