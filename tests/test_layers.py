@@ -40,9 +40,10 @@ LAYERS = [
     ("analysis", ["analysis", "analysis.*"], ["ground"]),
     # the application: lgp's application wing (lgp/app/ and its two commands), CLIs,
     # caches, report and page writers
-    # stimuli.render is a package (camera, engine, run, __main__): the renderer and its cached run
+    # stimuli.render is a package (camera, engine, run, __main__): the renderer and its cached run;
+    # stimuli.design searches for stimuli through the pipeline's stages and caches (lgp.app)
     ("application", [*APP_WING, "stimuli.sheet", "stimuli.generate", "stimuli.render", "stimuli.render.*",
-                     "stimuli.experiment", "stimuli.experiment.*", "analysis.import_study", "analysis.mental_jenga", "*.__main__"], None),
+                     "stimuli.experiment", "stimuli.experiment.*", "stimuli.design", "stimuli.design.*", "analysis.import_study", "analysis.mental_jenga", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]
 RANK = {name: k for k, (name, _, _) in enumerate(LAYERS)}
