@@ -112,4 +112,4 @@ def test_the_end_of_a_run_counts_a_recomputed_entry_as_computed(tmp_path, capsys
     assert cache.get("effort", "k") is None
     capsys.readouterr()
     line = end_of_run(3.0, cache, Path("out"), 5).splitlines()[0]
-    assert line == "done in 3.0 s (1 results computed, 0 reused from the cache); open out/index.html"
+    assert line == "done in 3.0 s (1 results computed, 0 reused); open out/index.html"

@@ -147,7 +147,7 @@ def test_viewer_replays_the_effort_table_row(capsys, trial_id, seed, sample):
 
     table = physical_effort(trial_id, samples=sample + 1, seed=seed)[1]
     assert main([trial_id, "--seed", str(seed), "--sample", str(sample)]) == 0
-    printed = float(re.search(r"^effort ([0-9.eE+-]+) J\*s$", capsys.readouterr().out, re.M).group(1))
+    printed = float(re.search(r"^physical effort: ([0-9.eE+-]+) J s over \d+ actions$", capsys.readouterr().out, re.M).group(1))
     assert printed == pytest.approx(table.loc[table["sample"] == sample, "effort"].item(), rel=1e-9)
 
 
