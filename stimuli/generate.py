@@ -40,6 +40,7 @@ from __future__ import annotations
 from lgp.atomic import write_text_atomic
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -200,6 +201,15 @@ def generate(directory: str | Path, count: int, seed: int = 0, engine: str | Non
     if kind not in ("scatter", "rearrange"):
         raise InputError(f"kind must be scatter or rearrange, got {kind!r}")
     directory = Path(directory)
+    prefix = "R" if kind == "rearrange" else "G"
+    # A file of the user's with one of our names is never replaced (nor deleted when a
+    # draw turns out unstable): refuse before any work, naming the files.
+    taken = [f"{prefix}{i + 1:04d}.yaml" for i in range(count)
+             if os.path.lexists(directory / f"{prefix}{i + 1:04d}.yaml")]
+    if taken:
+        listed = ", ".join(taken[:3]) + (f" and {len(taken) - 3} more" if len(taken) > 3 else "")
+        raise InputError(f"{directory} already holds {listed}: choose an empty or new folder "
+                         f"(this command never replaces a file it did not write in this call)")
     directory.mkdir(parents=True, exist_ok=True)
     paths = []
     for i in range(count):
@@ -207,7 +217,7 @@ def generate(directory: str | Path, count: int, seed: int = 0, engine: str | Non
             # a redraw uses its own stream: trial i's first draw does not depend on the attempts of others
             draw = rearrange_data if kind == "rearrange" else trial_data
             data = draw(i, seed if attempt == 0 else seed + 1_000_003 * attempt)
-            data["id"] = f"{'R' if kind == 'rearrange' else 'G'}{i + 1:04d}"
+            data["id"] = f"{prefix}{i + 1:04d}"
             path = write_trial(data, directory)
             try:
                 trial = stimuli.load_file(path)

@@ -85,3 +85,24 @@ def test_a_bad_generated_count_is_refused():
     r = subprocess.run([sys.executable, "-m", "stimuli.generate", "--out", "/tmp/x", "--count", "0"], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "argument --count: must be a whole number >= 1" in r.stderr, r.stderr
+
+
+def test_a_users_file_with_a_generated_name_is_never_replaced_or_deleted(tmp_path):
+    """A folder holding the user's own G0002.yaml is refused before any draw: the file
+    stays byte-identical and no other trial is written beside it."""
+    mine = tmp_path / "G0002.yaml"
+    mine.write_bytes(b"# my hand-made trial\n")
+    with pytest.raises(ValueError, match="G0002.yaml"):
+        generate(tmp_path, 3, seed=0)
+    assert mine.read_bytes() == b"# my hand-made trial\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["G0002.yaml"]
+
+
+@pytest.mark.slow
+def test_the_cli_refuses_a_folder_holding_a_generated_name_in_one_line(tmp_path):
+    mine = tmp_path / "G0002.yaml"
+    mine.write_bytes(b"# my hand-made trial\n")
+    run = subprocess.run([sys.executable, "-m", "stimuli.generate", "--out", str(tmp_path), "--count", "3"],
+                         capture_output=True, text=True, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert run.returncode == 1 and run.stderr.count("\n") == 1 and "G0002.yaml" in run.stderr
+    assert mine.read_bytes() == b"# my hand-made trial\n"
