@@ -4,7 +4,7 @@
     python bench/test_times.py after.csv                  # totals, per module, the slowest tests
     python bench/test_times.py before.csv after.csv       # the same, side by side
     python bench/test_times.py after.csv --over 0.4       # fast-subset tests over 0.4 CPU-s (candidates for slow)
-    python bench/test_times.py after.csv --over 0.45 --write-slow   # ... added to tests/slow_cases.txt (conftest marks them)
+    python bench/test_times.py after.csv --over 0.3 --write-slow    # ... added to tests/slow_cases.txt (conftest marks them)
     python bench/test_times.py --count                    # tests and asserts in tests/ (AST), for before/after notes
 
 CPU = the test's own CPU seconds plus its children's (subprocesses, pool workers it

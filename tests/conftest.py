@@ -10,7 +10,7 @@ instead of running their own; a test that must rerun copies its cache
 (`copy_of_run`: the cache is keyed by content, so a copy computes nothing again).
 Only the cache tests keep caches of their own.
 
-Slow (`@pytest.mark.slow`, in the full suite only): a case over ~0.5 CPU-s, a Drake or
+Slow (`@pytest.mark.slow`, in the full suite only): a case over ~0.3 CPU-s (tests/slow_cases.txt), a Drake or
 PhysX engine case (the rule below), a subprocess, pool or figure-heavy case; a case
 whose B copies an earlier trial's blocks (`trials_with_copies_slow`) when the fast
 subset already checks that B. A second engine runs on each distinct B once
@@ -44,7 +44,7 @@ from lgp.paper import SIGMA_GRID, TRIAL_IDS
 
 
 #: Cases measured over the fast subset's share (CPU seconds beside each; written by
-#: `python bench/test_times.py CSV --over 0.45 --write-slow`): in the full suite only.
+#: `python bench/test_times.py CSV --over 0.3 --write-slow`): in the full suite only.
 SLOW_CASES = Path(__file__).with_name("slow_cases.txt")
 
 
