@@ -10,13 +10,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.crossval import SCHEMES
+from analysis.crossval import SCHEMES as PAPER_SCHEMES
+from analysis.crossval import STRUCTURE_SCHEME
 from analysis.data import ordered_datasets
 from analysis.models import MODELS
 from lgp.paper import PAPER_SIGMA
 
+#: The schemes of the report's tables: the paper's three and folds by structure (issue 32).
+SCHEMES = PAPER_SCHEMES + (STRUCTURE_SCHEME,)
 #: Short names of the schemes in table headers.
-SHORT = {"in-sample": "in-sample", "leave-one-pair-out": "held-out pairs", "leave-one-trial-out": "held-out trials"}
+SHORT = {"in-sample": "in-sample", "leave-one-pair-out": "held-out pairs", "leave-one-trial-out": "held-out trials",
+         STRUCTURE_SCHEME: "held-out structures"}
 
 CANNOT_FAIL = ("In sample the comparison of Eq. 1 with effort-only cannot fail: Eq. 1 nests effort-only "
                "(E = E(1-R) + E R, so effort-only is Eq. 1 with b1 = b2) and its sigma is chosen on the same data, so "
@@ -38,7 +42,8 @@ def side_by_side(comparison: pd.DataFrame) -> pd.DataFrame:
                 if s not in g.index:
                     continue
                 x = g.loc[s]
-                ci = f" [{x['r_low']:.3f}, {x['r_high']:.3f}]" if "r_low" in x and np.isfinite(x["r_low"]) else ""
+                lo, hi = ("r_low_centred", "r_high_centred") if "r_low_centred" in x else ("r_low", "r_high")
+                ci = f" [{x[lo]:.3f}, {x[hi]:.3f}]" if lo in x and np.isfinite(x[lo]) else ""
                 row[f"r {SHORT[s]}"] = f"{x['r']:.3f}{ci}" if np.isfinite(x["r"]) else "n/a"
             for s in SCHEMES:
                 if s in g.index:
@@ -126,15 +131,23 @@ def comparison_lines(analysis: dict, markdown) -> list[str]:
     if "model_comparison" not in analysis:
         return []
     lines = ["## Model comparison: in-sample and out of sample", "", CANNOT_FAIL, "",
-             "r (95% bootstrap interval: participants and risk runs resampled, the cross-validation redone in each "
-             "resample), RMSE (z units) and pairs ordered E < H (tie rule of analysis.pairs):", "",
+             "r (95% bootstrap interval centred on r: participants and risk runs resampled, the cross-validation redone "
+             "in each resample; the paper's percentile interval, which need not contain r, is r_low/r_high in "
+             "model_comparison.csv), RMSE (z units) and pairs ordered E < H (tie rule of analysis.pairs):", "",
              markdown(side_by_side(analysis["model_comparison"])), "",
              "Direct bootstrap tests, Eq. 1 against effort-only:", "",
              markdown(tests_table(analysis["model_comparison_tests"])), "",
              widening_text(analysis["model_comparison"]), ""]
+    if "model_comparison_held_out_tests" in analysis:
+        held = analysis["model_comparison_held_out_tests"]
+        lines += ["Held-out comparison paired over folds (calibrated; sign-flip of the per-fold squared-error "
+                  "differences, p of \"model_a predicts held-out trials better than model_b\"):", "",
+                  markdown(held.assign(p_value=held["p_value"].round(4), sse_a=held["sse_a"].round(4),
+                                       sse_b=held["sse_b"].round(4))), ""]
     if "permutation_test" in analysis:
-        lines += ["Permutation tests of the risk term (statistic: held-out-pairs RMSE of effort-only minus Eq. 1's; "
-                  "E fixed, everything refit including sigma). p = (1 + permutations with a gain at least the observed) "
+        lines += ["Permutation tests of the risk term (statistic: held-out RMSE of effort-only minus Eq. 1's on folds by "
+                  "structure; everything refit including sigma; Freedman-Lane is the default null, shuffle is NOT "
+                  "CALIBRATED). p = (1 + permutations with a gain at least the observed) "
                   "/ (1 + permutations); distinct_assignments counts the different risk tables the permutations can "
                   "make, so p cannot go much below its inverse (trials with the same risk curve, e.g. never falling, "
                   "swap to the same table):", "",
