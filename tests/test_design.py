@@ -205,3 +205,15 @@ def test_the_same_seed_writes_the_same_set_end_to_end(tmp_path):
     for name in a:
         trial = stimuli.load_file(tmp_path / "a" / name)  # valid under the project's trial rules
         assert "designed: objective" in trial.provenance["designed"][0] and "seed 3" in trial.provenance["designed"][0]
+
+
+def test_a_folder_holding_a_users_trial_files_is_refused_and_left_as_it_was(tmp_path, capsys):
+    from stimuli.design.__main__ import main
+    from lgp.cli import run_cli
+
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "D01.yaml").write_text("id: D01\n")
+    code = run_cli(main, ["--out", str(user), "--candidates", "10", "--trials", "4"], prog="python -m stimuli.design")
+    assert code == 1 and "did not write (D01.yaml)" in capsys.readouterr().err
+    assert [p.name for p in user.iterdir()] == ["D01.yaml"] and (user / "D01.yaml").read_text() == "id: D01\n"

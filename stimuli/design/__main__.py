@@ -76,7 +76,10 @@ def main(argv=None) -> int:
     from stimuli.design.run import faithful, run_design, wide
 
     out = Path(args.out)
+    previous = claim_folder(out)
     out.mkdir(parents=True, exist_ok=True)
+    for name in previous:  # the set an earlier design run wrote here (its design.json lists them)
+        (out / name).unlink(missing_ok=True)
     cache = Cache(out / "cache")
     t0 = time.perf_counter()
     with executor_for_scheduler(args.scheduler, args.jobs) as ex:
@@ -111,13 +114,37 @@ def main(argv=None) -> int:
             contact_sheet(out / "pictures", out / "contact_sheet.png")
             design.timings["render"] = time.perf_counter() - t2
     design.timings["command"] = time.perf_counter() - t0
-    outputs.write_json({"config": cfg.__dict__ | {"sigmas": cfg.sigmas, "faithful_sigmas": cfg.faithful_sigmas}, "objective": design.terms,
+    outputs.write_json({"written": [p.name for p in paths], "config": cfg.__dict__ | {"sigmas": cfg.sigmas, "faithful_sigmas": cfg.faithful_sigmas}, "objective": design.terms,
                         "timings_s": design.timings, "screened": cfg.candidates, "passed_screen": len(design.pool),
                         "discards": dict(design.reasons)}, out / "design.json")
     t = design.terms
     print(f"wrote {len(paths)} designed trials to {out.resolve()}: |r| max {t['max_abs_r']:.2f}, rising {t['rising']:.0%}, "
           f"{design.timings['command']:.0f} s (python -m lgp.reproduce --stimuli {args.out})")
     return 0
+
+
+def claim_folder(out: Path) -> list[str]:
+    """The trial files an earlier design run wrote into `out` (its design.json's
+    "written"), to be replaced; RuntimeError naming them if `out` holds trial files
+    (*.yaml) this command did not write: a user's folder is never written over."""
+    import json
+
+    if not out.is_dir():
+        return []
+    mine: list[str] = []
+    record = out / "design.json"
+    if record.is_file():
+        try:
+            mine = [str(n) for n in json.loads(record.read_text()).get("written", [])]
+        except (ValueError, AttributeError, TypeError):
+            mine = []
+    foreign = sorted(p.name for p in out.glob("*.yaml") if p.name not in mine)
+    if foreign:
+        from lgp.errors import InputError
+
+        raise InputError(f"--out {out} holds trial files this command did not write ({', '.join(foreign[:5])}"
+                           f"{' ...' if len(foreign) > 5 else ''}); choose an empty or new folder")
+    return [n for n in mine if "/" not in n and n.endswith(".yaml")]
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from lgp.errors import InputError
 from stimuli.design import objective
 from stimuli.design.checks import Discarded, engine_check, plan_check, screen_candidate
 from stimuli.design.grammar import MAX_BLOCKS, draw
@@ -174,7 +175,7 @@ def pick_finalists(cfg: DesignConfig, pool: pd.DataFrame, executor, reasons: Cou
     for rnd in range(6):
         live = pool[~pool["candidate"].isin(failed)].reset_index(drop=True)
         if len(live) < cfg.trials:
-            raise RuntimeError(f"only {len(live)} candidates pass every check; --trials {cfg.trials} needs more (--candidates)")
+            raise InputError(f"only {len(live)} candidates pass every check; --trials {cfg.trials} needs more (--candidates)")
         idx, terms = objective.choose(live, min(F, len(live)), rng)
         chosen = live.iloc[idx]
         todo = [int(c) for c in chosen["candidate"] if int(c) not in checked]
@@ -207,7 +208,7 @@ def pick_finalists(cfg: DesignConfig, pool: pd.DataFrame, executor, reasons: Cou
                 reasons[status] += 1
         if not (set(int(c) for c in chosen["candidate"]) & failed):
             return chosen.assign(effort_layout0=[checked[int(c)] for c in chosen["candidate"]]).reset_index(drop=True)
-    raise RuntimeError("finalists: still failing checks after 6 rounds")
+    raise InputError("finalists: still failing checks after 6 rounds")
 
 
 def faithful(trials, cfg: DesignConfig, executor, cache) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -276,7 +277,7 @@ def run_design(cfg: DesignConfig, out: Path, executor, cache, log=print) -> Desi
     timings["screen"] = time.perf_counter() - t0
     log(f"screen: {len(pool)} of {cfg.candidates} candidates pass ({', '.join(f'{n} {r}' for r, n in reasons.most_common())})")
     if len(pool) < cfg.trials:
-        raise RuntimeError(f"only {len(pool)} of {cfg.candidates} candidates pass the screen; --trials {cfg.trials} needs more")
+        raise InputError(f"only {len(pool)} of {cfg.candidates} candidates pass the screen; --trials {cfg.trials} needs more")
     t1 = time.perf_counter()
     fin = pick_finalists(cfg, pool, executor, reasons, log, cache)
     timings["finalists"] = time.perf_counter() - t1
