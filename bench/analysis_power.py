@@ -105,12 +105,39 @@ def fpr(cache: str, out: Path, studies: int, slow_studies: int, jobs: int, seed:
     return "\n".join(lines) + "\n", res
 
 
+def predictors(results: str) -> str:
+    """What the 24 trials can tell apart: each heuristic's correlation with effort, and
+    the correlation of E*R beyond (1, E) with each heuristic beyond (1, E), by sigma."""
+    import numpy as np
+
+    from analysis import power as pw
+
+    t = pw.read_trial_table(results)
+    E, F = t.effort, t.features
+    X = np.column_stack([np.ones(len(E)), E])
+
+    def beyond(v):
+        return v - X @ np.linalg.lstsq(X, v, rcond=None)[0]
+
+    r = lambda a, b: float(np.corrcoef(a, b)[0, 1])  # noqa: E731
+    lines = [f"Predictors of the paper's 24 trials ({results}): height equals depth on every trial: "
+             f"{bool(np.array_equal(F['height'], F['depth']))}.", "",
+             "| | " + " | ".join(F) + " |", "|---|" + "---|" * len(F),
+             "| r with E | " + " | ".join(f"{r(E, v):.2f}" for v in F.values()) + " |"]
+    for s in (0.065, 0.10, 0.15, 0.20):
+        k = int(np.argmin(np.abs(t.risk.sigmas - s)))
+        ER = E * t.risk.risk[k]
+        lines.append(f"| r of E*R with it, both beyond (1, E), sigma {s:g} d | "
+                     + " | ".join(f"{r(beyond(ER), beyond(v)):.2f}" for v in F.values()) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--cache", default="results/cache")
     p.add_argument("--results", help="a finished lgp.reproduce run (effort_samples.csv, risk.csv) instead of the cache")
     p.add_argument("--out", default="results/bench_power")
-    p.add_argument("--only", choices=["speed", "fpr"])
+    p.add_argument("--only", choices=["speed", "fpr", "predictors"])
     p.add_argument("--studies", type=int, default=200)
     p.add_argument("--fpr-studies", type=int, default=1000)
     p.add_argument("--fpr-slow-studies", type=int, default=300)
@@ -121,6 +148,13 @@ def main(argv=None) -> int:
     p.add_argument("--docs", default=str(ROOT / "docs" / "benchmarks.md"))
     args = p.parse_args(argv)
     out = Path(args.out)
+    if args.only in (None, "predictors"):
+        if not args.results:
+            raise SystemExit("--only predictors needs --results DIR")
+        text = predictors(args.results)
+        print(text)
+        write_section(Path(args.docs), "analysis.power: what the 24 trials can tell apart",
+                      f"## analysis.power: what the 24 trials can tell apart\n\n{text}")
     if args.only in (None, "speed"):
         text = speed(args.cache, out, args.studies, args.results, args.n_perm)
         print(text)
