@@ -31,17 +31,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-#: The heuristic predictors, in table order.
-FEATURES: tuple[str, ...] = ("height", "blocks", "stacked", "distance", "actions", "depth")
-#: What each predictor stands for, one sentence each (tables, figures, docs).
-FEATURE_MEANING: dict[str, str] = {
-    "height": "taller targets are harder: B's height in block levels",
-    "blocks": "more blocks are harder: the number of blocks in B",
-    "stacked": "stacking is what is hard: the number of B's blocks resting on another block",
-    "distance": "carrying is what is hard: total distance the assigned blocks travel from A to B (m)",
-    "actions": "every grasp and place costs the same: the number of actions of the symbolic plan",
-    "depth": "deep support chains are hard: the longest chain of blocks resting on one another in B",
-}
+from analysis.spec import FEATURE_MEANING, FEATURES  # noqa: E402,F401  (one home: analysis.spec)
 
 
 def target_features(target, block_edge: float | None = None) -> dict[str, float]:

@@ -102,15 +102,13 @@ def cv_gain(Y: np.ndarray, E: np.ndarray, risk: np.ndarray, scheme: str = SCHEME
     (S, T) or (B, S, T); returns (B, D). `groups` the structure groups (default:
     from `risk` when it is one (S, T) table)."""
     if scheme == STRUCTURE_SCHEME and groups is None:
-        from analysis.heuristics import paper_identical_targets
-
-        groups = structure_groups(TRIAL_IDS, np.asarray(risk), paper_identical_targets())
+        groups = structure_groups(TRIAL_IDS, np.asarray(risk))
     preds, _, _ = cross_validate(Y, E, {"R": risk}, ["full", "effort"], scheme, pool=pool, groups=groups)
     return scores(Y, preds["effort"])["rmse"] - scores(Y, preds["full"])["rmse"]
 
 
 def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_perm: int = N_PERM,
-                     rng: np.random.Generator | None = None, kinds=KINDS, scheme: str = SCHEME
+                     rng: np.random.Generator | None = None, kinds=KINDS, scheme: str = SCHEME, groups=None
                      ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The permutation tests of `kinds` (module docstring) on the full-sample trial means.
 
@@ -131,9 +129,8 @@ def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_
     datasets = ordered_datasets(means)
     Y = np.stack([np.asarray(means[d], float) for d in datasets])[None]     # (1, D, T)
     if scheme == STRUCTURE_SCHEME:
-        from analysis.heuristics import paper_identical_targets
-
-        groups = structure_groups(TRIAL_IDS, grid.risk, paper_identical_targets())
+        # `groups` from the caller (identical B's of the trial files), else pairs and identical risk curves
+        groups = structure_groups(TRIAL_IDS, grid.risk) if groups is None else groups
     else:
         groups = None
     observed = cv_gain(Y, E, grid.risk, scheme, groups=groups)[0]            # (D,)

@@ -33,7 +33,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
                  sigmas=None, figures: bool = True, build_risk: pd.DataFrame | None = None,
                  risk_measure: str | None = None, compare: bool = True, n_perm: int = N_PERM,
                  risk_draw: str = "binomial", pair_names: dict | None = None,
-                 features: pd.DataFrame | None = None) -> dict[str, pd.DataFrame]:
+                 features: pd.DataFrame | None = None, same=()) -> dict[str, pd.DataFrame]:
     """Run the paper's analysis and write tidy CSVs and figures into `out_dir`.
 
     Parameters
@@ -77,6 +77,9 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         predictor alone, effort + height, effort + stacked) joins the fits, the
         bootstrap, the comparison and its tests (full against effort + height and
         effort + stacked), fitted exactly like effort-only.
+    same : sets of trial ids whose B is the same structure (lgp.reproduce passes
+        analysis.heuristics.identical_targets of the trial files): folds by
+        structure hold each set out together (with pairs and identical risk curves).
     risk_draw : "binomial" (default): every bootstrap resample of the comparison
         also redraws each trial's risk from its runs (run counts from the risk
         table's n_sims or n column); "none": risk fixed at the table. The
@@ -212,12 +215,10 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         feats = None
         if features is not None:
             from analysis.models import feature_vector
-            from analysis.heuristics import FEATURES
+            from analysis.spec import FEATURES
 
             feats = {f: feature_vector(features, f) for f in FEATURES}
-        from analysis.heuristics import paper_identical_targets
-
-        groups = structure_groups(TRIAL_IDS, source_R.risk, paper_identical_targets())
+        groups = structure_groups(TRIAL_IDS, source_R.risk, same)
         results.update(_comparison(means, boot_means, E, grids, models, comparisons, in_sample, seed, n_perm, draw,
                                    feats, groups))
         results["settings"] = results["settings"].assign(
@@ -263,7 +264,8 @@ def _comparison(means: pd.DataFrame, boot_means, E: pd.Series, grids, models, co
         summary = summarize_comparison(point, fixed)
         tests = comparison_tests(point, fixed, comparisons)
         cv_boot = fixed.assign(risk_draw="none")
-    perm, null = permutation_test(y, E, grids["R"], n_perm, np.random.default_rng([seed, PERMUTATION_STREAM]))
+    perm, null = permutation_test(y, E, grids["R"], n_perm, np.random.default_rng([seed, PERMUTATION_STREAM]),
+                                  groups=groups)
     gain = gain_over_effort(point, boot if risk_draw == "binomial" else fixed)
     return {"model_comparison": summary, "model_comparison_gain": gain, "model_comparison_tests": tests,
             "model_comparison_held_out_tests": held_out_tests(cv_pred, comparisons),

@@ -20,7 +20,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from analysis.heuristics import FEATURE_MEANING, FEATURES
+#: The heuristic predictors, in table order.
+FEATURES: tuple[str, ...] = ("height", "blocks", "stacked", "distance", "actions", "depth")
+#: What each predictor stands for, one sentence each (tables, figures, docs).
+FEATURE_MEANING: dict[str, str] = {
+    "height": "taller targets are harder: B's height in block levels",
+    "blocks": "more blocks are harder: the number of blocks in B",
+    "stacked": "stacking is what is hard: the number of B's blocks resting on another block",
+    "distance": "carrying is what is hard: total distance the assigned blocks travel from A to B (m)",
+    "actions": "every grasp and place costs the same: the number of actions of the symbolic plan",
+    "depth": "deep support chains are hard: the longest chain of blocks resting on one another in B",
+}
 
 #: Bases that read risk R (and so a sigma).
 RISK_BASES: tuple[str, ...] = ("full", "risk")

@@ -374,7 +374,8 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
                                 build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
                                 risk_measure=args.risk_measure, n_perm=args.n_perm,
                                 pair_names={t.pair: t.dimension for t in paper},
-                                features=_heuristics(paper, args) if human is not None and len(paper) == len(TRIAL_IDS) else None)
+                                features=_heuristics(paper, args) if human is not None and len(paper) == len(TRIAL_IDS) else None,
+                                same=_identical(paper))
         written += [Path(path) for path in analysis["files"]["path"]]
         if args.recovery:
             from lgp.app.recovery import list_files, recovery_outputs
@@ -499,6 +500,13 @@ def _home(path) -> str:
     """A path with the user's home written ~ (shorter, and the same on every account)."""
     p, home = str(path), str(Path.home())
     return "~" + p[len(home):] if home != "/" and (p == home or p.startswith(home + os.sep)) else p
+
+
+def _identical(paper):
+    """Sets of the paper's trials whose B is the same structure (folds by structure)."""
+    from analysis.heuristics import identical_targets
+
+    return identical_targets(paper)
 
 
 def end_of_run(seconds: float, cache, out: Path, n_files: int) -> str:

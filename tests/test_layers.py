@@ -43,7 +43,9 @@ LAYERS = [
     # stimuli.render is a package (camera, engine, run, __main__): the renderer and its cached run;
     # stimuli.design searches for stimuli through the pipeline's stages and caches (lgp.app)
     ("application", [*APP_WING, "stimuli.sheet", "stimuli.generate", "stimuli.render", "stimuli.render.*",
-                     "stimuli.experiment", "stimuli.experiment.*", "stimuli.design", "stimuli.design.*", "analysis.import_study", "analysis.mental_jenga", "*.__main__"], None),
+                     "stimuli.experiment", "stimuli.experiment.*", "stimuli.design", "stimuli.design.*", "analysis.import_study", "analysis.mental_jenga",
+                     # they read trial files, plans and lgp.reproduce's caches (issue 32)
+                     "analysis.heuristics", "analysis.power", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]
 RANK = {name: k for k, (name, _, _) in enumerate(LAYERS)}
