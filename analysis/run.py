@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from lgp.atomic import write_csv_atomic
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -295,5 +296,9 @@ def _write(results: dict[str, pd.DataFrame], out_dir: Path, prefix: str,
     files_path = out_dir / f"{prefix}files.csv"
     written.append(("table", str(files_path)))
     results["files"] = pd.DataFrame(written, columns=["kind", "path"])
-    write_csv_atomic(results["files"], files_path)
+    # On disk each path is relative to the folder holding files.csv, so the list stays
+    # true when the folder is copied, moved, or swapped in from a run's staging folder
+    # (absolute paths named the staging folder, gone after the swap).
+    write_csv_atomic(results["files"].assign(path=[os.path.relpath(p, out_dir) for p in results["files"]["path"]]),
+                     files_path)
     return results

@@ -2,6 +2,8 @@
 pipeline labels everything made from them as simulated (analysis.simulate,
 analysis.run, analysis.figures). Simulated participants exist for these tests
 only; they are not, and never stand in for, the paper's human data."""
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -139,6 +141,12 @@ def test_run_analysis_without_human_data_writes_pairs_and_effort_risk_figure(tmp
     assert png.exists() and (tmp_path / "effort_risk_pairs.pdf").exists()
     assert "SIMULATED" not in Image.open(png).text["Title"]
     assert not any("simulated" in p for p in out["files"]["path"])
+    # files.csv names its files relative to its own folder: true after the folder is moved
+    moved = tmp_path.parent / (tmp_path.name + "-moved")
+    tmp_path.rename(moved)
+    listed = pd.read_csv(moved / "files.csv")["path"]
+    assert len(listed) == len(out["files"]) and not any(Path(p).is_absolute() for p in listed)
+    assert all((moved / p).is_file() for p in listed)
 
 
 def test_effort_risk_figure_with_fitted_betas_is_written_as_png_and_pdf(tmp_path, E, RISK):
