@@ -71,13 +71,25 @@ def draw_permutations(kind: str, n_perm: int, rng: np.random.Generator, trials=T
     if kind in ("shuffle", "freedman-lane"):
         return rng.permuted(base, axis=1)
     if kind == "within-pair":
-        pairs = np.array(pairs_of(list(trials)), dtype=int)
+        pairs = np.array(pairs_of(list(trials)), dtype=int).reshape(-1, 2)
+        if not len(pairs):
+            raise InputError(f"within-pair permutations: {skip_reason(kind, trials)}")
         swap = rng.random((n_perm, len(pairs))) < 0.5
         out = base.copy()
         out[:, pairs[:, 0]] = np.where(swap, pairs[:, 1], pairs[:, 0])
         out[:, pairs[:, 1]] = np.where(swap, pairs[:, 0], pairs[:, 1])
         return out
     raise InputError(f"unknown permutation kind {kind!r}; expected one of {', '.join(KINDS)}")
+
+
+def skip_reason(kind: str, trials=TRIAL_IDS) -> str | None:
+    """Why the null of `kind` cannot be drawn on `trials`, or None: the within-pair
+    null swaps the risks of each pair's easy and hard trial, so it needs at least
+    one pair (nE and nH both among the trials)."""
+    if kind == "within-pair" and not pairs_of(list(trials)):
+        return ("skipped: no easy/hard pairs (nE and nH both) among the trials "
+                f"{', '.join(map(str, trials))}; the within-pair null swaps risks within pairs")
+    return None
 
 
 def distinct_assignments(kind: str, risk: np.ndarray, trials=TRIAL_IDS) -> float:
@@ -97,19 +109,36 @@ def distinct_assignments(kind: str, risk: np.ndarray, trials=TRIAL_IDS) -> float
 
 
 def cv_gain(Y: np.ndarray, E: np.ndarray, risk: np.ndarray, scheme: str = SCHEME, pool: bool = True,
-            groups=None) -> np.ndarray:
+            groups=None, trials=TRIAL_IDS) -> np.ndarray:
     """Cross-validated RMSE of effort-only minus Eq. 1's: Y (B, D, T), risk
     (S, T) or (B, S, T); returns (B, D). `groups` the structure groups (default:
     from `risk` when it is one (S, T) table)."""
     if scheme == STRUCTURE_SCHEME and groups is None:
-        groups = structure_groups(TRIAL_IDS, np.asarray(risk))
-    preds, _, _ = cross_validate(Y, E, {"R": risk}, ["full", "effort"], scheme, pool=pool, groups=groups)
-    return scores(Y, preds["effort"])["rmse"] - scores(Y, preds["full"])["rmse"]
+        groups = structure_groups(trials, np.asarray(risk))
+    preds, _, _ = cross_validate(Y, E, {"R": risk}, ["full", "effort"], scheme, pool=pool, groups=groups,
+                                 trials=trials)
+    return scores(Y, preds["effort"], trials)["rmse"] - scores(Y, preds["full"], trials)["rmse"]
+
+
+def _effort(effort, trials) -> np.ndarray:
+    """Effort in `trials` order: the paper's 24 through models.effort_per_trial (its
+    checks); another trial set from a Series indexed by trial id or T values in order."""
+    if trials == list(TRIAL_IDS):
+        return effort_per_trial(effort).to_numpy()
+    if isinstance(effort, pd.Series):
+        missing = [t for t in trials if t not in effort.index]
+        if missing:
+            raise InputError(f"effort lacks trial(s) {', '.join(missing)}")
+        return effort.reindex(trials).to_numpy(dtype=float)
+    E = np.asarray(effort, dtype=float)
+    if E.shape != (len(trials),):
+        raise InputError(f"effort: expected {len(trials)} values in trial order, got shape {E.shape}")
+    return E
 
 
 def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_perm: int = N_PERM,
-                     rng: np.random.Generator | None = None, kinds=KINDS, scheme: str = SCHEME, groups=None
-                     ) -> tuple[pd.DataFrame, pd.DataFrame]:
+                     rng: np.random.Generator | None = None, kinds=KINDS, scheme: str = SCHEME, groups=None,
+                     trials=TRIAL_IDS) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The permutation tests of `kinds` (module docstring) on the full-sample trial means.
 
     `means` {dataset: (24,)}; `grid` the risk over sigma (crossval.risk_grid).
@@ -122,31 +151,42 @@ def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_
     make (trials with identical risk curves swap to the same table): the
     observed table is one of them, so p cannot fall far below its inverse. With
     our table's few risky pairs the within-pair test has only 2^k of them.
+
+    `trials` the trial ids of the columns (default the paper's 24). A kind that
+    cannot be drawn on them (`skip_reason`: within-pair without pairs) gets one
+    row per dataset with its reason in ``calibration``, NaN numbers and no null.
     """
     n_perm = check_count(n_perm, "the number of permutations")
     rng = np.random.default_rng(0) if rng is None else rng
-    E = effort_per_trial(effort).to_numpy()
+    trials = list(trials)
+    E = _effort(effort, trials)
     datasets = ordered_datasets(means)
     Y = np.stack([np.asarray(means[d], float) for d in datasets])[None]     # (1, D, T)
     if scheme == STRUCTURE_SCHEME:
         # `groups` from the caller (identical B's of the trial files), else pairs and identical risk curves
-        groups = structure_groups(TRIAL_IDS, grid.risk) if groups is None else groups
+        groups = structure_groups(trials, grid.risk) if groups is None else groups
     else:
         groups = None
-    observed = cv_gain(Y, E, grid.risk, scheme, groups=groups)[0]            # (D,)
+    observed = cv_gain(Y, E, grid.risk, scheme, groups=groups, trials=trials)[0]            # (D,)
     X = np.column_stack([np.ones(len(E)), E])
     fit = (X @ np.linalg.lstsq(X, Y[0].T, rcond=None)[0]).T                  # (D, T) effort-only fit
-    grouping = grouping_label(groups, TRIAL_IDS) if groups is not None else scheme
+    grouping = grouping_label(groups, trials) if groups is not None else scheme
     rows, nulls = [], []
     for kind in kinds:
-        perms = draw_permutations(kind, n_perm, rng)
+        reason = skip_reason(kind, trials)
+        if reason is not None:
+            rows += [(kind, reason, dataset, scheme, grouping, observed[k], np.nan, np.nan, 0, 0, np.nan, np.nan)
+                     for k, dataset in enumerate(datasets)]
+            continue
+        perms = draw_permutations(kind, n_perm, rng, trials)
         if kind == "freedman-lane":
             Ystar = fit[None] + (Y[0] - fit)[:, perms].transpose(1, 0, 2)     # (P, D, T)
-            null = cv_gain(Ystar, E, grid.risk, scheme, groups=groups)
+            null = cv_gain(Ystar, E, grid.risk, scheme, groups=groups, trials=trials)
         else:
             risks = grid.risk[:, perms].transpose(1, 0, 2)                     # (P, S, T)
-            null = cv_gain(np.broadcast_to(Y, (n_perm,) + Y.shape[1:]), E, risks, scheme, groups=groups)   # (P, D)
-        distinct = distinct_assignments(kind, grid.risk)
+            null = cv_gain(np.broadcast_to(Y, (n_perm,) + Y.shape[1:]), E, risks, scheme, groups=groups,
+                           trials=trials)   # (P, D)
+        distinct = distinct_assignments(kind, grid.risk, trials)
         for k, dataset in enumerate(datasets):
             g = null[:, k]
             at_least = int(np.sum(g >= observed[k] - 1e-12 * abs(observed[k])))

@@ -17,6 +17,7 @@ from analysis import (TRIAL_IDS, bootstrap_model_correlations, resample_trial_me
 from analysis.crossval import (SCHEMES, STRUCTURE_SCHEME, CrossValidationError, RiskGrid, bootstrap_comparison, cross_validate,
                                make_folds, model_comparison, redraw_risk, risk_grid, scores, verdicts)
 from analysis.data import HumanDataError
+from lgp.errors import InputError
 from analysis.permutation import KINDS, check_count, draw_permutations, permutation_test
 from analysis.recovery import model_cost, recovery, simulate_trial_means
 
@@ -471,3 +472,23 @@ def test_reproduce_writes_the_comparison_the_permutations_and_the_recovery(tmp_p
     assert 'id="comparison"' in page and "SIMULATED participants, not human data" in page
     perm = pd.read_csv(out / "analysis" / "permutation_test.csv")
     assert (perm["n_perm"] == 9).all() and len(perm) == len(KINDS) * 2
+
+
+def test_within_pair_null_on_a_set_without_pairs_is_skipped_with_its_reason_and_the_others_still_run():
+    # Eight trials none of which has its partner (1E..8E): the within-pair null has
+    # nothing to swap, so it is skipped with its reason; freedman-lane and shuffle run.
+    trials = [f"{k}E" for k in range(1, 9)]
+    rng = np.random.default_rng(3)
+    sigmas = np.array([0.05, 0.1])
+    grid = RiskGrid(sigmas, rng.uniform(0, 1, (2, 8)))
+    E = pd.Series(rng.uniform(1, 3, 8), index=trials)
+    y = {"simulated-time": E.to_numpy() + rng.normal(0, 0.3, 8)}
+    with pytest.raises(InputError, match="no easy/hard pairs"):
+        draw_permutations("within-pair", 5, rng, trials)
+    summary, null = permutation_test(y, E, grid, 19, rng, trials=trials)
+    skipped = summary[summary["kind"] == "within-pair"].iloc[0]
+    assert skipped["calibration"].startswith("skipped: no easy/hard pairs")
+    assert np.isnan(skipped["p_value"]) and skipped["n_perm"] == 0
+    assert set(null["kind"]) == {"freedman-lane", "shuffle"}
+    ran = summary[summary["kind"] != "within-pair"]
+    assert ran["p_value"].between(1 / 20, 1).all() and (ran["n_perm"] == 19).all()
