@@ -39,6 +39,7 @@ from models.risk.mujoco_engine import SOLIMP, SOLREF, TIMESTEP, quiet_log
 from models.risk.engine import DENSITY
 from stimuli.mental_jenga import (FRICTION_A, LINEAR_DAMPING_A, PRESETTLE_STEPS_A, SETTLE_STEPS_A, STEP_A,
                                   JengaScene, time_scale)
+from lgp.errors import InputError
 
 NOISE_RULES = ("authors-x", "paper-3d", "authors-x:all", "paper-3d:all")
 #: Two bricks touch when the gap between their x-z outlines is at most this
@@ -250,7 +251,7 @@ class Perturbation:
         R, n = z.shape[0], world.n
         p = np.repeat(world.q_settled[None, :, :3], R, axis=0).copy()
         if rule not in NOISE_RULES:
-            raise ValueError(f"unknown noise rule {rule!r}; known rules: {', '.join(NOISE_RULES)}")
+            raise InputError(f"unknown noise rule {rule!r}; known rules: {', '.join(NOISE_RULES)}")
         rule, _, scope = rule.partition(":")
         m = self.movable if scope == "all" else self.above
         if rule == "authors-x":
@@ -264,7 +265,7 @@ class Perturbation:
             p[:, :, 1] += local[:, :, 1] * m
             p[:, :, 2] += (-s * local[:, :, 0] + c * local[:, :, 2]) * m
         else:
-            raise ValueError(f"unknown noise rule {rule!r}; known rules: {', '.join(NOISE_RULES)}")
+            raise InputError(f"unknown noise rule {rule!r}; known rules: {', '.join(NOISE_RULES)}")
         if sigma == 0:
             return p
         half = self.half

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from lgp import cli
+from lgp.errors import InputError
 
 PROG = "python -m stimuli.design"
 
@@ -61,7 +62,7 @@ def parse_args(argv=None):
     try:
         check_config(cfg)
         if args.studies < 1:
-            raise ValueError(f"--studies must be >= 1, got {args.studies}")
+            raise InputError(f"--studies must be >= 1, got {args.studies}")
     except ValueError as e:
         p.error(str(e))  # one line, exit 2, before anything is written
     return args, cfg

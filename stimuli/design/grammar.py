@@ -39,6 +39,7 @@ import numpy as np
 
 from lgp.paper import BLOCK_SIZE as d
 from lgp.paper import BUILD_SITE
+from lgp.errors import InputError
 
 KINDS = ("staircase", "zigzag", "bridge", "cantilever", "tee", "wall", "row", "pile", "arch", "precarious")
 STARTS = ("near", "far", "anywhere", "relocate", "partial")
@@ -188,7 +189,7 @@ def _structure(kind: str, rng: np.random.Generator, budget: int = MAX_BLOCKS) ->
         p = float(rng.uniform(0.25, 0.49)) * d
         cells = _col(0.0, 0.0, h - 1) + [(p, 0.0, h - 1)]
         return cells, f"column of {h - 1} with a top block {p / d:.2f} d over the edge", {"h": h, "top_offset": p / d}
-    raise ValueError(f"unknown structure kind {kind!r} (known: {', '.join(KINDS)})")
+    raise InputError(f"unknown structure kind {kind!r} (known: {', '.join(KINDS)})")
 
 
 def _blocks(cells, x0: float, y0: float, prefix: str) -> list[dict]:
@@ -230,7 +231,7 @@ def draw(index: int, seed: int, budget: int = MAX_BLOCKS, kinds=KINDS, starts=ST
             initial["scattered"] = {"count": rest, **scatter}
         what = f"{len(bottom)} of B's blocks in place, {rest} scattered"
     else:
-        raise ValueError(f"unknown start {start!r} (known: {', '.join(STARTS)})")
+        raise InputError(f"unknown start {start!r} (known: {', '.join(STARTS)})")
     tid = f"{prefix}{index + 1:05d}"
     data = {
         "id": tid,

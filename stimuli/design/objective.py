@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from lgp.errors import InputError
 
 #: The goal for |r| between risk and height, block count and effort (issue 34).
 TARGET_R = 0.3
@@ -75,7 +76,7 @@ def choose(df: pd.DataFrame, k: int, rng: np.random.Generator, effort: str = "ef
     """Positions (into `df`, sorted) of the k rows minimising the cost, and its terms."""
     n = len(df)
     if not 1 <= k <= n:
-        raise ValueError(f"cannot choose {k} trials from {n} candidates")
+        raise InputError(f"cannot choose {k} trials from {n} candidates")
     cols = columns(df, effort, risk)
     cost = lambda idx: terms(*(c[idx] for c in cols))["cost"]  # noqa: E731
     current = np.sort(rng.choice(n, k, replace=False))

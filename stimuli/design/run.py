@@ -70,19 +70,19 @@ def check_config(cfg: DesignConfig) -> None:
     """ValueError (one line, naming the flag) for a config no run can satisfy."""
     lo, hi = cfg.prior
     if not (0 < lo <= 1 and 0 < hi <= 1 and lo < hi):
-        raise ValueError(f"--sigma-prior {lo:g} {hi:g}: both ends must lie in (0, 1] (units of d), low < high")
+        raise InputError(f"--sigma-prior {lo:g} {hi:g}: both ends must lie in (0, 1] (units of d), low < high")
     if cfg.budget < 1:
-        raise ValueError(f"--budget {cfg.budget}: a trial needs at least 1 block")
+        raise InputError(f"--budget {cfg.budget}: a trial needs at least 1 block")
     if cfg.trials < 4:
-        raise ValueError(f"--pairs {cfg.trials // 2}: a design needs at least 2 pairs" if cfg.pairs
+        raise InputError(f"--pairs {cfg.trials // 2}: a design needs at least 2 pairs" if cfg.pairs
                          else f"--trials {cfg.trials}: a design needs at least 4 trials")
     if cfg.trials > cfg.candidates:
-        raise ValueError(f"--trials {cfg.trials} is more than the {cfg.candidates} candidates (--candidates)")
+        raise InputError(f"--trials {cfg.trials} is more than the {cfg.candidates} candidates (--candidates)")
     if cfg.n_finalists < cfg.trials:
-        raise ValueError(f"--finalists {cfg.n_finalists} is fewer than --trials {cfg.trials}")
+        raise InputError(f"--finalists {cfg.n_finalists} is fewer than --trials {cfg.trials}")
     for name in ("samples", "n_sims", "screen_runs", "candidates"):
         if getattr(cfg, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(cfg, name)}")
+            raise InputError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(cfg, name)}")
 
 
 def _screen_unit(unit) -> list:
