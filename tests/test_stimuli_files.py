@@ -2,7 +2,6 @@
 anchors/aliases and oversized files are refused, and a scatter region that cannot
 hold its blocks fails at once with the reason."""
 import re
-import time
 
 import numpy as np
 import pytest
@@ -48,10 +47,16 @@ def test_numbers_written_without_a_dot_still_read_as_numbers(tmp_path):
 def test_yaml_aliases_are_refused_before_they_expand(tmp_path):
     bomb = "a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
         f"{chr(98 + k)}: &{chr(98 + k)} [{', '.join(['*' + chr(97 + k)] * 10)}]\n" for k in range(8))
-    t0 = time.perf_counter()
-    with pytest.raises(StimulusError, match="line 1: YAML anchors and aliases"):
-        _load(tmp_path, bomb)
-    assert time.perf_counter() - t0 < 1.0
+    import tracemalloc
+
+    tracemalloc.start()  # expanded, the bomb holds 10^9 references: refused first, it costs a few kB
+    try:
+        with pytest.raises(StimulusError, match="line 1: YAML anchors and aliases"):
+            _load(tmp_path, bomb)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20e6, f"{peak / 1e6:.0f} MB"
     with pytest.raises(StimulusError, match="anchors and aliases"):
         _load(tmp_path, BASE.replace("x: [0.2, 0.55]", "x: &span [0.2, 0.55]"))
 
@@ -73,10 +78,12 @@ def _scatter(n, x, y, r_S=None, min_gap=0.01):
 
 def test_a_region_too_small_for_its_blocks_fails_at_once_with_the_areas():
     start = _scatter(100, (0.3, 0.4), (0.0, 0.1))
-    t0 = time.perf_counter()
+    class NoDraws:  # "at once": refused before a single position is drawn
+        def __getattr__(self, name):
+            raise AssertionError(f"drew from the generator ({name}) before refusing")
+
     with pytest.raises(StimulusError, match=r"cannot scatter 100 blocks .* need at least .* m\^2 .* at most .* m\^2 \(too small\)"):
-        start.sample(np.random.default_rng(0))
-    assert time.perf_counter() - t0 < 0.1
+        start.sample(NoDraws())
 
 
 def test_the_area_bound_never_refuses_a_region_that_can_hold_its_blocks():
@@ -92,11 +99,9 @@ def test_a_huge_region_is_refused_at_once():
         _scatter(3, (-1e300, 1e300), (-1e300, 1e300)).sample(np.random.default_rng(0))
 
 
-def test_scattering_500_blocks_is_quick_and_obeys_the_gap():
+def test_scattering_500_blocks_obeys_the_gap():
     start = _scatter(500, (-1.0, 1.0), (-1.0, 1.0))
-    t0 = time.perf_counter()
-    scene = start.sample(np.random.default_rng(1))
-    assert time.perf_counter() - t0 < 5.0
+    scene = start.sample(np.random.default_rng(1))  # no time bound here: the machines are shared
     from lgp.scene import horizontal_penetration, near_pairs
     from lgp.scene import Block
 
