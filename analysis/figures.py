@@ -26,7 +26,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from analysis.data import PAIRS, TRIAL_IDS, is_simulated_dataset, ordered_datasets
+from analysis.data import is_simulated_dataset, ordered_datasets
+from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
 from analysis.models import MODEL_LABELS, MODELS, effort_per_trial, full_model_cost, risk_at_sigma
 from analysis.pairs import PAPER_NO_DIFFERENCE, TIE_REL, pair_table
 
@@ -72,17 +73,17 @@ def plot_trial_means(means: pd.DataFrame, predictions: pd.DataFrame, out_dir: st
     axes = fig.subplots(len(datasets), 1, squeeze=False)[:, 0]
     x = _trial_x()
     for ax, dataset in zip(axes, datasets):
-        m = means[means["dataset"] == dataset].set_index("trial").reindex(list(TRIAL_IDS))
+        m = means[means["dataset"] == dataset].set_index("trial").reindex(list(trial_ids()))
         p = predictions[(predictions["dataset"] == dataset) & (predictions["model"] == model)]
-        p = p.set_index("trial").reindex(list(TRIAL_IDS))
+        p = p.set_index("trial").reindex(list(trial_ids()))
         sigma = p["sigma"].iloc[0] if "sigma" in p and len(p) else np.nan
         r = np.corrcoef(p["predicted"], m["mean_z"])[0, 1]
-        for k, pair in enumerate(PAIRS):
+        for k, pair in enumerate(pair_numbers()):
             sl = slice(2 * k, 2 * k + 2)
             ax.plot(x[sl], m["mean_z"].to_numpy()[sl], "-", color="0.45", lw=1.2, zorder=1)
             ax.plot(x[sl] + 0.18, p["predicted"].to_numpy()[sl], ":", color="0.2", lw=1.2, zorder=1)
         for level, colour in (("E", EASY_COLOUR), ("H", HARD_COLOUR)):
-            idx = [i for i, t in enumerate(TRIAL_IDS) if t.endswith(level)]
+            idx = [i for i, t in enumerate(trial_ids()) if t.endswith(level)]
             mm = m["mean_z"].to_numpy()[idx]
             err = np.vstack([mm - m["ci_low"].to_numpy()[idx], m["ci_high"].to_numpy()[idx] - mm])
             ax.errorbar(x[idx], mm, yerr=err, fmt="o", ms=7, color=colour, ecolor=colour,
@@ -90,7 +91,7 @@ def plot_trial_means(means: pd.DataFrame, predictions: pd.DataFrame, out_dir: st
             ax.plot(x[idx] + 0.18, p["predicted"].to_numpy()[idx], "o", ms=3.5, color=colour,
                     markeredgecolor="black", markeredgewidth=0.4, zorder=4)
         ax.axhline(0, color="0.85", lw=0.8, zorder=0)
-        ax.set_xticks(x, list(TRIAL_IDS), fontsize=8)
+        ax.set_xticks(x, list(trial_ids()), fontsize=8)
         ax.set_xlim(x[0] - 0.7, x[-1] + 0.9)
         ax.set_ylabel("mean z-score")
         ax.set_title(f"{dataset_label(dataset)}: {MODEL_LABELS.get(model, model)} model, "
@@ -198,7 +199,7 @@ def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
     fig = Figure(figsize=(9, 2.5 * len(panels) + 0.6), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(len(panels), 1, squeeze=False, sharex=True)[:, 0]
-    pairs = np.array(PAIRS, dtype=float)
+    pairs = np.array(pair_numbers(), dtype=float)
     for ax, (label, ylabel, values) in zip(axes, panels):
         table = pair_table(values)
         for k, row in table.iterrows():
@@ -218,7 +219,7 @@ def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
             if found:
                 notes.append(f"{word}: {', '.join(map(str, found))}")
         rest = f"; {'; '.join(notes)}" if notes else ""
-        ax.set_title(f"{label}: E < H in {n_ok}/{len(PAIRS)} pairs{rest}", fontsize=9)
+        ax.set_title(f"{label}: E < H in {n_ok}/{len(pair_numbers())} pairs{rest}", fontsize=9)
         ax.set_ylabel(ylabel, fontsize=9)
     from matplotlib.patches import Patch
 
@@ -230,7 +231,7 @@ def plot_effort_risk(effort_by_trial, risk_table: pd.DataFrame, sigma: float,
     fig.legend(handles=handles, fontsize=7.5, frameon=False, loc="outside lower center", ncols=2)
     import textwrap
 
-    labels = [f"{p}\n" + "\n".join(textwrap.wrap(str(names[p]), 11)) if names and p in names else str(p) for p in PAIRS]
+    labels = [f"{p}\n" + "\n".join(textwrap.wrap(str(names[p]), 11)) if names and p in names else str(p) for p in pair_numbers()]
     axes[-1].set_xticks(pairs, labels, fontsize=6.5 if names else None)
     axes[-1].set_xlabel(f"pair (tie: |H - E| <= {TIE_REL:g} x max(E, H))")
     from_fits = list(betas) if isinstance(betas, Mapping) else []
@@ -271,7 +272,7 @@ def plot_participant_sigma(table: pd.DataFrame, out_dir: str | Path,
 
 def _trial_x() -> np.ndarray:
     """x positions of the 24 trials: E and H of a pair 1 apart, pairs 2.6 apart."""
-    return np.array([2.6 * (int(t[:-1]) - 1) + (t[-1] == "H") for t in TRIAL_IDS], dtype=float)
+    return np.array([2.6 * (int(t[:-1]) - 1) + (t[-1] == "H") for t in trial_ids()], dtype=float)
 
 
 def _fit_title(fig: Figure, title: str, **style) -> None:

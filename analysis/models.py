@@ -24,7 +24,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from analysis.data import TRIAL_IDS
+from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
 from analysis.spec import RISK_BASES, ModelSpec, ModelSpecError
 
 #: Model names used in every table: Eq. 1, effort-only, risk-only.
@@ -70,7 +70,7 @@ class ModelFit:
 
 
 def effort_per_trial(effort: pd.Series | pd.DataFrame) -> pd.Series:
-    """Effort per trial as a Series named ``effort`` indexed by TRIAL_IDS.
+    """Effort per trial as a Series named ``effort`` indexed by trial_ids().
 
     A DataFrame with columns trial, effort (and e.g. sample) is averaged over the
     rows of each trial. Raises ModelInputError naming the trial for a missing or
@@ -102,7 +102,7 @@ def risk_sigmas(risk_table: pd.DataFrame) -> np.ndarray:
 
 
 def risk_at_sigma(risk_table: pd.DataFrame, sigma: float) -> pd.Series:
-    """Risk per trial at one sigma, as a Series named ``risk`` indexed by TRIAL_IDS.
+    """Risk per trial at one sigma, as a Series named ``risk`` indexed by trial_ids().
 
     Raises ModelInputError if no row has this sigma, a trial is missing or
     repeated at this sigma, or a risk is not a probability.
@@ -150,7 +150,7 @@ def split_model(model: "str | ModelSpec") -> tuple[str, str | None]:
 
 
 def measure_at_sigma(build_table: pd.DataFrame, sigma: float, measure: str) -> pd.Series:
-    """One build-risk aggregate per trial at one sigma, a Series indexed by TRIAL_IDS.
+    """One build-risk aggregate per trial at one sigma, a Series indexed by trial_ids().
 
     `build_table` has columns trial, sigma, measure, risk (models.risk.build's
     `measure_table`). Raises ModelInputError naming the measure, sigma and trial
@@ -180,10 +180,10 @@ def measure_at_sigma(build_table: pd.DataFrame, sigma: float, measure: str) -> p
 
 
 def risk_inputs(R: pd.Series, build_table: pd.DataFrame | None = None, sigma: float | None = None) -> pd.DataFrame:
-    """The risks the models read, one column per source, indexed by TRIAL_IDS:
+    """The risks the models read, one column per source, indexed by trial_ids():
     ``R`` (used by full and risk) and one column per build-risk measure (used by
     ``full[measure]`` and ``risk[measure]``) when `build_table` is given."""
-    out = pd.DataFrame({"R": R.reindex(list(TRIAL_IDS))})
+    out = pd.DataFrame({"R": R.reindex(list(trial_ids()))})
     if build_table is not None:
         for m in RISK_MEASURES:
             out[m] = measure_at_sigma(build_table, sigma, m)
@@ -192,7 +192,7 @@ def risk_inputs(R: pd.Series, build_table: pd.DataFrame | None = None, sigma: fl
 
 def design_matrix(model: str, effort: pd.Series, risk: pd.Series | pd.DataFrame | None = None,
                   features: pd.DataFrame | None = None) -> np.ndarray:
-    """The (24, p) regressor matrix of `model`, rows in TRIAL_IDS order, first
+    """The (24, p) regressor matrix of `model`, rows in trial_ids() order, first
     column the intercept. `risk` is a per-trial Series, or a DataFrame from
     `risk_inputs` (column R for full and risk, column m for full[m] and risk[m]);
     `features` the heuristic predictors (analysis.heuristics.trial_features,
@@ -201,7 +201,7 @@ def design_matrix(model: str, effort: pd.Series, risk: pd.Series | pd.DataFrame 
     model, measure = spec.base, spec.risk
     if spec.feature is not None:
         h = feature_vector(features, spec.feature)
-        E = effort.reindex(list(TRIAL_IDS)).to_numpy(dtype=float)
+        E = effort.reindex(list(trial_ids())).to_numpy(dtype=float)
         ones = np.ones_like(h)
         return np.column_stack([ones, E, h]) if spec.reads_effort else np.column_stack([ones, h])
     if isinstance(risk, pd.DataFrame):
@@ -212,13 +212,13 @@ def design_matrix(model: str, effort: pd.Series, risk: pd.Series | pd.DataFrame 
         risk = risk[column]
     elif measure is not None:
         raise ModelInputError(f"model {model}[{measure}] needs the build-risk aggregates (risk_inputs)")
-    E = effort.reindex(list(TRIAL_IDS)).to_numpy(dtype=float)
+    E = effort.reindex(list(trial_ids())).to_numpy(dtype=float)
     ones = np.ones_like(E)
     if model == "effort":
         return np.column_stack([ones, E])
     if risk is None:
         raise ModelInputError(f"model {model!r} needs risk per trial")
-    R = risk.reindex(list(TRIAL_IDS)).to_numpy(dtype=float)
+    R = risk.reindex(list(trial_ids())).to_numpy(dtype=float)
     if model == "full":
         return np.column_stack([ones, E * (1 - R), E * R])  # Eq. 1 of the paper
     if model == "risk":
@@ -226,9 +226,10 @@ def design_matrix(model: str, effort: pd.Series, risk: pd.Series | pd.DataFrame 
     raise ModelInputError(f"unknown model {model!r}; expected one of {', '.join(MODELS)}")
 
 
-def feature_vector(features: pd.DataFrame | None, feature: str, trials: Sequence[str] = TRIAL_IDS) -> np.ndarray:
+def feature_vector(features: pd.DataFrame | None, feature: str, trials: Sequence[str] | None = None) -> np.ndarray:
     """One heuristic predictor in `trials` order from a features table (indexed by
     trial, or with a column trial). ModelInputError names a missing feature or trial."""
+    trials = trial_ids() if trials is None else trials
     if features is None:
         raise ModelInputError(f"model needs the heuristic predictor {feature!r} per trial "
                               "(analysis.heuristics.trial_features)")
@@ -249,7 +250,7 @@ def fit_model(model: str, y: pd.Series | Sequence[float], effort: pd.Series | pd
               risk: pd.Series | None = None, features: pd.DataFrame | None = None) -> ModelFit:
     """Least-squares fit of `model` ('full', 'effort' or 'risk') to trial means `y`.
 
-    `y` is a Series indexed by trial id or 24 values in TRIAL_IDS order; `effort`
+    `y` is a Series indexed by trial id or 24 values in trial_ids() order; `effort`
     anything `effort_per_trial` accepts; `risk` a per-trial Series (see
     `risk_at_sigma`). Solved with numpy.linalg.lstsq, so a rank-deficient design
     (e.g. the same risk on every trial) gives the minimum-norm coefficients and
@@ -263,7 +264,7 @@ def fit_model(model: str, y: pd.Series | Sequence[float], effort: pd.Series | pd
     return ModelFit(
         model=model,
         coefficients=tuple(float(b) for b in beta),
-        predictions=pd.Series(pred, index=list(TRIAL_IDS), name="predicted"),
+        predictions=pd.Series(pred, index=list(trial_ids()), name="predicted"),
         rmse=float(np.sqrt(np.mean((y_vec - pred) ** 2))),
         r=pearson_r(pred, y_vec, what=f"{model} model"),
     )
@@ -293,8 +294,8 @@ def fit_models(means: pd.DataFrame, effort: pd.Series | pd.DataFrame,
         for model in models:
             fit = fit_model(model, y, E, R, features)
             b = list(fit.coefficients) + [np.nan] * (3 - len(fit.coefficients))
-            fit_rows.append((dataset, model, s, *b, fit.rmse, fit.r, len(TRIAL_IDS)))
-            for trial, obs, pred in zip(TRIAL_IDS, y_vec, fit.predictions.to_numpy()):
+            fit_rows.append((dataset, model, s, *b, fit.rmse, fit.r, len(trial_ids())))
+            for trial, obs, pred in zip(trial_ids(), y_vec, fit.predictions.to_numpy()):
                 pred_rows.append((dataset, model, s, trial, obs, pred))
     fits = pd.DataFrame(fit_rows, columns=["dataset", "model", "sigma", "b0", "b1", "b2",
                                            "rmse", "r", "n_trials"])
@@ -308,7 +309,7 @@ def full_model_cost(effort: pd.Series | pd.DataFrame, risk: pd.Series,
     """Eq. 1 evaluated with given (b0, b1, b2): the model's cost per trial."""
     b0, b1, b2 = betas
     E = effort_per_trial(effort)
-    R = risk.reindex(list(TRIAL_IDS))
+    R = risk.reindex(list(trial_ids()))
     return (b0 + b1 * E * (1 - R) + b2 * E * R).rename("cost")
 
 
@@ -356,9 +357,9 @@ def _trial_vector(y) -> np.ndarray:
                              "trial means", nonnegative=False)
         return y.to_numpy()
     y = np.asarray(y, dtype=float)
-    if y.shape != (len(TRIAL_IDS),):
-        raise ModelInputError(f"expected {len(TRIAL_IDS)} trial means in order "
-                              f"{TRIAL_IDS[0]}..{TRIAL_IDS[-1]}, got shape {y.shape}")
+    if y.shape != (len(trial_ids()),):
+        raise ModelInputError(f"expected {len(trial_ids())} trial means in order "
+                              f"{trial_ids()[0]}..{trial_ids()[-1]}, got shape {y.shape}")
     return y
 
 
@@ -370,16 +371,16 @@ def _check_risk_columns(risk_table: pd.DataFrame) -> None:
 
 
 def _check_per_trial(series: pd.Series, what: str, nonnegative: bool) -> pd.Series:
-    unknown = [t for t in series.index if t not in TRIAL_IDS]
+    unknown = [t for t in series.index if t not in trial_ids()]
     if unknown:
         raise ModelInputError(f"{what}: unknown trial id {unknown[0]!r}; expected 1E, 1H, ..., 12H")
     if series.index.duplicated().any():
         raise ModelInputError(f"{what}: trial {series.index[series.index.duplicated()][0]} "
                               "appears more than once")
-    missing = [t for t in TRIAL_IDS if t not in series.index]
+    missing = [t for t in trial_ids() if t not in series.index]
     if missing:
         raise ModelInputError(f"{what}: missing trial(s) {', '.join(missing)}")
-    series = series.reindex(list(TRIAL_IDS)).astype(float)
+    series = series.reindex(list(trial_ids())).astype(float)
     bad = series[~np.isfinite(series.to_numpy())]
     if len(bad):
         raise ModelInputError(f"{what} of trial {bad.index[0]} is {bad.iloc[0]!r}, "

@@ -10,7 +10,7 @@ from typing import Mapping
 import numpy as np
 import pandas as pd
 
-from analysis.data import PAIRS, TRIAL_IDS
+from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
 from analysis.models import SIGMA_ATOL, ModelInputError, risk_at_sigma
 
 #: The one tie rule of every pair table, report line and figure: E and H are tied
@@ -59,17 +59,17 @@ def pair_table(cost: pd.Series | Mapping[str, float], tie_rel: float = TIE_REL) 
     """
     series = pd.Series(cost, dtype=float)
     series.index = [str(t).strip().upper() for t in series.index]
-    missing = [t for t in TRIAL_IDS if t not in series.index]
+    missing = [t for t in trial_ids() if t not in series.index]
     if missing:
         raise ModelInputError(f"pair table: cost is missing trial(s) {', '.join(missing)}")
-    bad = [t for t in TRIAL_IDS if not np.isfinite(series[t])]
+    bad = [t for t in trial_ids() if not np.isfinite(series[t])]
     if bad:
         raise ModelInputError(f"pair table: cost of trial {bad[0]} is {series[bad[0]]!r}, "
                               "not a finite number")
-    easy = np.array([series[f"{p}E"] for p in PAIRS])
-    hard = np.array([series[f"{p}H"] for p in PAIRS])
+    easy = np.array([series[f"{p}E"] for p in pair_numbers()])
+    hard = np.array([series[f"{p}H"] for p in pair_numbers()])
     order = [pair_order(e, h, tie_rel) for e, h in zip(easy, hard)]
-    return pd.DataFrame({"pair": list(PAIRS), "cost_E": easy, "cost_H": hard, "order": order,
+    return pd.DataFrame({"pair": list(pair_numbers()), "cost_E": easy, "cost_H": hard, "order": order,
                          "E_lt_H": [o == "E<H" for o in order]})
 
 
@@ -78,7 +78,7 @@ def pair_table(cost: pd.Series | Mapping[str, float], tie_rel: float = TIE_REL) 
 #: Pairs the paper's fitted full model ordered E < H ("correct rank order ... in all
 #: of the pairs. The only exception is the pair 11E and 11H, where humans did not show
 #: any difference"; Results, Figure 3).
-PAPER_ORDERED: dict[int, bool] = {pair: pair != 11 for pair in PAIRS}
+PAPER_ORDERED: dict[int, bool] = {pair: pair != 11 for pair in pair_numbers()}
 
 
 @dataclass(frozen=True)

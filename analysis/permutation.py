@@ -37,7 +37,8 @@ import numpy as np
 import pandas as pd
 
 from analysis.crossval import STRUCTURE_SCHEME, RiskGrid, cross_validate, grouping_label, pairs_of, scores, structure_groups
-from analysis.data import TRIAL_IDS, ordered_datasets
+from analysis.data import ordered_datasets
+from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
 from analysis.models import effort_per_trial
 from lgp.errors import InputError
 
@@ -61,10 +62,11 @@ def check_count(value, what: str) -> int:
     return int(value)
 
 
-def draw_permutations(kind: str, n_perm: int, rng: np.random.Generator, trials=TRIAL_IDS) -> np.ndarray:
+def draw_permutations(kind: str, n_perm: int, rng: np.random.Generator, trials=None) -> np.ndarray:
     """(n_perm, T) trial index permutations: ``shuffle`` and ``freedman-lane`` draw
     ``rng.permuted`` of every row (of risks, of residuals); ``within-pair``
     ``rng.random((n_perm, pairs)) < 0.5`` swaps."""
+    trials = trial_ids() if trials is None else trials
     n_perm = check_count(n_perm, "the number of permutations")
     T = len(trials)
     base = np.tile(np.arange(T), (n_perm, 1))
@@ -82,20 +84,22 @@ def draw_permutations(kind: str, n_perm: int, rng: np.random.Generator, trials=T
     raise InputError(f"unknown permutation kind {kind!r}; expected one of {', '.join(KINDS)}")
 
 
-def skip_reason(kind: str, trials=TRIAL_IDS) -> str | None:
+def skip_reason(kind: str, trials=None) -> str | None:
     """Why the null of `kind` cannot be drawn on `trials`, or None: the within-pair
     null swaps the risks of each pair's easy and hard trial, so it needs at least
     one pair (nE and nH both among the trials)."""
+    trials = trial_ids() if trials is None else trials
     if kind == "within-pair" and not pairs_of(list(trials)):
         return ("skipped: no easy/hard pairs (nE and nH both) among the trials "
                 f"{', '.join(map(str, trials))}; the within-pair null swaps risks within pairs")
     return None
 
 
-def distinct_assignments(kind: str, risk: np.ndarray, trials=TRIAL_IDS) -> float:
+def distinct_assignments(kind: str, risk: np.ndarray, trials=None) -> float:
     """Number of distinct risk tables (S, T) a permutation of `kind` can produce:
     shuffle T! / prod(m!) over groups of trials with identical risk curves (a
     float; may be huge); within-pair 2^k, k the pairs whose E and H curves differ."""
+    trials = trial_ids() if trials is None else trials
     from math import lgamma
 
     if kind == "freedman-lane":
@@ -109,10 +113,11 @@ def distinct_assignments(kind: str, risk: np.ndarray, trials=TRIAL_IDS) -> float
 
 
 def cv_gain(Y: np.ndarray, E: np.ndarray, risk: np.ndarray, scheme: str = SCHEME, pool: bool = True,
-            groups=None, trials=TRIAL_IDS) -> np.ndarray:
+            groups=None, trials=None) -> np.ndarray:
     """Cross-validated RMSE of effort-only minus Eq. 1's: Y (B, D, T), risk
     (S, T) or (B, S, T); returns (B, D). `groups` the structure groups (default:
     from `risk` when it is one (S, T) table)."""
+    trials = trial_ids() if trials is None else trials
     if scheme == STRUCTURE_SCHEME and groups is None:
         groups = structure_groups(trials, np.asarray(risk))
     preds, _, _ = cross_validate(Y, E, {"R": risk}, ["full", "effort"], scheme, pool=pool, groups=groups,
@@ -123,7 +128,7 @@ def cv_gain(Y: np.ndarray, E: np.ndarray, risk: np.ndarray, scheme: str = SCHEME
 def _effort(effort, trials) -> np.ndarray:
     """Effort in `trials` order: the paper's 24 through models.effort_per_trial (its
     checks); another trial set from a Series indexed by trial id or T values in order."""
-    if trials == list(TRIAL_IDS):
+    if trials == list(trial_ids()):
         return effort_per_trial(effort).to_numpy()
     if isinstance(effort, pd.Series):
         missing = [t for t in trials if t not in effort.index]
@@ -138,7 +143,7 @@ def _effort(effort, trials) -> np.ndarray:
 
 def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_perm: int = N_PERM,
                      rng: np.random.Generator | None = None, kinds=KINDS, scheme: str = SCHEME, groups=None,
-                     trials=TRIAL_IDS) -> tuple[pd.DataFrame, pd.DataFrame]:
+                     trials=None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The permutation tests of `kinds` (module docstring) on the full-sample trial means.
 
     `means` {dataset: (24,)}; `grid` the risk over sigma (crossval.risk_grid).
@@ -156,6 +161,7 @@ def permutation_test(means: Mapping[str, np.ndarray], effort, grid: RiskGrid, n_
     cannot be drawn on them (`skip_reason`: within-pair without pairs) gets one
     row per dataset with its reason in ``calibration``, NaN numbers and no null.
     """
+    trials = trial_ids() if trials is None else trials
     n_perm = check_count(n_perm, "the number of permutations")
     rng = np.random.default_rng(0) if rng is None else rng
     trials = list(trials)

@@ -10,15 +10,16 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.crossval import (RISK_DRAW_STREAM, RISK_DRAWS, SCHEMES, STRUCTURE_SCHEME, bootstrap_comparison, comparison_tests,
+from analysis.crossval import (MIN_PAIRS, RISK_DRAW_STREAM, RISK_DRAWS, SCHEMES, STRUCTURE_SCHEME, bootstrap_comparison, comparison_tests,
                                gain_over_effort, grouping_label, held_out_tests, measure_grid, model_comparison, redraw_risk,
                                risk_grid, structure_groups, summarize_comparison)
 from analysis.spec import HEURISTIC_MODELS
 from analysis.permutation import N_PERM, PERMUTATION_STREAM, check_count, permutation_test
 from analysis.bootstrap import COMPARISONS, bootstrap_model_correlations, bootstrap_tests, summarize_bootstrap
-from analysis.data import (TRIAL_IDS, exclude_constant_participants, is_simulated, load_human_data, ordered_datasets,
+from analysis.data import (exclude_constant_participants, is_simulated, load_human_data, ordered_datasets,
                            resample_trial_means, trial_mean_intervals, validate_human_data,
                            zscore_responses)
+from analysis.data.trialset import pair_numbers, trial_ids, using_trials
 from analysis.figures import (plot_effort_risk, plot_model_comparison, plot_model_correlations, plot_sigma_profile,
                               plot_trial_means)
 from analysis.models import (MEASURE_BASES, MODELS, RISK_MEASURES, effort_per_trial, fit_models,
@@ -34,7 +35,7 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
                  sigmas=None, figures: bool = True, build_risk: pd.DataFrame | None = None,
                  risk_measure: str | None = None, compare: bool = True, n_perm: int = N_PERM,
                  risk_draw: str = "binomial", pair_names: dict | None = None,
-                 features: pd.DataFrame | None = None, same=()) -> dict[str, pd.DataFrame]:
+                 features: pd.DataFrame | None = None, same=(), trials=None) -> dict[str, pd.DataFrame]:
     """Run the paper's analysis and write tidy CSVs and figures into `out_dir`.
 
     Parameters
@@ -104,8 +105,20 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     biased), model_comparison_held_out_tests (sign-flip over folds, calibrated),
     cv_predictions, cv_bootstrap, permutation_test and permutation_null; plus
     files (kind, path) listing everything written.
+
+    trials : the trial ids of the run (default the paper's 24; analysis.data.trialset).
+        The human data must name exactly these. Pair tables (orderings), the
+        within-pair permutation null, leave-one-pair-out folds and the pair
+        figures need easy/hard pairs (nE and nH both; MIN_PAIRS for the folds):
+        on a set without them they are left out and the table ``skipped`` (what,
+        reason) says why; the paper's set never has this table.
     """
+    if trials is not None and tuple(str(t).strip().upper() for t in trials) != trial_ids():
+        args = {k: v for k, v in locals().items() if k != "trials"}
+        with using_trials(trials):
+            return run_analysis(**args)
     out_dir = Path(out_dir)
+    skipped = _skipped(compare)
     check_count(n_boot, "the number of bootstrap resamples")
     check_count(n_perm, "the number of permutations")
     if risk_draw not in RISK_DRAWS:
@@ -123,12 +136,15 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         else:
             rule = "given by caller"
         R = risk_at_sigma(risk_table, sigma)
-        results["orderings"] = _model_pairs(E, R)
+        if pair_numbers():
+            results["orderings"] = _model_pairs(E, R)
         results["settings"] = pd.DataFrame([{
             "human_data": False, "simulated": False, "seed": seed, "n_boot": 0, "jobs": jobs,
             "sigma": sigma, "sigma_rule": rule}])
-        if figures:
+        if figures and pair_numbers():
             figure_paths += plot_effort_risk(E, risk_table, sigma, out_dir, names=pair_names)
+        if skipped is not None:
+            results["skipped"] = skipped
         return _write(results, out_dir, "", figure_paths)
 
     if isinstance(human_df, (str, Path)):
@@ -203,6 +219,8 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         "bootstrap_tests": bootstrap_tests(boot, fits, comparisons),
         "orderings": _tidy_pairs(pd.concat(pairs, ignore_index=True)),
     })
+    if not pair_numbers():
+        del results["orderings"]
     for key in ("fits", "bootstrap_summary", "bootstrap_tests"):
         results[key] = results[key].assign(scheme="in-sample")
     if compare:
@@ -219,15 +237,16 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
             from analysis.spec import FEATURES
 
             feats = {f: feature_vector(features, f) for f in FEATURES}
-        groups = structure_groups(TRIAL_IDS, source_R.risk, same)
+        groups = structure_groups(trial_ids(), source_R.risk, same)
         results.update(_comparison(means, boot_means, E, grids, models, comparisons, in_sample, seed, n_perm, draw,
                                    feats, groups))
         results["settings"] = results["settings"].assign(
             n_perm=n_perm, risk_draw=draw, cv_sigma_rule="chosen inside each fold: least mean training RMSE of Eq. 1",
-            folds_by_structure=grouping_label(groups, TRIAL_IDS))
+            folds_by_structure=grouping_label(groups, trial_ids()))
     if figures:
         full = fits[fits["model"] == "full"].set_index("dataset")[["b0", "b1", "b2"]]
-        figure_paths += plot_trial_means(means, predictions, out_dir, stem=f"{prefix}fig3_trial_means")
+        if pair_numbers():
+            figure_paths += plot_trial_means(means, predictions, out_dir, stem=f"{prefix}fig3_trial_means")
         figure_paths += plot_model_correlations(results["bootstrap_summary"], out_dir,
                                                 stem=f"{prefix}fig4_model_correlations")
         figure_paths += plot_sigma_profile(profile, out_dir, choice, stem=f"{prefix}sigma_profile")
@@ -235,11 +254,31 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
             figure_paths += plot_model_comparison(results["model_comparison"], out_dir,
                                                   stem=f"{prefix}fig4_model_comparison",
                                                   gain=results["model_comparison_gain"])
-        figure_paths += plot_effort_risk(
-            E, risk_table, sigma, out_dir,
-            betas={d: tuple(full.loc[d]) for d in ordered_datasets(full.index)},  # the paper's order, as every figure
-            stem=f"{prefix}effort_risk_pairs", names=pair_names)
+        if pair_numbers():
+            figure_paths += plot_effort_risk(
+                E, risk_table, sigma, out_dir,
+                betas={d: tuple(full.loc[d]) for d in ordered_datasets(full.index)},  # the paper's order, as every figure
+                stem=f"{prefix}effort_risk_pairs", names=pair_names)
+    if skipped is not None:
+        results["skipped"] = skipped
     return _write(results, out_dir, prefix, figure_paths)
+
+
+def _skipped(compare: bool) -> pd.DataFrame | None:
+    """What the run's trial set cannot have, and why (None for a set with all of it,
+    e.g. the paper's 24): pair tables and pair figures without pairs, the
+    within-pair null without pairs, leave-one-pair-out with fewer than MIN_PAIRS."""
+    pairs = pair_numbers()
+    rows = []
+    if not pairs:
+        why = (f"the {len(trial_ids())} trials hold no easy/hard pair (nE and nH both)")
+        rows += [("orderings (pair tables)", why), ("figures fig3_trial_means and effort_risk_pairs", why)]
+        if compare:
+            rows.append(("permutation null within-pair", why))
+    if compare and len(pairs) < MIN_PAIRS:
+        rows.append(("leave-one-pair-out cross-validation",
+                     f"needs at least {MIN_PAIRS} easy/hard pairs; the {len(trial_ids())} trials hold {len(pairs)}"))
+    return pd.DataFrame(rows, columns=["what", "reason"]) if rows else None
 
 
 def _comparison(means: pd.DataFrame, boot_means, E: pd.Series, grids, models, comparisons, in_sample, seed: int,
@@ -248,9 +287,10 @@ def _comparison(means: pd.DataFrame, boot_means, E: pd.Series, grids, models, co
     analysis.permutation) on the same participant resamples as the in-sample
     bootstrap. Risk redraws and permutations come from their own streams,
     ``default_rng([seed, RISK_DRAW_STREAM])`` and ``default_rng([seed, PERMUTATION_STREAM])``."""
-    y = {d: g.set_index("trial")["mean_z"].reindex(list(TRIAL_IDS)).to_numpy()
+    y = {d: g.set_index("trial")["mean_z"].reindex(list(trial_ids())).to_numpy()
          for d, g in means.groupby("dataset", sort=False)}
-    schemes = SCHEMES + (STRUCTURE_SCHEME,)
+    schemes = tuple(s for s in SCHEMES if s != "leave-one-pair-out" or len(pair_numbers()) >= MIN_PAIRS) \
+        + (STRUCTURE_SCHEME,)
     kw = {"features": features, "groups": groups}
     point, cv_pred = model_comparison(y, E, grids, models, schemes, in_sample, **kw)
     fixed = bootstrap_comparison(boot_means, E, grids, models, schemes, in_sample, **kw)

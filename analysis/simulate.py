@@ -14,7 +14,8 @@ from typing import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from analysis.data import DATASETS, SIMULATED_PREFIX, TRIAL_IDS, is_simulated_dataset
+from analysis.data import DATASETS, SIMULATED_PREFIX, is_simulated_dataset
+from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
 from analysis.models import full_model_cost, risk_at_sigma
 from lgp.errors import InputError
 
@@ -54,12 +55,12 @@ def simulate_participants(effort, risk_by_sigma: pd.DataFrame,
         y = full_model_cost(effort, R, b).to_numpy()
         scale = np.exp(scale_log_sd * rng.standard_normal(n))
         offset = offset_sd * rng.standard_normal(n)
-        noise = noise_sd * rng.standard_normal((n, len(TRIAL_IDS)))
+        noise = noise_sd * rng.standard_normal((n, len(trial_ids())))
         responses = offset[:, None] + scale[:, None] * (y[None, :] + noise)
         frames.append(pd.DataFrame({
             "dataset": SIMULATED_PREFIX + dataset,
-            "participant": np.repeat([f"sim-{k + 1:03d}" for k in range(n)], len(TRIAL_IDS)),
-            "trial": np.tile(list(TRIAL_IDS), n),
+            "participant": np.repeat([f"sim-{k + 1:03d}" for k in range(n)], len(trial_ids())),
+            "trial": np.tile(list(trial_ids()), n),
             "response": responses.reshape(-1),
         }))
     return pd.concat(frames, ignore_index=True)

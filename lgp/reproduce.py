@@ -117,7 +117,8 @@ def parse_args(argv=None) -> RunConfig:
                         "and reported beside this run's, with the pair table at it (docs/mental-jenga.md)")
     p.add_argument("--seed", type=cli.seed, default=D("seed"))
     p.add_argument("--n-boot", type=cli.bounded_count("MAX_N_BOOT"), help=f"bootstrap resamples (default {D('n_boot')}; --quick {QUICK['n_boot']})")
-    p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md); needs the paper's 24 trials")
+    p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md) naming exactly the run's trials (the paper's 24, "
+                        "or every trial of --stimuli DIR)")
     p.add_argument("--max-participants", type=cli.positive_int, default=None,
                    help=f"with --human-data: most participants the file may hold (default {D('max_participants')}; memory grows with "
                         "participants x bootstrap resamples, docs/human-data.md)")
@@ -232,9 +233,17 @@ def run(args: RunConfig, argv=None) -> int:
     if args.human_data:
         from analysis import load_human_data
 
-        human = load_human_data(args.human_data, max_participants=args.max_participants, allow_simulated=args.allow_simulated)
-        if not {t.id for t in trials} >= set(TRIAL_IDS):
-            raise InputError("--human-data needs the paper's 24 trials (the fits compare the 12 pairs); drop --trials")
+        from analysis.data import using_trials
+
+        # The data must name exactly the analysis's trials: the paper's 24 when the run has them all
+        # (as before), else every trial of the run (a --stimuli folder of stimuli.design or stimuli.generate).
+        ids = _analysis_ids(trials)
+        with using_trials(ids):
+            human = load_human_data(args.human_data, max_participants=args.max_participants,
+                                    allow_simulated=args.allow_simulated)
+        if len(ids) < MIN_ANALYSIS_TRIALS:
+            raise InputError(f"--human-data: the fits of Eq. 1 (3 parameters, held-out folds) need at least "
+                             f"{MIN_ANALYSIS_TRIALS} trials; this run has {len(ids)} ({', '.join(ids)})")
     out = Path(args.out)
     check_output_folder(out, args.into_existing)  # a folder of foreign files: refused now, before any work
     created = _missing_folders(out)
@@ -411,7 +420,22 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
             written.append(write_csv_atomic(pairs_csv_table(pairs), out / "pairs.csv"))
         if args.recovery:
             _log("--recovery simulates studies of the paper's 24 trials; not all are in this run, so it is skipped")
-        _log("not all of the paper's 24 trials: no figures or fits (they need all 24); "
+        if human is not None:  # the fits on the run's own trials (analysis.data.trialset)
+            from analysis import run_analysis
+
+            ids = _analysis_ids(trials)
+            analysis = run_analysis(human, effort_samples, risk, out / "analysis", seed=args.seed, n_boot=args.n_boot,
+                                    jobs=args.jobs, n_perm=args.n_perm, trials=ids,
+                                    pair_names={t.pair: t.dimension for t in trials if t.pair is not None},
+                                    same=_identical(trials))
+            written += [Path(path) for path in analysis["files"]["path"]]
+            for _, row in (analysis["skipped"].iterrows() if "skipped" in analysis else ()):
+                _log(f"analysis of the {len(ids)} trials: {row['what']} left out: {row['reason']}")
+            if args.per_participant_sigma:
+                _log("--per-participant-sigma works on the paper's 24 trials; not all are in this run, so it is skipped")
+        _log("not all of the paper's 24 trials: "
+             + ("fits on the run's own trials (analysis/); " if human is not None
+                else "no figures or fits (they need all 24, or --human-data for the run's own trials); ")
              + (f"pair table for the {len(pairs)} pair(s) whose E and H trials are both in the run" if pairs is not None
                 else "no pair table (no trial files declare both trials of a pair)"))
     clock.lap("analysis")
@@ -462,6 +486,19 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
         print(human_data_summary(analysis))
     print(end_of_run(time.perf_counter() - t0, cache, final, len(files)))
     return 0
+
+
+#: Fewest trials the fits of --human-data run on: Eq. 1 has 3 parameters and every
+#: held-out fold must leave at least 4 trials to fit them (analysis.crossval.make_folds).
+MIN_ANALYSIS_TRIALS = 5
+
+
+def _analysis_ids(trials) -> list[str]:
+    """The trials the analysis runs on: the paper's 24 when the run holds them all (the
+    paper's analysis; other trials stay in the effort and risk tables), else every
+    trial of the run, in the run's order."""
+    ids = [t.id for t in trials]
+    return list(TRIAL_IDS) if set(ids) >= set(TRIAL_IDS) else ids
 
 
 def _heuristics(paper, args):

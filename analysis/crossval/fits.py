@@ -9,7 +9,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from analysis.crossval.folds import STRUCTURE_SCHEME, CrossValidationError, make_folds, pairs_of, structure_folds
-from analysis.data import TRIAL_IDS
+from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
 from analysis.models import ModelInputError, model_spec, rowwise_pearson
 from analysis.pairs import pair_order_codes
 from analysis.sigma import least_sigma_index
@@ -161,7 +161,7 @@ def _scatter(out: np.ndarray, fold_values: np.ndarray, test: np.ndarray) -> None
 
 def cross_validate(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray], models: Sequence[str],
                    scheme: str, sigma_index: Mapping[str, int] | None = None, pool: bool = True,
-                   trials: Sequence[str] = TRIAL_IDS, chunk: int = CHUNK,
+                   trials: Sequence[str] | None = None, chunk: int = CHUNK,
                    features: Mapping[str, np.ndarray] | None = None,
                    groups: Sequence[Sequence[int]] | None = None
                    ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], np.ndarray | list[np.ndarray]]:
@@ -171,6 +171,7 @@ def cross_validate(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray]
     (for STRUCTURE_SCHEME, which needs `groups` from crossval.structure_groups, a
     list of the held-out index arrays, one per group, of unequal lengths; folds of
     equal size are computed together and chosen keeps the groups' order)."""
+    trials = trial_ids() if trials is None else trials
     if scheme == STRUCTURE_SCHEME:
         if groups is None:
             raise CrossValidationError(f"{STRUCTURE_SCHEME} needs the structure groups (crossval.structure_groups)")
@@ -213,11 +214,12 @@ def cross_validate(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray]
             {s: np.concatenate(v) for s, v in chosen.items()}, test_out)
 
 
-def scores(Y: np.ndarray, predictions: np.ndarray, trials: Sequence[str] = TRIAL_IDS) -> dict[str, np.ndarray]:
+def scores(Y: np.ndarray, predictions: np.ndarray, trials: Sequence[str] | None = None) -> dict[str, np.ndarray]:
     """Scores of (B, D, T) predictions against (B, D, T) trial means, over the
     trials that have predictions: rmse, r (NaN if either side is constant) and
     pairs (number of pairs with the easy trial predicted lower, the tie rule of
     analysis.pairs). Each (B, D)."""
+    trials = trial_ids() if trials is None else trials
     Y = np.broadcast_to(np.asarray(Y, float), predictions.shape)
     held = ~np.isnan(predictions[0, 0])
     P, Yh = predictions[..., held], Y[..., held]

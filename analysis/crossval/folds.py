@@ -7,7 +7,7 @@ from typing import Sequence
 
 import numpy as np
 
-from analysis.data import TRIAL_IDS
+from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
 
 #: The three ways a model is scored: fit and scored on the same 24 trials, or
 #: scored on held-out pairs or trials.
@@ -41,13 +41,14 @@ def pairs_of(trials: Sequence[str]) -> list[tuple[int, int]]:
     return out
 
 
-def make_folds(scheme: str, trials: Sequence[str] = TRIAL_IDS) -> tuple[np.ndarray, np.ndarray]:
+def make_folds(scheme: str, trials: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(train, test): index arrays (n_folds, n_train) and (n_folds, n_test) into
     `trials`. In-sample is one fold with train = test = all trials; leave-one-pair-
     out holds out both trials of a pair (trials in no complete pair are always
     trained on); leave-one-trial-out one trial. Raises CrossValidationError for an
     unknown scheme, fewer than MIN_PAIRS pairs (leave-one-pair-out), or folds that
     leave fewer than 4 training trials (Eq. 1 has 3 parameters)."""
+    trials = trial_ids() if trials is None else trials
     n = len(trials)
     every = np.arange(n)
     if scheme == "in-sample":
@@ -114,8 +115,9 @@ def structure_groups(trials: Sequence[str], risk: np.ndarray | None = None,
     return sorted((tuple(g) for g in groups.values()), key=lambda g: g[0])
 
 
-def grouping_label(groups: Sequence[Sequence[int]], trials: Sequence[str] = TRIAL_IDS) -> str:
+def grouping_label(groups: Sequence[Sequence[int]], trials: Sequence[str] | None = None) -> str:
     """The grouping as text: '1E 1H 9E 9H 11E 11H | 2E 2H | ...'."""
+    trials = trial_ids() if trials is None else trials
     return " | ".join(" ".join(str(trials[i]) for i in g) for g in groups)
 
 

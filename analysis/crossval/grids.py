@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from analysis.data import TRIAL_IDS
+from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
 from analysis.models import ModelInputError, measure_at_sigma, risk_at_sigma, risk_sigmas
 
 #: How each bootstrap resample treats risk: fixed at the table, or redrawn from its runs.
@@ -24,7 +24,7 @@ RISK_DRAW_STREAM = 2301
 @dataclass(frozen=True)
 class RiskGrid:
     """Risk of every trial at every sigma of a table: ``risk[s, i]`` is trial
-    TRIAL_IDS[i] at ``sigmas[s]`` (ascending); ``runs`` the number of noisy runs
+    trial_ids()[i] at ``sigmas[s]`` (ascending); ``runs`` the number of noisy runs
     behind each value (None when the table does not say, e.g. a build-risk
     aggregate)."""
 
@@ -48,7 +48,7 @@ def risk_grid(risk_table: pd.DataFrame, sigmas: Sequence[float] | None = None) -
         for k, s in enumerate(grid):
             rows = risk_table[np.isclose(risk_table["sigma"].astype(float), s, rtol=0, atol=1e-9)]
             n = pd.Series(pd.to_numeric(rows[column], errors="coerce").to_numpy(),
-                          index=rows["trial"].astype(str).str.strip().str.upper()).reindex(list(TRIAL_IDS))
+                          index=rows["trial"].astype(str).str.strip().str.upper()).reindex(list(trial_ids()))
             bad = n[~(np.isfinite(n) & (n >= 1) & (n == np.round(n)))]
             if len(bad):
                 raise ModelInputError(f"risk table: {column} of trial {bad.index[0]} at sigma {s:g} is "

@@ -12,7 +12,8 @@ import pandas as pd
 from analysis.crossval.fits import cross_validate, scores
 from analysis.crossval.folds import SCHEMES, pairs_of
 from analysis.crossval.grids import RiskGrid
-from analysis.data import TRIAL_IDS, ordered_datasets
+from analysis.data import ordered_datasets
+from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
 from analysis.models import MODELS, effort_per_trial, model_spec
 
 
@@ -28,7 +29,7 @@ def model_comparison(means: Mapping[str, np.ndarray], effort, grids: Mapping[str
                      ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Scores of every model under every scheme, on the full-sample trial means.
 
-    `means` {dataset: (24,) trial means in TRIAL_IDS order}; `grids` {source:
+    `means` {dataset: (24,) trial means in trial_ids() order}; `grids` {source:
     RiskGrid} ("R", and a measure m for full[m]/risk[m]). In-sample, sigma is
     `in_sample_sigma[source]` (the analysis's chosen sigma; default: chosen by the
     rule on all 24 trials); cross-validated, it is chosen in each fold.
@@ -49,7 +50,7 @@ def model_comparison(means: Mapping[str, np.ndarray], effort, grids: Mapping[str
     for scheme in schemes:
         fixed = _fixed_index(grids, risks, in_sample_sigma) if scheme == "in-sample" else None
         preds, chosen, test = cross_validate(Y, E, risks, models, scheme, fixed, features=features, groups=groups)
-        fold_of = np.empty(len(TRIAL_IDS), dtype=int)
+        fold_of = np.empty(len(trial_ids()), dtype=int)
         for f, held in enumerate(test):
             fold_of[held] = f
         for model in models:
@@ -57,13 +58,13 @@ def model_comparison(means: Mapping[str, np.ndarray], effort, grids: Mapping[str
             source = model_spec(model).source
             for k, dataset in enumerate(datasets):
                 if source is None:
-                    sig = np.full(len(TRIAL_IDS), np.nan)
+                    sig = np.full(len(trial_ids()), np.nan)
                 else:
                     sig = grids[source].sigmas[chosen[source][0, :, k]][fold_of]
                 rows.append((dataset, scheme, model, sc["rmse"][0, k], sc["r"][0, k], int(sc["pairs"][0, k]),
-                             len(pairs_of(TRIAL_IDS)), np.nanmin(sig) if source is not None else np.nan,
+                             len(pairs_of(trial_ids())), np.nanmin(sig) if source is not None else np.nan,
                              np.nanmax(sig) if source is not None else np.nan))
-                for i, trial in enumerate(TRIAL_IDS):
+                for i, trial in enumerate(trial_ids()):
                     pred_rows.append((dataset, scheme, model, trial, int(fold_of[i]), sig[i], Y[0, k, i],
                                       preds[model][0, k, i]))
     table = pd.DataFrame(rows, columns=["dataset", "scheme", "model", "rmse", "r", "pairs_E_lt_H", "n_pairs",

@@ -24,3 +24,5 @@ from analysis.data.validation import (BYTES_PER_PARTICIPANT, MAX_PARTICIPANTS,  
 # TRIAL_IDS: the 24 trial ids in the paper's order (pair 1 easy, pair 1 hard, ..., 12H);
 # PAIRS: the 12 easy/hard pairs.
 from lgp.paper import PAIRS, TRIAL_IDS  # noqa: F401  (re-exported)
+# The trial set the analysis runs on (default the paper's 24): analysis.data.trialset.
+from analysis.data.trialset import is_paper_set, pair_numbers, trial_ids, using_trials  # noqa: F401,E402

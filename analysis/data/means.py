@@ -10,7 +10,7 @@ import pandas as pd
 
 from analysis.data.datasets import HumanDataError, ordered_datasets
 from lgp.errors import InputError
-from lgp.paper import TRIAL_IDS
+from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
 
 #: Memory (bytes) one block of bootstrap resamples may take in `resample_trial_means`.
 BOOTSTRAP_BLOCK_BYTES = 32 * 2**20
@@ -71,12 +71,12 @@ def zscore_responses(responses: pd.DataFrame, ddof: int = 0) -> pd.DataFrame:
 
 def participant_matrices(zscored: pd.DataFrame) -> dict[str, tuple[list[str], np.ndarray]]:
     """Per dataset (in `ordered_datasets` order): participant ids and their z-scores as an
-    (n_participants, 24) array, columns in TRIAL_IDS order."""
+    (n_participants, 24) array, columns in trial_ids() order."""
     out = {}
     for dataset in ordered_datasets(zscored["dataset"].unique()):
         wide = zscored[zscored["dataset"] == dataset].pivot(
             index="participant", columns="trial", values="z")
-        wide = wide.reindex(columns=list(TRIAL_IDS))
+        wide = wide.reindex(columns=list(trial_ids()))
         if wide.isna().any().any():
             raise InputError(f"dataset {dataset!r}: some participants lack z-scores for some "
                              "trials; validate the data with validate_human_data first")
@@ -86,10 +86,10 @@ def participant_matrices(zscored: pd.DataFrame) -> dict[str, tuple[list[str], np
 
 def trial_means(zscored: pd.DataFrame) -> pd.DataFrame:
     """Mean z-scored response per dataset and trial: columns dataset, trial,
-    mean_z, n_participants (trials in TRIAL_IDS order)."""
+    mean_z, n_participants (trials in trial_ids() order)."""
     rows = []
     for dataset, (participants, Z) in participant_matrices(zscored).items():
-        for trial, m in zip(TRIAL_IDS, Z.mean(axis=0)):
+        for trial, m in zip(trial_ids(), Z.mean(axis=0)):
             rows.append((dataset, trial, m, len(participants)))
     return pd.DataFrame(rows, columns=["dataset", "trial", "mean_z", "n_participants"])
 
@@ -100,7 +100,7 @@ def resample_trial_means(zscored: pd.DataFrame, n_boot: int, rng: np.random.Gene
 
     For each dataset in `ordered_datasets` order, draws ``rng.integers(0, n, size=(n_boot, n))``
     (n = participants in that dataset, indexed in sorted participant-id order)
-    and averages the resampled participants' z-scores. Returns {dataset: array (n_boot, 24)}, columns in TRIAL_IDS order.
+    and averages the resampled participants' z-scores. Returns {dataset: array (n_boot, 24)}, columns in trial_ids() order.
     """
     out = {}
     for dataset, (_, Z) in participant_matrices(zscored).items():
@@ -131,7 +131,7 @@ def trial_mean_intervals(zscored: pd.DataFrame, boot_means: Mapping[str, np.ndar
         boot = boot_means[dataset]
         lows.append(np.percentile(boot, tail, axis=0))
         highs.append(np.percentile(boot, 100 - tail, axis=0))
-        nboot.append(np.full(len(TRIAL_IDS), boot.shape[0]))
+        nboot.append(np.full(len(trial_ids()), boot.shape[0]))
     return means.assign(ci_low=np.concatenate(lows), ci_high=np.concatenate(highs),
                         n_boot=np.concatenate(nboot))
 

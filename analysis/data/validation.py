@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.data.datasets import DATASETS, REQUIRED_COLUMNS, SIMULATED_PREFIX, HumanDataError, is_simulated_dataset
+from analysis.data.trialset import trial_ids
 from lgp.paper import TRIAL_IDS
 
 #: Problems listed in one HumanDataError message before "... and N more".
@@ -135,8 +136,9 @@ def validate_human_data(
                                   f"{', '.join(sorted(allowed))}{hint}"))
     for k in np.flatnonzero((table["participant"] == "").to_numpy()):
         problems.append((line[k], "empty participant id"))
-    for k in np.flatnonzero(~table["trial"].isin(TRIAL_IDS).to_numpy()):
-        problems.append((line[k], f"unknown trial id {table['trial'].iat[k]!r}; expected 1E, 1H, ..., 12H"))
+    for k in np.flatnonzero(~table["trial"].isin(trial_ids()).to_numpy()):
+        problems.append((line[k], f"unknown trial id {table['trial'].iat[k]!r}; expected one of the run's trials "
+                                  f"{_trial_list()}"))
     values, bad = _parse_responses(table["response"])
     problems += [(line[k], message) for k, message in bad]
     problems.sort(key=lambda p: p[0])  # stable: rule order within a line
@@ -157,9 +159,9 @@ def validate_human_data(
     # some are missing; only those participants are looked at one by one.
     by_participant = table.groupby(["dataset", "participant"], sort=False)
     sizes = by_participant["trial"].transform("size")
-    for (dataset, participant), group in table[sizes < len(TRIAL_IDS)].groupby(["dataset", "participant"], sort=False):
+    for (dataset, participant), group in table[sizes < len(trial_ids())].groupby(["dataset", "participant"], sort=False):
         answered = set(group["trial"])
-        absent = [t for t in TRIAL_IDS if t not in answered]
+        absent = [t for t in trial_ids() if t not in answered]
         line_list = group["line"].tolist()
         problems.append((min(line_list), f"participant {participant!r} in dataset {dataset!r} "
                                          f"(rows on lines {_line_ranges(line_list)}) is missing "
@@ -169,6 +171,12 @@ def validate_human_data(
     _raise_if(problems, source)
     _raise_if(_nobody_left(table), source)
     return table
+
+
+def _trial_list() -> str:
+    """The trial set, short: '1E, 1H, ..., 12H' for the paper's, else every id."""
+    ids = trial_ids()
+    return f"{ids[0]}, {ids[1]}, ..., {ids[-1]}" if ids == tuple(TRIAL_IDS) else ", ".join(ids)
 
 
 def _nobody_left(table: pd.DataFrame) -> list[tuple[int, str]]:

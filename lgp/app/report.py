@@ -172,6 +172,11 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         lines += comparison_lines(analysis, markdown_table)
         if "orderings" in analysis:
             lines += ["## Pair orderings by source (orderings.csv)", "", markdown_table(analysis["orderings"]), ""]
+        if isinstance(analysis.get("skipped"), pd.DataFrame) and len(analysis["skipped"]):
+            lines += ["## Left out for this trial set (skipped.csv)", "",
+                      "These parts of the analysis need easy/hard pairs (trials nE and nH), which this trial set "
+                      "lacks; the fits, sigma profile, bootstrap and the other tests are above.", "",
+                      markdown_table(analysis["skipped"]), ""]
     if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers
         lines += ["## Software", "", "Libraries: " + ", ".join(f"{k} {v}" for k, v in software["libraries"].items()) + ".",
                   "", f"Risk engine settings: `{json.dumps(software['engine'], sort_keys=True, default=str)}`.", ""]
