@@ -27,7 +27,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from analysis.data import is_simulated_dataset, ordered_datasets
-from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
+from analysis.data.trialset import pair_numbers, trial_ids
 from analysis.models import MODEL_LABELS, MODELS, effort_per_trial, full_model_cost, risk_at_sigma
 from analysis.pairs import PAPER_NO_DIFFERENCE, TIE_REL, pair_table
 

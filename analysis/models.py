@@ -24,7 +24,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
+from analysis.data.trialset import trial_ids
 from analysis.spec import RISK_BASES, ModelSpec, ModelSpecError
 
 #: Model names used in every table: Eq. 1, effort-only, risk-only.

@@ -10,7 +10,7 @@ from typing import Mapping
 import numpy as np
 import pandas as pd
 
-from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
+from analysis.data.trialset import pair_numbers, trial_ids
 from analysis.models import SIGMA_ATOL, ModelInputError, risk_at_sigma
 
 #: The one tie rule of every pair table, report line and figure: E and H are tied

@@ -38,7 +38,7 @@ import pandas as pd
 
 from analysis.crossval import STRUCTURE_SCHEME, RiskGrid, cross_validate, grouping_label, pairs_of, scores, structure_groups
 from analysis.data import ordered_datasets
-from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
+from analysis.data.trialset import trial_ids
 from analysis.models import effort_per_trial
 from lgp.errors import InputError
 

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.data import DATASETS, SIMULATED_PREFIX, is_simulated_dataset
-from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
+from analysis.data.trialset import trial_ids
 from analysis.models import full_model_cost, risk_at_sigma
 from lgp.errors import InputError
 

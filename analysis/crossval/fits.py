@@ -9,7 +9,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from analysis.crossval.folds import STRUCTURE_SCHEME, CrossValidationError, make_folds, pairs_of, structure_folds
-from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
+from analysis.data.trialset import trial_ids
 from analysis.models import ModelInputError, model_spec, rowwise_pearson
 from analysis.pairs import pair_order_codes
 from analysis.sigma import least_sigma_index

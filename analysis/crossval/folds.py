@@ -7,7 +7,7 @@ from typing import Sequence
 
 import numpy as np
 
-from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
+from analysis.data.trialset import trial_ids
 
 #: The three ways a model is scored: fit and scored on the same 24 trials, or
 #: scored on held-out pairs or trials.

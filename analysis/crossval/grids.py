@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
+from analysis.data.trialset import trial_ids
 from analysis.models import ModelInputError, measure_at_sigma, risk_at_sigma, risk_sigmas
 
 #: How each bootstrap resample treats risk: fixed at the table, or redrawn from its runs.

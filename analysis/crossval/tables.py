@@ -13,7 +13,7 @@ from analysis.crossval.fits import cross_validate, scores
 from analysis.crossval.folds import SCHEMES, pairs_of
 from analysis.crossval.grids import RiskGrid
 from analysis.data import ordered_datasets
-from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
+from analysis.data.trialset import trial_ids
 from analysis.models import MODELS, effort_per_trial, model_spec
 
 

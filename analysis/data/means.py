@@ -10,7 +10,7 @@ import pandas as pd
 
 from analysis.data.datasets import HumanDataError, ordered_datasets
 from lgp.errors import InputError
-from analysis.data.trialset import pair_numbers, trial_ids  # noqa: F401
+from analysis.data.trialset import trial_ids
 
 #: Memory (bytes) one block of bootstrap resamples may take in `resample_trial_means`.
 BOOTSTRAP_BLOCK_BYTES = 32 * 2**20
