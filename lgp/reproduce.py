@@ -433,6 +433,9 @@ def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0
                 _log(f"analysis of the {len(ids)} trials: {row['what']} left out: {row['reason']}")
             if args.per_participant_sigma:
                 _log("--per-participant-sigma works on the paper's 24 trials; not all are in this run, so it is skipped")
+            if args.risk_measure:
+                _log(f"--risk-measure {args.risk_measure} works on the paper's 24 trials; the fits of this run use the "
+                     "final-state risk table")
         _log("not all of the paper's 24 trials: "
              + ("fits on the run's own trials (analysis/); " if human is not None
                 else "no figures or fits (they need all 24, or --human-data for the run's own trials); ")
