@@ -30,6 +30,7 @@ from analysis.data import is_simulated_dataset, ordered_datasets
 from analysis.data.trialset import pair_numbers, trial_ids
 from analysis.models import MODEL_LABELS, MODELS, effort_per_trial, full_model_cost, risk_at_sigma
 from analysis.pairs import PAPER_NO_DIFFERENCE, TIE_REL, pair_table
+from analysis.spec import RISK_MEASURES, ModelSpec
 
 EASY_COLOUR = "tab:red"
 HARD_COLOUR = "tab:blue"
@@ -38,6 +39,29 @@ MODEL_COLOURS = {"full": "black", "effort": "tab:green", "risk": "tab:orange",
                  "height": "#9ecae1", "blocks": "#c6dbef", "stacked": "#6baed6", "distance": "#bcbddc",
                  "actions": "#dadaeb", "depth": "#4292c6",
                  "effort+height": "tab:purple", "effort+stacked": "tab:brown"}
+
+
+#: Colours of the build-risk measures standing in for R (``full[max]``, ...): one per measure.
+MEASURE_COLOURS = ("tab:gray", "tab:red", "tab:cyan", "tab:olive", "tab:pink", "tab:blue", "goldenrod")
+
+
+def model_colour(model: str) -> str:
+    """A model's colour: its own (MODEL_COLOURS), or for a build-risk model
+    (``full[max]``) one colour per risk measure (RISK_MEASURES order)."""
+    if model in MODEL_COLOURS:
+        return MODEL_COLOURS[model]
+    spec = ModelSpec.parse(model)
+    if spec.risk is None:
+        return MODEL_COLOURS[spec.base]
+    return MEASURE_COLOURS[RISK_MEASURES.index(spec.risk) % len(MEASURE_COLOURS)]
+
+
+def model_label(model: str) -> str:
+    """A model's label: MODEL_LABELS, or its base's label with the risk measure (``Full (effort + risk), R = max``)."""
+    if model in MODEL_LABELS:
+        return MODEL_LABELS[model]
+    spec = ModelSpec.parse(model)
+    return MODEL_LABELS.get(spec.base, spec.base) + (f", R = {spec.risk}" if spec.risk else "")
 
 
 def _models_in(summary: pd.DataFrame) -> list[str]:
@@ -94,7 +118,7 @@ def plot_trial_means(means: pd.DataFrame, predictions: pd.DataFrame, out_dir: st
         ax.set_xticks(x, list(trial_ids()), fontsize=8)
         ax.set_xlim(x[0] - 0.7, x[-1] + 0.9)
         ax.set_ylabel("mean z-score")
-        ax.set_title(f"{dataset_label(dataset)}: {MODEL_LABELS.get(model, model)} model, "
+        ax.set_title(f"{dataset_label(dataset)}: {model_label(model)} model, "
                      f"sigma = {sigma:g} d, r = {r:.2f}", fontsize=10)
     handles = [
         Line2D([], [], marker="o", ms=7, color=EASY_COLOUR, ls="", label="easy trial (mean, 95% CI)"),
@@ -119,7 +143,8 @@ def plot_model_correlations(summary: pd.DataFrame, out_dir: str | Path,
     """
     datasets = ordered_datasets(summary["dataset"].unique())
     models = _models_in(summary)
-    fig = Figure(figsize=(2.4 * len(datasets) * min(max(1.0, len(models) / 4), 1.8) + 3.0, 4.2), layout="constrained")
+    fig = Figure(figsize=(2.4 * len(datasets) * min(max(1.0, len(models) / 4), 1.8) + 3.0,
+                          max(4.2, 0.2 * len(models) + 1.4)), layout="constrained")  # room for every legend entry
     FigureCanvasAgg(fig)
     ax = fig.subplots()
     spread = 0.22 if len(models) <= 3 else 0.4
@@ -129,8 +154,9 @@ def plot_model_correlations(summary: pd.DataFrame, out_dir: str | Path,
         xs = np.arange(len(datasets)) + off
         med = s["r_median"].to_numpy()
         err = np.vstack([med - s["r_low"].to_numpy(), s["r_high"].to_numpy() - med])
-        ax.errorbar(xs, med, yerr=err, fmt="o", ms=8 if len(models) <= 3 else 5, capsize=3, color=MODEL_COLOURS[model],
-                    label=MODEL_LABELS[model])
+        spec = ModelSpec.parse(model)  # a build-risk measure's risk-only model: squares beside its full model's circles
+        ax.errorbar(xs, med, yerr=err, fmt="s" if spec.risk and spec.base == "risk" else "o",
+                    ms=8 if len(models) <= 3 else 5, capsize=3, color=model_colour(model), label=model_label(model))
     ax.axhline(0, color="0.85", lw=0.8, zorder=0)
     ax.set_xticks(np.arange(len(datasets)), [dataset_label(d) for d in datasets], fontsize=9)
     ax.set_ylabel("correlation with mean z-scores (r)")
@@ -352,15 +378,15 @@ def plot_model_comparison(summary: pd.DataFrame, out_dir: str | Path, stem: str 
                     row = row.iloc[0]
                     x = i - 0.4 + width * (j * len(schemes) + k + 0.5)
                     _, alpha, hatch = SCHEME_STYLE[scheme]
-                    ax.bar(x, row[value], width * 0.92, color=MODEL_COLOURS[model], alpha=alpha, hatch=hatch,
-                           edgecolor="white" if hatch else MODEL_COLOURS[model], lw=0.5)
+                    ax.bar(x, row[value], width * 0.92, color=model_colour(model), alpha=alpha, hatch=hatch,
+                           edgecolor="white" if hatch else model_colour(model), lw=0.5)
                     if low in row and np.isfinite(row[low]):
                         ax.errorbar(x, row[value], yerr=[[max(0.0, row[value] - row[low])], [max(0.0, row[high] - row[value])]],
                                     fmt="none", ecolor="0.25", elinewidth=1, capsize=2)
         ax.axhline(0, color="0.6", lw=0.8)
         ax.set_xticks(np.arange(len(datasets)), [dataset_label(d) for d in datasets], fontsize=9)
         ax.set_xlim(-0.5, len(datasets) - 0.5)
-        handles = [Patch(color=MODEL_COLOURS[m], label=MODEL_LABELS[m]) for m in models_here]
+        handles = [Patch(color=model_colour(m), label=model_label(m)) for m in models_here]
         handles += [Patch(facecolor="0.3", alpha=SCHEME_STYLE[s][1], hatch=SCHEME_STYLE[s][2], edgecolor="white",
                           label=SCHEME_STYLE[s][0]) for s in schemes]
         ax.legend(handles=handles, fontsize=8, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
@@ -409,8 +435,8 @@ def plot_recovery(summary: pd.DataFrame, out_dir: str | Path, paper_sigma: float
             g = at[(at["true_model"] == model) & (at["procedure"] == proc)].sort_values("participants")
             if len(g):
                 marker, ms = markers[model]
-                left.plot(g["participants"], g["p_right"], ls, marker=marker, ms=ms, color=MODEL_COLOURS[model],
-                          label=f"true: {MODEL_LABELS[model]}" + ("" if ls == "-" else " (in-sample)"))
+                left.plot(g["participants"], g["p_right"], ls, marker=marker, ms=ms, color=model_colour(model),
+                          label=f"true: {model_label(model)}" + ("" if ls == "-" else " (in-sample)"))
     left.set_xscale("log")
     ns = sorted(at["participants"].unique())
     left.set_xticks(ns, [str(n) for n in ns])

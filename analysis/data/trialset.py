@@ -11,6 +11,7 @@ import re
 from contextlib import contextmanager
 from typing import Iterable, Iterator
 
+from lgp.errors import InputError
 from lgp.paper import TRIAL_IDS
 
 _TRIALS: contextvars.ContextVar[tuple[str, ...]] = contextvars.ContextVar("analysis_trials", default=tuple(TRIAL_IDS))
@@ -42,7 +43,7 @@ def using_trials(ids: Iterable[str]) -> Iterator[tuple[str, ...]]:
     """Within the block, the analysis runs on trials `ids` (upper-cased, distinct)."""
     ids = tuple(str(t).strip().upper() for t in ids)
     if len(set(ids)) != len(ids) or not ids:
-        raise ValueError(f"trial set must be distinct, non-empty ids, got {', '.join(ids) or 'none'}")
+        raise InputError(f"trial set must be distinct, non-empty ids, got {', '.join(ids) or 'none'}")
     token = _TRIALS.set(ids)
     try:
         yield ids
