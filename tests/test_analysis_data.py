@@ -317,7 +317,7 @@ def _reference_validation(table: pd.DataFrame, allowed) -> list[str]:
         if p == "":
             problems.append((line, "empty participant id"))
         if tr not in TRIAL_IDS:
-            problems.append((line, f"unknown trial id {tr!r}; expected 1E, 1H, ..., 12H"))
+            problems.append((line, f"unknown trial id {tr!r}; expected one of the run's trials 1E, 1H, ..., 12H"))
         v = _parse_response(r)
         if isinstance(v, str):
             problems.append((line, v))
