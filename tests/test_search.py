@@ -317,7 +317,7 @@ def test_show_replays_a_rearrangement_of_another_folder_with_the_search(tmp_path
     assert show.main(["REV", "--stimuli", str(REARRANGE), "--planner", "search", "--seed", "0",
                       "--html", str(html), "--png", str(png)]) == 0
     out = capsys.readouterr().out
-    printed = float(next(line for line in out.splitlines() if line.startswith("effort ")).split()[1])
+    printed = float(next(line for line in out.splitlines() if line.startswith("physical effort: ")).split()[2])
     row = physical_effort(stimuli.load_file(REARRANGE / "REV.yaml"), samples=1, seed=0,
                           spec=EffortSpec(planner="search")).table.iloc[0]
     assert printed == pytest.approx(row["effort"], rel=1e-9)
