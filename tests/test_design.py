@@ -139,13 +139,17 @@ def test_the_objective_decorrelates_risk_from_height_on_a_pool_where_they_go_tog
     assert a[1]["rising"] >= objective.RISING
 
 
-@pytest.mark.parametrize("args, words", [
+#: Bad inputs and the words their one-line refusal must hold (the API and the command).
+BAD_INPUTS = [
     (["--trials", "3"], "--trials 3"),
     (["--trials", "30", "--candidates", "20"], "more than the 20 candidates"),
     (["--sigma-prior", "0", "0.2"], "--sigma-prior"),
     (["--sigma-prior", "0.1", "1.5"], "--sigma-prior"),
     (["--budget", "0"], "--budget 0"),
-])
+]
+
+
+@pytest.mark.parametrize("args, words", BAD_INPUTS)
 def test_bad_input_is_refused_with_exit_2_before_anything_is_written(tmp_path, capsys, args, words):
     from stimuli.design.__main__ import main
 
@@ -157,13 +161,7 @@ def test_bad_input_is_refused_with_exit_2_before_anything_is_written(tmp_path, c
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("args, words", [
-    (["--trials", "3"], "--trials 3"),
-    (["--trials", "30", "--candidates", "20"], "more than the 20 candidates"),
-    (["--sigma-prior", "0", "0.2"], "--sigma-prior"),
-    (["--sigma-prior", "0.1", "1.5"], "--sigma-prior"),
-    (["--budget", "0"], "--budget 0"),
-])
+@pytest.mark.parametrize("args, words", BAD_INPUTS)
 def test_bad_input_is_refused_in_one_line_by_the_command(tmp_path, args, words):
     out = tmp_path / "designed"
     r = subprocess.run([sys.executable, "-m", "stimuli.design", "--out", str(out), *args], cwd=ROOT,
