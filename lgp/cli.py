@@ -18,7 +18,8 @@ and exit code 2), and runs under `run_cli`:
 - Ctrl-C prints one line (the CLI says what survives, e.g. the cache) and exits 130.
 
 Trial ids are case-insensitive everywhere (``7h`` is ``7H``; `lgp.paper.canonical_trial_id`).
-This module imports nothing of the project but `lgp.paper`, so a CLI on any floor may use it.
+This module imports nothing of the project but `lgp.paper` and `lgp.command_times` (wall times
+in words, and the measured ones ``--help`` quotes), so a CLI on any floor may use it.
 """
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ import traceback
 from pathlib import Path
 from typing import Callable, Sequence
 
+from lgp.command_times import COMMAND_TIMES, duration_text, measured_time  # noqa: F401 (every CLI's formats)
 from lgp.paper import TRIAL_IDS, canonical_trial_id
 
 #: Environment variable that turns on tracebacks, like ``--debug``.
@@ -66,7 +68,7 @@ def nonnegative_int(text: str) -> int:
 
 seed = nonnegative_int
 
-#: The largest counts a command line takes (issue 30): past them the run needs
+#: The largest counts a command line takes: past them the run needs
 #: more memory or time than any machine it is meant for, and failed with a
 #: MemoryError after minutes of work. Each refusal gives the estimate.
 MAX_SAMPLES = 10_000          # --samples M: layouts of A per trial (the paper: 30)
@@ -464,57 +466,3 @@ def _interrupted(prog: str, message: str, debug: bool) -> int:
         traceback.print_exc()
     print(f"{prog}: {message}", file=sys.stderr, flush=True)
     return EXIT_INTERRUPTED
-
-
-# ----------------------------------------------------------------------------- measured times
-
-#: How long the README's commands took: rows written by ``python bench/commands.py``.
-COMMAND_TIMES = Path(__file__).resolve().parent.parent / "docs" / "command_times.csv"
-
-
-def duration_text(seconds: float) -> str:
-    """A wall time for a reader, the one format of every command line, progress
-    line and page: "4.2 s", "16 s", "2 min 06 s", "1 h 05 min"."""
-    s = max(0.0, float(seconds))
-    if s < 10:
-        return f"{s:.1f} s"
-    if s < 120:
-        return f"{s:.0f} s"
-    if s < 3600:
-        return f"{int(s // 60)} min {s % 60:02.0f} s"
-    return f"{int(s // 3600)} h {s % 3600 // 60:02.0f} min"
-
-
-def measured_time(command: str, path: Path | str | None = None) -> str | None:
-    """How long `command` (as the README writes it) took in the last ``bench/commands.py``
-    run, with the machine, as the one phrase README, ``--help`` and docs/results.md quote,
-    e.g. ``16 s cold (20 CPU-s), 2.1 s cached (--jobs 2); 25 s cold with --jobs 1 [2 cores,
-    AMD EPYC, load average 3.1-4.0; bench/commands.py]``. None when it was not measured (an
-    installed copy without docs/)."""
-    import csv
-
-    path = COMMAND_TIMES if path is None else Path(path)
-    try:
-        with open(path, newline="") as f:
-            rows = [r for r in csv.DictReader(f) if r["command"] == command]
-    except OSError:
-        return None
-    if not rows:
-        return None
-    at = {(int(r["jobs"]), r["cache"]): float(r["wall_s"]) for r in rows}
-    cpu = {(int(r["jobs"]), r["cache"]): float(r["cpu_s"]) for r in rows}
-    most = max(j for j, _ in at)
-    parts = []
-    if (most, "cold") in at:
-        # CPU seconds beside the wall time: they hardly change with the machine's load
-        parts.append(duration_text(at[most, "cold"]) + (" cold" if (most, "warm") in at else "")
-                     + (f" ({cpu[most, 'cold']:.0f} CPU-s)" if cpu[most, "cold"] >= 10 else ""))
-    if (most, "warm") in at:
-        parts.append(duration_text(at[most, "warm"]) + " cached")
-    text = ", ".join(parts) + (f" (--jobs {most})" if any(j != most for j, _ in at) else "")
-    others = sorted({j for j, _ in at if j != most}, reverse=True)
-    for j in others:
-        text += f"; {duration_text(at[j, 'cold'])} cold with --jobs {j}" if (j, "cold") in at else ""
-    loads = [float(r[k].split()[0]) for r in rows for k in ("load_before", "load_after")]
-    load = f"{min(loads):.1f}" if max(loads) - min(loads) < 0.05 else f"{min(loads):.1f}-{max(loads):.1f}"
-    return f"{text} [{rows[0]['cores']} cores, {rows[0]['cpu_model']}, load average {load}; bench/commands.py]"

@@ -27,7 +27,7 @@ APP_WING = ["lgp.app", "lgp.app.*", "lgp.reproduce", "lgp.show"]
 #: (layer, module-name patterns, layers it may import besides its own; None = all lower)
 LAYERS = [
     # lgp.cli (argument checks, one-line errors) is used by CLIs on every floor, so it sits here
-    ("ground", ["lgp.paper", "lgp.scene", "lgp.scene.*", "lgp.geometry", "lgp.executor", "lgp.executor.*", "lgp.cli", "lgp.inputs", "lgp.atomic", "lgp.errors", "lgp.owned"], None),
+    ("ground", ["lgp.paper", "lgp.scene", "lgp.scene.*", "lgp.geometry", "lgp.executor", "lgp.executor.*", "lgp.cli", "lgp.command_times", "lgp.inputs", "lgp.atomic", "lgp.errors", "lgp.owned"], None),
     ("stimuli and logic", ["stimuli", "stimuli.start", "stimuli.reading", "stimuli.trial", "stimuli.mental_jenga", "lgp.assignment", "lgp.symbolic"], None),
     ("arm", ["lgp.arm"], None),
     ("KOMO", ["lgp.komo", "lgp.komo.*"], None),

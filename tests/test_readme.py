@@ -145,7 +145,7 @@ def test_the_readmes_commands_run_as_written(command, tmp_path):
 def _measured() -> dict[str, str]:
     import csv
 
-    from lgp.cli import COMMAND_TIMES, measured_time
+    from lgp.command_times import COMMAND_TIMES, measured_time
 
     with open(COMMAND_TIMES, newline="") as f:
         commands = list(dict.fromkeys(r["command"] for r in csv.DictReader(f)))
@@ -154,7 +154,7 @@ def _measured() -> dict[str, str]:
 
 def test_every_time_in_the_readme_is_one_bench_run_quoted_with_its_machine():
     """README, `lgp.reproduce --help` and docs/results.md quote the same figures,
-    those of the last `python bench/commands.py` run (docs/command_times.csv), each with
+    those of the last `python bench/commands.py` run (lgp/command_times.csv), each with
     the machine (cores, CPU model, load average); no hand-kept test counts."""
     measured = _measured()
     assert {"python -m lgp.reproduce --quick", "python -m lgp.reproduce"} <= set(measured), measured
