@@ -200,6 +200,124 @@ def _symbolic(problem: Problem, carries) -> SymbolicPlan:
     return plan
 
 
+class _Search:
+    """One search's state: the incumbent plan, the queue of open branches and what
+    the search has cost so far. `solve` tries a complete skeleton with KOMO; `run`
+    dives from the best open branch until the gap closes or the budget runs out."""
+
+    def __init__(self, problem: Problem, rng: np.random.Generator, options: dict, budget: Budget,
+                 spots_per_set_aside: int, start: float):
+        self.problem, self.rng, self.options, self.budget = problem, rng, options, budget
+        self.spots_per_set_aside, self.start = spots_per_set_aside, start
+        self.best: tuple[float, Plan, float] | None = None  # (effort, plan, skeleton bound)
+        self.tried: list = []
+        self.solves = self.expansions = 0
+        self.komo_seconds = 0.0
+        self.counter = itertools.count()
+        # Branches that make the same carries in another order are one branch (the
+        # bound cannot tell orders apart): the first order found is kept.
+        self.seen: set = {frozenset()}
+        self.queue: list = []
+
+    def solve(self, symbolic: SymbolicPlan, bound: float) -> None:
+        """KOMO on one skeleton; a plan that beats the incumbent becomes it."""
+        self.solves += 1
+        t0 = time.perf_counter()
+        try:
+            result = plan_symbolic(symbolic, self.rng, **self.options)
+        except PlanningError as e:
+            self.tried.append((bound, f"failed: {e}"))
+            return
+        finally:
+            self.komo_seconds += time.perf_counter() - t0
+        sweep = first_sweep(result)
+        if sweep is not None:
+            self.tried.append((bound, f"rejected: {sweep}"))
+            return
+        effort = kinetic_energy(result)
+        self.tried.append((bound, effort))
+        if self.best is None or effort < self.best[0]:
+            self.best = (effort, result, bound)
+
+    def out_of_budget(self) -> StopReason | None:
+        if self.solves >= self.budget.solves:
+            return StopReason.SOLVE_BUDGET
+        if time.perf_counter() - self.start >= self.budget.seconds:
+            return StopReason.TIME_BUDGET
+        if self.expansions >= self.budget.expansions:
+            return StopReason.EXPANSION_BUDGET
+        return None
+
+    def entries(self, node: _Node) -> list:
+        """Queue entries of the children of `node` (one expansion), best guide first.
+
+        An entry is (guide g + h_direct rounded, -depth, count, lower bound g + h,
+        node): popped in the guide's order (it dives along the bound's best
+        assignment; the lower bound alone also counts relays no move takes and goes
+        wide); pruned, and reported, by the lower bound."""
+        self.expansions += 1
+        out = []
+        for child in _children(self.problem, node, self.spots_per_set_aside):
+            key = frozenset(child.carries)
+            if key in self.seen:
+                continue
+            h, guide = self.problem.remaining_bound(child.where, child.settled)
+            f_child = child.g + h
+            if not np.isfinite(h) or (self.best is not None and f_child >= self.best[0]):
+                continue
+            self.seen.add(key)
+            out.append((round(child.g + guide, 12), -len(child.carries), next(self.counter), f_child, child))
+        return sorted(out)
+
+    def complete(self, node: _Node) -> bool:
+        return all((1 + j) in node.where for j in range(len(self.problem.slots)))
+
+    def dive(self, entry, paper_key) -> None:
+        """A dive (anytime best-first): from the best open branch down its best child
+        to a complete skeleton, the other children queued. Every pop ends in a
+        skeleton within a plan's depth of expansions."""
+        while entry is not None:
+            f, node = entry[3], entry[4]
+            if self.best is not None and f >= self.best[0]:
+                return  # pruned
+            if self.complete(node):
+                if frozenset(node.carries) != paper_key:
+                    self.solve(_symbolic(self.problem, node.carries), node.g)
+                return
+            if self.out_of_budget():
+                heapq.heappush(self.queue, entry)  # still open
+                return
+            children = self.entries(node)
+            for other in children[1:]:
+                heapq.heappush(self.queue, other)
+            entry = children[0] if children else None
+
+    def run(self, paper_key) -> StopReason:
+        """Dive from the root until no open branch is left or the budget runs out."""
+        root = _Node(self.problem.final_from_start(), (), 0.0, False)
+        h0, guide0 = self.problem.remaining_bound(root.where, False)
+        if np.isfinite(h0):
+            self.queue.append((round(guide0, 12), 0, next(self.counter), h0, root))
+        while self.queue:
+            reason = self.out_of_budget()
+            if reason:
+                return reason
+            self.dive(heapq.heappop(self.queue), paper_key)
+        return StopReason.GAP_CLOSED if self.best is not None else StopReason.EXHAUSTED
+
+    def lowest_open(self) -> float:
+        """The bound of the best unexplored branch: the lowest lower bound left in the queue."""
+        return float(min((e[3] for e in self.queue if self.best is None or e[3] < self.best[0]), default=np.inf))
+
+
+def _paper_key(problem: Problem, paper_symbolic: SymbolicPlan) -> frozenset:
+    """The carries (block index, 1 + slot index) of the paper's skeleton: the search does not solve them again."""
+    index = {b.name: i for i, b in enumerate(problem.blocks)}
+    slot = {s.name: j for j, s in enumerate(problem.slots)}
+    return frozenset((index[a.block], 1 + slot[paper_symbolic.assignment[a.block]])
+                     for a in paper_symbolic.actions if isinstance(a, Place))
+
+
 def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | None = None,
            approach_height: float | None = None, slices_per_phase: int | None = None, design: Design | None = None,
            formulation: str = "reduced", solver: str = "snopt", arm=None,
@@ -229,134 +347,39 @@ def search(initial: Scene, target: Scene, rng_or_seed=0, *, budget: Budget | Non
     problem = Problem(initial, target, approach_height, slices_per_phase, arm)
     options = dict(formulation=formulation, solver=solver, slices_per_phase=slices_per_phase,
                    approach_height=approach_height, arm=arm)
-    best: tuple[float, Plan, float] | None = None  # (effort, plan, skeleton bound)
-    tried: list = []
-    solves = 0
+    state = _Search(problem, rng, options, budget, spots_per_set_aside, start)
     paper_effort, paper_symbolic = None, None
-
-    komo_seconds = 0.0
-
-    def solve(symbolic: SymbolicPlan, bound: float) -> None:
-        nonlocal best, solves, komo_seconds
-        solves += 1
-        t0 = time.perf_counter()
-        try:
-            result = plan_symbolic(symbolic, rng, **options)
-        except PlanningError as e:
-            tried.append((bound, f"failed: {e}"))
-            return
-        finally:
-            komo_seconds += time.perf_counter() - t0
-        sweep = first_sweep(result)
-        if sweep is not None:
-            tried.append((bound, f"rejected: {sweep}"))
-            return
-        effort = kinetic_energy(result)
-        tried.append((bound, effort))
-        if best is None or effort < best[0]:
-            best = (effort, result, bound)
-
     if paper_first:
         try:
             paper_symbolic = symbolic_plan(initial, target, assign_blocks(initial, target))
         except SymbolicPlanningError:
             paper_symbolic = None
         if paper_symbolic is not None:
-            solve(paper_symbolic, skeleton_bound(paper_symbolic, approach_height=approach_height,
-                                                 slices_per_phase=slices_per_phase))
-            if best is not None:
-                paper_effort = best[0]
-
-    root = _Node(problem.final_from_start(), (), 0.0, False)
-    h0, guide0 = problem.remaining_bound(root.where, False)
-    paper_key = None
-    if paper_symbolic is not None:
-        index = {b.name: i for i, b in enumerate(problem.blocks)}
-        slot = {s.name: j for j, s in enumerate(problem.slots)}
-        paper_key = frozenset((index[a.block], 1 + slot[paper_symbolic.assignment[a.block]])
-                              for a in paper_symbolic.actions if isinstance(a, Place))
-    counter = itertools.count()
-    # Entries (guide g + h_direct rounded, -depth, count, lower bound g + h, node): popped
-    # in the guide's order (it dives along the bound's best assignment; the lower
-    # bound alone also counts relays no move takes and goes wide); pruned, and
-    # reported, by the lower bound.
-    queue = [] if not np.isfinite(h0) else [(round(guide0, 12), 0, next(counter), h0, root)]
-    # Branches that make the same carries in another order are one branch (the
-    # bound cannot tell orders apart): the first order found is kept.
-    seen: set = {frozenset()}
-    expansions = 0
-    stopped = StopReason.GAP_CLOSED
-
-    def out_of_budget():
-        if solves >= budget.solves:
-            return StopReason.SOLVE_BUDGET
-        if time.perf_counter() - start >= budget.seconds:
-            return StopReason.TIME_BUDGET
-        if expansions >= budget.expansions:
-            return StopReason.EXPANSION_BUDGET
-        return None
-
-    def entries(node):
-        """Queue entries of the children of `node` (one expansion), best guide first."""
-        nonlocal expansions
-        expansions += 1
-        out = []
-        for child in _children(problem, node, spots_per_set_aside):
-            key = frozenset(child.carries)
-            if key in seen:
-                continue
-            h, guide = problem.remaining_bound(child.where, child.settled)
-            f_child = child.g + h
-            if not np.isfinite(h) or (best is not None and f_child >= best[0]):
-                continue
-            seen.add(key)
-            out.append((round(child.g + guide, 12), -len(child.carries), next(counter), f_child, child))
-        return sorted(out)
-
-    complete = lambda node: all((1 + j) in node.where for j in range(len(problem.slots)))  # noqa: E731
-    while queue:
-        reason = out_of_budget()
-        if reason:
-            stopped = reason
-            break
-        entry = heapq.heappop(queue)
-        # A dive (anytime best-first): from the best open branch down its best child
-        # to a complete skeleton, the other children queued. Every pop ends in a
-        # skeleton within a plan's depth of expansions.
-        while entry is not None:
-            f, node = entry[3], entry[4]
-            if best is not None and f >= best[0]:
-                break  # pruned
-            if complete(node):
-                if frozenset(node.carries) != paper_key:
-                    solve(_symbolic(problem, node.carries), node.g)
-                break
-            if out_of_budget():
-                heapq.heappush(queue, entry)  # still open
-                break
-            children = entries(node)
-            for other in children[1:]:
-                heapq.heappush(queue, other)
-            entry = children[0] if children else None
-    else:
-        stopped = StopReason.GAP_CLOSED if best is not None else StopReason.EXHAUSTED
-    # The bound of the best unexplored branch: the lowest lower bound left in the queue.
-    open_bounds = [entry[3] for entry in queue if best is None or entry[3] < best[0]]
-    lowest_open = min(open_bounds, default=np.inf)
-
+            state.solve(paper_symbolic, skeleton_bound(paper_symbolic, approach_height=approach_height,
+                                                       slices_per_phase=slices_per_phase))
+            if state.best is not None:
+                paper_effort = state.best[0]
+    stopped = state.run(None if paper_symbolic is None else _paper_key(problem, paper_symbolic))
+    lowest_open = state.lowest_open()
     seconds = time.perf_counter() - start
-    if best is None:
-        if stopped in (StopReason.EXHAUSTED, StopReason.GAP_CLOSED):
-            why = "; ".join(str(t[1]) for t in tried) or "no sequence of carries reaches B"
-            raise SearchError(f"{label}: no plan: every branch of the search explored ({expansions} expansions), "
-                              f"{why}", NoPlan.UNSOLVABLE, float(lowest_open))
-        solved = "".join(f"; {t[1]}" for t in tried)  # why each solve gave no plan (failed, or rejected by the sweep check)
-        raise SearchError(f"{label}: {stopped} ran out before any plan was found ({solves} KOMO solves, "
-                          f"{expansions} expansions, {seconds:.1f} s{solved}); best lower bound {lowest_open:.4f} J s",
-                          NoPlan.BUDGET, float(lowest_open))
-    effort, result, bound = best
+    if state.best is None:
+        raise _no_plan(label, stopped, state, seconds, lowest_open)
+    effort, result, bound = state.best
     result.planning_time = seconds
-    found = SearchResult(result, effort, min(float(lowest_open), effort), bound, solves, expansions, seconds, stopped,
-                         paper_effort, paper_symbolic, tried, komo_seconds)
+    found = SearchResult(result, effort, min(lowest_open, effort), bound, state.solves, state.expansions, seconds,
+                         stopped, paper_effort, paper_symbolic, state.tried, state.komo_seconds)
     result.search = found  # the plan carries what the search found (Plan.search)
     return found
+
+
+def _no_plan(label: str, stopped: StopReason, state: _Search, seconds: float, lowest_open: float) -> SearchError:
+    """The SearchError of a search that found no plan: unsolvable when every
+    branch was explored, else the budget that ran out (with why each solve failed)."""
+    if stopped in (StopReason.EXHAUSTED, StopReason.GAP_CLOSED):
+        why = "; ".join(str(t[1]) for t in state.tried) or "no sequence of carries reaches B"
+        return SearchError(f"{label}: no plan: every branch of the search explored ({state.expansions} expansions), "
+                          f"{why}", NoPlan.UNSOLVABLE, lowest_open)
+    solved = "".join(f"; {t[1]}" for t in state.tried)  # why each solve gave no plan (failed, or rejected by the sweep check)
+    return SearchError(f"{label}: {stopped} ran out before any plan was found ({state.solves} KOMO solves, "
+                      f"{state.expansions} expansions, {seconds:.1f} s{solved}); best lower bound {lowest_open:.4f} J s",
+                      NoPlan.BUDGET, lowest_open)
