@@ -226,3 +226,120 @@ def under_blas_core(core: str, script: str, timeout: float = 300) -> str:
     assert done.returncode == 0, f"OPENBLAS_CORETYPE={core}: {done.stderr[-2000:]}"
     return done.stdout
 
+
+
+# ----------------------------------------------------------------------------- a worker of a running command, signalled
+
+
+def workers_of(pid: int) -> list[int]:
+    """The descendants of process `pid` but spawn's resource tracker (no worker)."""
+    from tests.test_faults import descendants
+
+    out = []
+    for p in descendants(pid):
+        try:
+            if b"resource_tracker" not in Path(f"/proc/{p}/cmdline").read_bytes():
+                out.append(p)
+        except OSError:
+            pass
+    return out
+
+
+def run_signalling_a_worker(cmd: list[str], cwd: Path, env: dict, sig=None, after: float = 0.0,
+                            deadline: float = 60.0, what: str = "a worker died") -> tuple[int, str, str]:
+    """(exit status, stdout, stderr) of `cmd`; with a signal `sig`: once the command
+    has two workers, wait `after` s and send `sig` to one of them from outside
+    (as `kill -9` or `kill -STOP` from another shell does). A command still running
+    `deadline` s later is killed and the test fails: it hung after `what`."""
+    import os
+    import time
+
+    t0 = time.monotonic()
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    if sig is not None:
+        while len(workers_of(proc.pid)) < 2 and time.monotonic() - t0 < 30:
+            time.sleep(0.02)
+        time.sleep(after)
+        workers = workers_of(proc.pid)
+        assert workers, f"the command ended before a worker could be signalled ({sig!r})"
+        os.kill(workers[0], sig)
+    try:
+        out, err = proc.communicate(timeout=deadline)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+        pytest.fail(f"the command hung: still running {deadline:g} s after {what}\n{err[-2000:]}")
+    return proc.returncode, out, err
+
+
+#: A small default (process-pool) run whose workers the worker-death and worker-stall
+#: tests kill or stop mid-stage: 4H's layouts first (quick), then 7H's (about 1 s
+#: each), so when "[effort  1/2]" is printed both workers are planning 7H; --verbose:
+#: the per-trial lines the cues wait for.
+POOL_RUN = ["-m", "lgp.reproduce", "--trials", "4H", "7H", "--samples", "4", "--n-sims", "40",
+            "--sigmas", "0.05", "0.1", "--jobs", "2", "--no-replays", "--verbose"]
+
+
+def result_csvs(out: Path) -> dict:
+    """A run's effort_samples.csv, effort.csv and risk.csv, less the wall-clock solve_time."""
+    tables = {name: pd.read_csv(out / name) for name in ("effort_samples.csv", "effort.csv", "risk.csv")}
+    tables["effort_samples.csv"] = tables["effort_samples.csv"].drop(columns="solve_time")
+    return tables
+
+
+def _project_env(**extra) -> dict:
+    import os
+
+    root = str(Path(__file__).resolve().parents[1])
+    return {**os.environ, "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", ""), **extra}
+
+
+@pytest.fixture(scope="session")
+def pool_run_undisturbed(tmp_path_factory) -> Path:
+    """The output folder of POOL_RUN without a fault and without a cache (once per
+    session: the worker-death and worker-stall cases compare their CSVs with it)."""
+    out = tmp_path_factory.mktemp("pool-run") / "undisturbed"
+    root = Path(__file__).resolve().parents[1]
+    ref = subprocess.run([sys.executable, *POOL_RUN, "--no-cache", "--out", str(out)], cwd=root, env=_project_env(),
+                         capture_output=True, text=True, timeout=600)
+    assert ref.returncode == 0, ref.stderr[-3000:]
+    return out
+
+
+def pool_run_signalling_a_worker(out: Path, cue: str, sig, pause: float = 0.0, **env) -> tuple[int, str]:
+    """(exit status, stderr) of POOL_RUN into `out`, one of whose workers gets `sig`
+    `pause` s after the run prints a line holding `cue`; fails if the cue never
+    comes or the run is still going 240 s after the signal. `env`: extra variables."""
+    import os
+    import threading
+    import time
+
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen([sys.executable, *POOL_RUN, "--out", str(out)], cwd=root, env=_project_env(**env),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines, seen = [], threading.Event()
+
+    def read():
+        for line in proc.stderr:
+            lines.append(line)
+            if cue in line:
+                seen.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        assert seen.wait(240), "".join(lines)[-3000:]
+        time.sleep(pause)
+        victims = workers_of(proc.pid)
+        assert victims, "".join(lines)[-3000:]
+        os.kill(victims[0], sig)
+        try:
+            proc.wait(timeout=240)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"the run hung after a worker got {sig!r}:\n" + "".join(lines)[-3000:])
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    reader.join(5)
+    return proc.returncode, "".join(lines)

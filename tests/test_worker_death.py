@@ -7,15 +7,13 @@ forever for a lost task fails the test instead of hanging the suite."""
 import json
 import os
 import signal
-import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import pytest
 
-from tests.test_faults import descendants
+from tests.conftest import pool_run_signalling_a_worker, result_csvs, run_signalling_a_worker
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 
@@ -60,45 +58,18 @@ _SCRIPT = textwrap.dedent("""
 """)
 
 
-def _workers(pid):
-    """Descendants of `pid` but spawn's resource tracker (no worker)."""
-    out = []
-    for p in descendants(pid):
-        try:
-            if b"resource_tracker" not in Path(f"/proc/{p}/cmdline").read_bytes():
-                out.append(p)
-        except OSError:
-            pass
-    return out
-
-
 def _run(tmp_path, mode, method, kill_after=None, deadline=60.0):
     script = tmp_path / "units.py"
     script.write_text(_SCRIPT)
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    t0 = time.monotonic()
-    proc = subprocess.Popen([sys.executable, str(script), mode, method, str(tmp_path / "mark")], cwd=tmp_path,
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    if kill_after is not None:  # kill one worker from outside, mid-map
-        while len(_workers(proc.pid)) < 2 and time.monotonic() - t0 < 30:
-            time.sleep(0.02)
-        time.sleep(kill_after)
-        workers = _workers(proc.pid)
-        assert workers, "the map ended before a worker could be killed"
-        os.kill(workers[0], signal.SIGKILL)
-    try:
-        out, err = proc.communicate(timeout=deadline)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, err = proc.communicate()
-        pytest.fail(f"the map hung: still running {deadline:g} s after a worker died\n{err[-2000:]}")
-    return proc.returncode, out, err, time.monotonic() - t0
+    return run_signalling_a_worker([sys.executable, str(script), mode, method, str(tmp_path / "mark")], tmp_path,
+                                   {**os.environ, "PYTHONPATH": str(ROOT)}, None if kill_after is None else signal.SIGKILL,
+                                   kill_after or 0.0, deadline, "a worker died")
 
 
 @pytest.mark.slow  # a subprocess pool, a worker killed
 @pytest.mark.parametrize("method", ["fork", "spawn"])
 def test_a_worker_killed_from_outside_is_replaced_and_the_map_completes(tmp_path, method):
-    code, out, err, took = _run(tmp_path, "plain", method, kill_after=0.8)
+    code, out, err = _run(tmp_path, "plain", method, kill_after=0.8)
     assert code == 0, err[-3000:]
     got = json.loads(out)
     assert got["results"] == [k * k for k in range(30)]
@@ -108,20 +79,20 @@ def test_a_worker_killed_from_outside_is_replaced_and_the_map_completes(tmp_path
 
 @pytest.mark.slow  # a subprocess pool, a worker killed
 def test_a_worker_that_died_between_two_maps_is_replaced(tmp_path):
-    code, out, err, took = _run(tmp_path, "between", "fork")
+    code, out, err = _run(tmp_path, "between", "fork")
     assert code == 0, err[-3000:]
     assert json.loads(out)["results"] == [k * k for k in range(30)]
 
 
 @pytest.mark.slow  # a subprocess pool, a worker killed
 def test_a_unit_that_kills_its_worker_once_is_retried(tmp_path):
-    code, out, err, took = _run(tmp_path, "once", "fork")
+    code, out, err = _run(tmp_path, "once", "fork")
     assert code == 0, err[-3000:]
     assert json.loads(out)["results"] == [k * k for k in range(30)]
 
 
 def test_a_unit_that_always_kills_its_worker_stops_the_map_in_one_line(tmp_path):
-    code, out, err, took = _run(tmp_path, "always", "fork")
+    code, out, err = _run(tmp_path, "always", "fork")
     assert code == 3, err[-3000:]
     line = [ln for ln in err.splitlines() if ln.startswith("WorkerDied:")]
     assert len(line) == 1, err
@@ -129,64 +100,15 @@ def test_a_unit_that_always_kills_its_worker_stops_the_map_in_one_line(tmp_path)
     assert "Traceback" not in err, err
 
 
-RUN = [sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "8", "--n-sims", "60",
-       "--sigmas", "0.05", "0.1", "--jobs", "2", "--no-replays", "--verbose"]  # --verbose: the per-trial lines the cues wait for
-
-
-def _csvs(out: Path) -> dict:
-    import pandas as pd
-
-    tables = {name: pd.read_csv(out / name) for name in ("effort_samples.csv", "effort.csv", "risk.csv")}
-    tables["effort_samples.csv"] = tables["effort_samples.csv"].drop(columns="solve_time")  # wall clock
-    return tables
-
-
-@pytest.fixture(scope="module")
-def undisturbed(tmp_path_factory) -> Path:
-    """The output folder of RUN without a kill and without a cache (made once, read by both stages' cases)."""
-    out = tmp_path_factory.mktemp("ref")
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    ref = subprocess.run(RUN + ["--no-cache", "--out", str(out)], cwd=ROOT, env=env,
-                         capture_output=True, text=True, timeout=300)
-    assert ref.returncode == 0, ref.stderr[-3000:]
-    return out
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("stage, cue", [("effort", "[effort  1/2]"), ("risk", "[effort] ")])
-def test_reproduce_survives_a_worker_killed_mid_stage_with_identical_csvs(tmp_path, stage, cue, undisturbed):
+def test_reproduce_survives_a_worker_killed_mid_stage_with_identical_csvs(tmp_path, stage, cue, pool_run_undisturbed):
     """The issue's probe: kill -9 one worker of a default (process-pool) run while
     it plans or simulates; the run ends by itself, exit 0, with the CSVs of an
     undisturbed run (bar the wall-clock solve_time)."""
-    import threading
-
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen(RUN + ["--out", str(tmp_path / "hit")], cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    lines, seen = [], threading.Event()
-
-    def read():
-        for line in proc.stderr:
-            lines.append(line)
-            if cue in line:
-                seen.set()
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
-    assert seen.wait(240), "".join(lines)[-3000:]
-    time.sleep(0.3)
-    victims = _workers(proc.pid)
-    assert victims
-    os.kill(victims[0], signal.SIGKILL)
-    try:
-        proc.wait(timeout=240)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        pytest.fail("the run hung after a worker was killed:\n" + "".join(lines)[-3000:])
-    reader.join(5)
-    err = "".join(lines)
-    assert proc.returncode == 0, err[-3000:]
+    code, err = pool_run_signalling_a_worker(tmp_path / "hit", cue, signal.SIGKILL, pause=0.3)
+    assert code == 0, err[-3000:]
     assert "died (SIGKILL)" in err, err[-3000:]
-    want, got = _csvs(undisturbed), _csvs(tmp_path / "hit")
+    want, got = result_csvs(pool_run_undisturbed), result_csvs(tmp_path / "hit")
     for name in want:
         assert got[name].equals(want[name]), name

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from lgp.executor.processes import STALL_ENV, _cpu_and_state, stall_seconds_default
-from tests.test_worker_death import _workers, undisturbed  # noqa: F401  (a module fixture: the run without a fault)
+from tests.conftest import pool_run_signalling_a_worker, result_csvs, run_signalling_a_worker
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc")
 
@@ -59,29 +59,15 @@ _SCRIPT = textwrap.dedent("""
 def _run(tmp_path, mode, stop_after=None, deadline=90.0):
     script = tmp_path / "units.py"
     script.write_text(_SCRIPT)
-    env = {**os.environ, "PYTHONPATH": str(ROOT), STALL_ENV: "1.5"}
-    t0 = time.monotonic()
-    proc = subprocess.Popen([sys.executable, str(script), mode, str(tmp_path / "mark")], cwd=tmp_path, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    if stop_after is not None:  # the issue's probe: SIGSTOP one worker from outside, mid-map
-        while len(_workers(proc.pid)) < 2 and time.monotonic() - t0 < 30:
-            time.sleep(0.02)
-        time.sleep(stop_after)
-        workers = _workers(proc.pid)
-        assert workers, "the map ended before a worker could be stopped"
-        os.kill(workers[0], signal.SIGSTOP)
-    try:
-        out, err = proc.communicate(timeout=deadline)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, err = proc.communicate()
-        pytest.fail(f"the map hung: still running {deadline:g} s after a worker was stopped\n{err[-2000:]}")
-    return proc.returncode, out, err, time.monotonic() - t0
+    return run_signalling_a_worker([sys.executable, str(script), mode, str(tmp_path / "mark")], tmp_path,
+                                   {**os.environ, "PYTHONPATH": str(ROOT), STALL_ENV: "1.5"},
+                                   None if stop_after is None else signal.SIGSTOP, stop_after or 0.0, deadline,
+                                   "a worker was stopped")
 
 
 @pytest.mark.slow  # a subprocess pool, a worker stopped for 1.5 s
 def test_a_worker_stopped_from_outside_is_replaced_and_the_map_completes(tmp_path):
-    code, out, err, took = _run(tmp_path, "plain", stop_after=0.5)
+    code, out, err = _run(tmp_path, "plain", stop_after=0.5)
     assert code == 0, err[-3000:]
     got = json.loads(out)
     assert got["results"] == [k * k for k in range(16)] and got["arrived"] == list(range(16))
@@ -91,7 +77,7 @@ def test_a_worker_stopped_from_outside_is_replaced_and_the_map_completes(tmp_pat
 
 @pytest.mark.slow  # a subprocess pool, a unit stopping its worker once
 def test_a_unit_whose_worker_stops_once_is_retried(tmp_path):
-    code, out, err, took = _run(tmp_path, "stop-once")
+    code, out, err = _run(tmp_path, "stop-once")
     assert code == 0, err[-3000:]
     assert json.loads(out)["results"] == [k * k for k in range(16)]
     assert "made no progress" in err and "unit 5 of 16" in err
@@ -99,7 +85,7 @@ def test_a_unit_whose_worker_stops_once_is_retried(tmp_path):
 
 @pytest.mark.slow  # a subprocess pool, a unit stopping its worker twice
 def test_a_unit_that_stalls_in_every_try_stops_the_map_in_one_line(tmp_path):
-    code, out, err, took = _run(tmp_path, "stop-always")
+    code, out, err = _run(tmp_path, "stop-always")
     assert code == 3, err[-3000:]
     line = [ln for ln in err.splitlines() if ln.startswith("WorkerDied:")]
     assert len(line) == 1 and "Traceback" not in err, err
@@ -109,7 +95,7 @@ def test_a_unit_that_stalls_in_every_try_stops_the_map_in_one_line(tmp_path):
 
 @pytest.mark.slow  # a 4 s unit under a 1.5 s stall limit
 def test_a_slow_unit_that_uses_the_cpu_is_never_taken_for_stalled(tmp_path):
-    code, out, err, took = _run(tmp_path, "slow")
+    code, out, err = _run(tmp_path, "slow")
     assert code == 0 and "no progress" not in err, err[-3000:]
     assert json.loads(out)["results"] == [k * k for k in range(16)]
 
@@ -138,41 +124,14 @@ def test_the_stall_limit_comes_from_the_environment_when_it_is_a_number(monkeypa
 
 
 @pytest.mark.slow  # a real lgp.reproduce run and its undisturbed twin (shared with test_worker_death)
-def test_reproduce_survives_a_worker_stopped_mid_effort_with_identical_csvs(tmp_path, undisturbed):
+def test_reproduce_survives_a_worker_stopped_mid_effort_with_identical_csvs(tmp_path, pool_run_undisturbed):
     """The issue's probe: `kill -STOP` one worker of a default (process-pool) run while
-    it plans (it hung forever at [effort] 11/12); with LGP_STALL_SECONDS=5 the run
+    it plans (it hung forever at [effort] 11/12); with LGP_STALL_SECONDS=2 the run
     replaces the worker, ends by itself, exit 0, with an undisturbed run's CSVs."""
-    import threading
-
-    from tests.test_worker_death import RUN, _csvs
-
-    env = {**os.environ, "PYTHONPATH": str(ROOT), STALL_ENV: "5"}
-    proc = subprocess.Popen(RUN + ["--out", str(tmp_path / "hit")], cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    lines, seen = [], threading.Event()
-
-    def read():
-        for line in proc.stderr:
-            lines.append(line)
-            if "[effort  1/2]" in line:
-                seen.set()
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
-    assert seen.wait(240), "".join(lines)[-3000:]
-    victims = _workers(proc.pid)
-    assert victims
-    os.kill(victims[0], signal.SIGSTOP)
-    try:
-        proc.wait(timeout=240)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        pytest.fail("the run hung after a worker was stopped:\n" + "".join(lines)[-3000:])
-    reader.join(5)
-    err = "".join(lines)
-    assert proc.returncode == 0, err[-3000:]
+    code, err = pool_run_signalling_a_worker(tmp_path / "hit", "[effort  1/2]", signal.SIGSTOP, **{STALL_ENV: "2"})
+    assert code == 0, err[-3000:]
     assert "made no progress" in err and "SIGSTOP" in err, err[-3000:]
-    want, got = _csvs(undisturbed), _csvs(tmp_path / "hit")
+    want, got = result_csvs(pool_run_undisturbed), result_csvs(tmp_path / "hit")
     for name in want:
         assert got[name].equals(want[name]), name
 
