@@ -131,80 +131,81 @@ def plot(series, path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--jobs", type=int, default=2)
-    p.add_argument("--small", action="store_true", help="a smoke run; writes nothing")
-    p.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
-    args = p.parse_args(argv)
-
+def measure(jobs: int, small: bool) -> dict:
+    """Every measurement of the benchmark: the backends on the paper's trials, the
+    growth series and the whole-set risk on a generated set, the machine before and after."""
     import stimuli
+    from lgp.executor import ProcessExecutor
     from lgp.paper import TRIAL_IDS
     from stimuli.generate import generate
 
     before = machine()
-    paper = [stimuli.load_trial(t) for t in (TRIAL_IDS[:4] if args.small else TRIAL_IDS)]
-    grid = dict(samples=1, sigmas=[0.065], n_sims=2 if args.small else 10)
+    paper = [stimuli.load_trial(t) for t in (TRIAL_IDS[:4] if small else TRIAL_IDS)]
+    grid = dict(samples=1, sigmas=[0.065], n_sims=2 if small else 10)
     print(f"backends on the paper's {len(paper)} trials, M = {grid['samples']}, N = {grid['n_sims']}, 1 sigma", flush=True)
-    rows = compare_backends(paper, grid["samples"], grid["sigmas"], grid["n_sims"], args.jobs)
+    rows = compare_backends(paper, grid["samples"], grid["sigmas"], grid["n_sims"], jobs)
 
     with tempfile.TemporaryDirectory() as tmp:
-        n_gen = 12 if args.small else 200
+        n_gen = 12 if small else 200
         t0 = time.perf_counter()
         paths = generate(tmp, n_gen, seed=0)
         t_gen = time.perf_counter() - t0
         trials = [stimuli.load_file(p) for p in paths]
-        counts = [2, 4] if args.small else [5, 10, 20, 40]
-        series = growth(trials, args.jobs, counts, [1, 2] if args.small else [1, 2, 4, 8],
-                        [2, 4] if args.small else [5, 10, 20, 40], [0.065])
+        counts = [2, 4] if small else [5, 10, 20, 40]
+        series = growth(trials, jobs, counts, [1, 2] if small else [1, 2, 4, 8],
+                        [2, 4] if small else [5, 10, 20, 40], [0.065])
         # risk on the whole generated set: the per-unit cost the projection uses
-        from lgp.executor import ProcessExecutor
+        with ProcessExecutor(jobs) as ex:
+            sims_all, t_all = risk_run(trials, [0.065], 2 if small else 5, ex)
+    return dict(before=before, after=machine(), paper=paper, grid=grid, rows=rows, n_gen=n_gen, t_gen=t_gen,
+                series=series, sims_all=sims_all, t_all=t_all)
 
-        with ProcessExecutor(args.jobs) as ex:
-            sims_all, t_all = risk_run(trials, [0.065], 2 if args.small else 5, ex)
-    after = machine()
-    if args.small:
-        return 0
 
-    png = ROOT / "docs" / "scale_loglog.png"
-    plot(series, png)
-    pool = rows[1]  # the process pool of --jobs processes: the default backend
-    # per-unit costs (core-seconds) from the process pool, for the projection
-    plan_cost = pool["effort_s"] * args.jobs / pool["plans"]
-    gen_plan_cost = series["effort vs trials (1 layout)"][-1][1] * args.jobs / series["effort vs trials (1 layout)"][-1][0]
-    sim_cost = t_all * args.jobs / sims_all
-    project_plans, project_sims, cores = 1000 * 30, 1000 * 11 * 100, 64
-    projection = (project_plans * gen_plan_cost + project_sims * sim_cost) / cores
-    dask_same = next(r for r in rows if r["backend"].startswith(f"LocalCluster, {args.jobs} worker"))
+def backend_lines(m: dict, jobs: int) -> list[str]:
+    """The section's head and its table of backends, with the verdict on Dask's overhead."""
+    rows, grid, pool = m["rows"], m["grid"], m["rows"][1]  # the process pool of --jobs processes: the default backend
+    dask_same = next(r for r in rows if r["backend"].startswith(f"LocalCluster, {jobs} worker"))
     overhead = (dask_same["effort_s"] + dask_same["risk_s"]) / (pool["effort_s"] + pool["risk_s"]) - 1
     lines = [
         "## scale",
         "",
-        f"`python bench/scale.py` (docs/scaling.md). Machine before: {before}; after: {after}. "
+        f"`python bench/scale.py` (docs/scaling.md). Machine before: {m['before']}; after: {m['after']}. "
         "The backends ran the same work units one after another in one script, so the ratios between them "
         "compare like with like; absolute times depend on the machine's load.",
         "",
-        f"### Process pool vs Dask LocalCluster (paper's {len(paper)} trials, M = {grid['samples']} layout, "
+        f"### Process pool vs Dask LocalCluster (paper's {len(m['paper'])} trials, M = {grid['samples']} layout, "
         f"N = {grid['n_sims']} runs at sigma = 0.065 d)",
         "",
-        f"| backend | start-up (s) | plans | effort (s) | plans/s | runs | risk (s) | runs/s | time vs pool of {args.jobs} |",
+        f"| backend | start-up (s) | plans | effort (s) | plans/s | runs | risk (s) | runs/s | time vs pool of {jobs} |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         ratio = (r["effort_s"] + r["risk_s"]) / (pool["effort_s"] + pool["risk_s"])
         lines.append(f"| {r['backend']} | {r['startup_s']:.1f} | {r['plans']} | {r['effort_s']:.1f} | {r['plans_per_s']:.3g} | "
                      f"{r['sims']} | {r['risk_s']:.1f} | {r['sims_per_s']:.3g} | {ratio:.2f} |")
-    lines += [
+    return lines + [
         "",
         f"The target, Dask within 10 % of the process pool of the same size, is {'met' if overhead <= 0.10 else 'not met'} "
-        f"in this measurement: a LocalCluster of {args.jobs} workers took {overhead * 100:+.0f} % of the pool's time "
+        f"in this measurement: a LocalCluster of {jobs} workers took {overhead * 100:+.0f} % of the pool's time "
         "(start-up excluded). The grid here is small (seconds of work), so fixed per-task costs weigh more than on "
         "the paper's full grid; the \"dask overhead\" section below splits such a gap into CPU inside the tasks and "
         "scheduling around them.",
+    ]
+
+
+def growth_lines(m: dict, jobs: int) -> list[str]:
+    """The generated set's series, their slopes, and the projection to 1,000 trials from their per-unit costs."""
+    series, sims_all, t_all, n_gen = m["series"], m["sims_all"], m["t_all"], m["n_gen"]
+    # per-unit costs (core-seconds) from the process pool, for the projection
+    gen_plan_cost = series["effort vs trials (1 layout)"][-1][1] * jobs / series["effort vs trials (1 layout)"][-1][0]
+    sim_cost = t_all * jobs / sims_all
+    project_plans, project_sims, cores = 1000 * 30, 1000 * 11 * 100, 64
+    projection = (project_plans * gen_plan_cost + project_sims * sim_cost) / cores
+    lines = [
         "",
-        f"### Generated set ({n_gen} trials from `python -m stimuli.generate --seed 0`, written and checked in {t_gen:.0f} s)",
+        f"### Generated set ({n_gen} trials from `python -m stimuli.generate --seed 0`, written and checked in {m['t_gen']:.0f} s)",
         "",
-        f"Process pool of {args.jobs}. Risk of all {n_gen} trials at N = 5, one sigma: {sims_all} runs in {t_all:.0f} s "
+        f"Process pool of {jobs}. Risk of all {n_gen} trials at N = 5, one sigma: {sims_all} runs in {t_all:.0f} s "
         f"({sims_all / t_all:.3g} runs/s).",
         "",
         "Series over trials take the first n trials of the set, which differ in size (2 to 16 blocks), so "
@@ -216,7 +217,7 @@ def main(argv=None) -> int:
     ]
     for name, pts in series.items():
         lines.append(f"| {name} | {', '.join(f'({n}, {s:.1f})' for n, s in pts)} | {slope(pts):.2f} |")
-    lines += [
+    return lines + [
         "",
         "![time against trials, layouts and runs](scale_loglog.png)",
         "",
@@ -229,6 +230,19 @@ def main(argv=None) -> int:
         "linearly in layouts and runs; a scheduler's per-unit cost comes on top, see above). Network transfer is small "
         "(a trial and a row per unit, docs/scaling.md).",
     ]
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--small", action="store_true", help="a smoke run; writes nothing")
+    p.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
+    args = p.parse_args(argv)
+    m = measure(args.jobs, args.small)
+    if args.small:
+        return 0
+    plot(m["series"], ROOT / "docs" / "scale_loglog.png")
+    lines = backend_lines(m, args.jobs) + growth_lines(m, args.jobs)
     write_section(Path(args.out), "scale", "\n".join(lines))
     print("\n".join(lines))
     return 0
