@@ -286,10 +286,6 @@ class ProcessExecutor:
         return dead
 
     def map(self, fn, items, on_result=None) -> list:
-        from collections import deque
-        from concurrent.futures import ALL_COMPLETED, FIRST_COMPLETED, wait
-        from concurrent.futures.process import BrokenProcessPool
-
         items = list(items)
         results: list = [None] * len(items)
         if not items:
@@ -297,78 +293,93 @@ class ProcessExecutor:
         todo = set(range(len(items)))
         tries = [0] * len(items)
         restarts = 0
-        window = 2 * self.jobs + 2
         try:
             while todo:
-                pool = self._get_pool()
-                queue = deque(sorted(todo))
-                inflight: dict = {}
-                broken = False
-                while (queue or inflight) and not broken:
-                    try:  # a few units ahead of the workers, not the whole list at once
-                        while queue and len(inflight) < window:
-                            inflight[pool.submit(_tracked, fn, queue[0], items[queue[0]])] = queue[0]
-                            queue.popleft()
-                    except BrokenProcessPool:  # a worker died between maps, or just now
-                        broken = True
-                    self._processes()
-                    if not broken:
-                        self._watchdog()
-                    done, _ = wait(list(inflight), timeout=10.0 if broken else 1.0, return_when=ALL_COMPLETED if broken else FIRST_COMPLETED)
-                    for f in done:
-                        k = inflight.pop(f)
-                        error = f.exception()
-                        if isinstance(error, BrokenProcessPool):
-                            broken = True
-                            continue
-                        if error is not None:
-                            raise error
-                        results[k] = f.result()
-                        todo.discard(k)
-                        if on_result is not None:
-                            on_result(k, results[k])
-                    if broken and inflight:  # the break fails every future still pending, at once
-                        done, _ = wait(list(inflight), timeout=10.0)
-                        for f in done:
-                            k = inflight.pop(f)
-                            if f.exception() is None:
-                                results[k] = f.result()
-                                todo.discard(k)
-                                if on_result is not None:
-                                    on_result(k, results[k])
-                if not broken:
+                if not self._run_on_pool(fn, items, todo, results, on_result):
                     continue
-                # The pool is broken: which worker died, running what?
-                dead = self._post_mortem(todo)
-                # A broken pool SIGTERMs its other workers: those died of the break, not of their units.
-                first = [d for d in dead if d[2] != "SIGTERM"]
-                dead = first or dead
-                self._discard_pool()
                 restarts += 1
-                self.restarts += 1
-                culprits = [(pid, k, how) for pid, k, how in dead if k is not None]
-                for _, k, _ in culprits:
-                    tries[k] += 1
-                what = "; ".join(_worker_fate(pid, how) + (
-                    f" while running unit {k} of {len(items)}, {describe_unit(fn, items[k])}" if k is not None else "")
-                    for pid, k, how in dead) or "a worker process died"
-                worst = max(culprits, key=lambda c: tries[c[1]], default=None)
-                if worst is not None and tries[worst[1]] >= MAX_TRIES:
-                    pid, k, how = worst
-                    fate = "stalled" if how.startswith("made no progress") else "died"
-                    raise WorkerDied(f"{_worker_fate(pid, how)} while running unit {k} of {len(items)}, "
-                                     f"{describe_unit(fn, items[k])}: its worker {fate} in each of its {tries[k]} tries; "
-                                     "stopped (results that arrived are kept)", unit=k, signal=how)
-                if restarts > MAX_RESTARTS:
-                    k = worst[1] if worst else None
-                    raise WorkerDied(f"{what}; {restarts} broken pools in one map, gave up "
-                                     "(results that arrived are kept)", unit=k, signal=worst[2] if worst else None)
-                print(f"lgp.executor: {what}; starting new workers and resubmitting the {len(todo)} unfinished "
-                      f"unit(s) (restart {restarts} of at most {MAX_RESTARTS})", file=sys.stderr, flush=True)
+                self._after_break(fn, items, todo, tries, restarts)
         except BaseException:
             self.terminate()
             raise
         return results
+
+    def _run_on_pool(self, fn, items, todo: set[int], results: list, on_result) -> bool:
+        """Run the units `todo` on the pool (a few ahead of the workers, not the whole
+        list at once), filling `results` and emptying `todo`; True when the pool broke
+        (a worker died), with every result that arrived kept."""
+        from collections import deque
+        from concurrent.futures import ALL_COMPLETED, FIRST_COMPLETED, wait
+        from concurrent.futures.process import BrokenProcessPool
+
+        def arrived(k, f):
+            results[k] = f.result()
+            todo.discard(k)
+            if on_result is not None:
+                on_result(k, results[k])
+
+        window = 2 * self.jobs + 2
+        pool = self._get_pool()
+        queue = deque(sorted(todo))
+        inflight: dict = {}
+        broken = False
+        while (queue or inflight) and not broken:
+            try:
+                while queue and len(inflight) < window:
+                    inflight[pool.submit(_tracked, fn, queue[0], items[queue[0]])] = queue[0]
+                    queue.popleft()
+            except BrokenProcessPool:  # a worker died between maps, or just now
+                broken = True
+            self._processes()
+            if not broken:
+                self._watchdog()
+            done, _ = wait(list(inflight), timeout=10.0 if broken else 1.0, return_when=ALL_COMPLETED if broken else FIRST_COMPLETED)
+            for f in done:
+                k = inflight.pop(f)
+                error = f.exception()
+                if isinstance(error, BrokenProcessPool):
+                    broken = True
+                    continue
+                if error is not None:
+                    raise error
+                arrived(k, f)
+            if broken and inflight:  # the break fails every future still pending, at once
+                done, _ = wait(list(inflight), timeout=10.0)
+                for f in done:
+                    k = inflight.pop(f)
+                    if f.exception() is None:
+                        arrived(k, f)
+        return broken
+
+    def _after_break(self, fn, items, todo: set[int], tries: list[int], restarts: int) -> None:
+        """The pool broke: find which worker died running what, count a try against
+        its unit, and raise WorkerDied when a unit killed its worker MAX_TRIES times or
+        the map broke more than MAX_RESTARTS pools; else say so and let new workers go on."""
+        dead = self._post_mortem(todo)
+        # A broken pool SIGTERMs its other workers: those died of the break, not of their units.
+        first = [d for d in dead if d[2] != "SIGTERM"]
+        dead = first or dead
+        self._discard_pool()
+        self.restarts += 1
+        culprits = [(pid, k, how) for pid, k, how in dead if k is not None]
+        for _, k, _ in culprits:
+            tries[k] += 1
+        what = "; ".join(_worker_fate(pid, how) + (
+            f" while running unit {k} of {len(items)}, {describe_unit(fn, items[k])}" if k is not None else "")
+            for pid, k, how in dead) or "a worker process died"
+        worst = max(culprits, key=lambda c: tries[c[1]], default=None)
+        if worst is not None and tries[worst[1]] >= MAX_TRIES:
+            pid, k, how = worst
+            fate = "stalled" if how.startswith("made no progress") else "died"
+            raise WorkerDied(f"{_worker_fate(pid, how)} while running unit {k} of {len(items)}, "
+                             f"{describe_unit(fn, items[k])}: its worker {fate} in each of its {tries[k]} tries; "
+                             "stopped (results that arrived are kept)", unit=k, signal=how)
+        if restarts > MAX_RESTARTS:
+            k = worst[1] if worst else None
+            raise WorkerDied(f"{what}; {restarts} broken pools in one map, gave up "
+                             "(results that arrived are kept)", unit=k, signal=worst[2] if worst else None)
+        print(f"lgp.executor: {what}; starting new workers and resubmitting the {len(todo)} unfinished "
+              f"unit(s) (restart {restarts} of at most {MAX_RESTARTS})", file=sys.stderr, flush=True)
 
     def _discard_pool(self) -> None:
         """Forget a broken pool (its workers are gone or being terminated)."""
