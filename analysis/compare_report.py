@@ -138,10 +138,19 @@ def comparison_lines(analysis: dict, markdown) -> list[str]:
              "Direct bootstrap tests, Eq. 1 against effort-only:", "",
              markdown(tests_table(analysis["model_comparison_tests"])), "",
              widening_text(analysis["model_comparison"]), ""]
+    if "model_comparison_held_out_permutation" in analysis:
+        perm = analysis["model_comparison_held_out_permutation"]
+        lines += ["**The decision: the held-out comparison test (calibrated).** p of \"model_a predicts held-out "
+                  "trials better than model_b\": the held-out RMSE difference on folds by structure against its "
+                  "Freedman-Lane null (residuals of model_b's fit permuted, everything refit, sigma inside every "
+                  "fold; analysis.crossval.permuted):", "",
+                  markdown(perm[["dataset", "model_a", "model_b", "rmse_a", "rmse_b", "observed", "n_perm",
+                                 "p_value"]].round(4)), ""]
     if "model_comparison_held_out_tests" in analysis:
         held = analysis["model_comparison_held_out_tests"]
-        lines += ["Held-out comparison paired over folds (calibrated; sign-flip of the per-fold squared-error "
-                  "differences, p of \"model_a predicts held-out trials better than model_b\"):", "",
+        lines += ["Held-out comparison paired over folds (sign-flip of the per-fold squared-error differences, "
+                  "NOT CALIBRATED: conservative for the richer model, anti-conservative for the simpler one; shown "
+                  "to compare, not to decide), p of \"model_a predicts held-out trials better than model_b\":", "",
                   markdown(held.assign(p_value=held["p_value"].round(4), sse_a=held["sse_a"].round(4),
                                        sse_b=held["sse_b"].round(4))), ""]
     if "permutation_test" in analysis:

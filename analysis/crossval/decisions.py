@@ -25,9 +25,15 @@ def direct_p(better: np.ndarray, worse: np.ndarray, higher_is_better: bool) -> f
     return float(np.mean(~wins))
 
 
-#: How the direct bootstrap test is labelled in every table: its intervals of resampled
-#: trial means carry extra noise, so out of sample it is biased toward the simpler model.
-DIRECT_METHOD = "direct bootstrap (paper's method; biased toward the simpler model held out)"
+#: How the direct bootstrap test is labelled in every table: resampled trial means carry
+#: extra noise, so out of sample it is biased toward the simpler model. Its false-positive
+#: rate is measured in SIMULATED null studies (bench/analysis_power.py, docs/results.md).
+DIRECT_METHOD = ("direct bootstrap (paper's method, NOT CALIBRATED: false-positive rate 0.0% for Eq. 1 over "
+                 "effort-only, biased toward the simpler model held out; decide by the held-out permutation test)")
+#: How the sign-flip over folds is labelled: under the null the richer model's held-out error is
+#: larger on average (over-fitting), so its per-fold differences are not symmetric about 0.
+SIGN_FLIP_METHOD = ("sign-flip over folds, NOT CALIBRATED: false-positive rate 0.3-0.5% for Eq. 1 over effort-only, "
+                    "11-13% for effort + height or stacked over Eq. 1; decide by the held-out permutation test")
 
 
 def comparison_tests(point: pd.DataFrame, boot: pd.DataFrame, comparisons: Sequence[tuple[str, str]],
@@ -104,7 +110,8 @@ def sign_flip_p(d: np.ndarray, rng: np.random.Generator | None = None) -> np.nda
 
 
 def held_out_tests(cv_predictions: pd.DataFrame, comparisons: Sequence[tuple[str, str]]) -> pd.DataFrame:
-    """The held-out comparison test paired over folds, per dataset, cross-validated
+    """The held-out comparison paired over folds (NOT CALIBRATED, SIGN_FLIP_METHOD; the
+    calibrated test is crossval.permuted.held_out_permutation_tests), per dataset, cross-validated
     scheme and comparison (a, b): d_f = SSE_b,f - SSE_a,f over the trials fold f
     holds out, p of "a predicts held-out trials better than b" by `sign_flip_p`.
     `cv_predictions` from crossval.model_comparison. Returns dataset, scheme,
@@ -125,6 +132,6 @@ def held_out_tests(cv_predictions: pd.DataFrame, comparisons: Sequence[tuple[str
             p = float(sign_flip_p(d[None])[0])
             method = "exact" if len(order) <= SIGN_FLIP_EXACT else f"{SIGN_FLIP_DRAWS} random flips"
             rows.append((dataset, scheme, a, b, float(sq_a.sum()), float(sq_b.sum()), len(order), p,
-                         f"sign-flip over folds ({method})"))
+                         f"{SIGN_FLIP_METHOD} ({method})"))
     return pd.DataFrame(rows, columns=["dataset", "scheme", "model_a", "model_b", "sse_a", "sse_b", "n_folds",
                                        "p_value", "method"])

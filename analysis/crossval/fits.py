@@ -78,30 +78,7 @@ def cv_arrays(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray], mod
     preds = {m: np.full((B, D, T), np.nan) for m in models}
     if "effort" in models:
         _scatter(preds["effort"], gy, test)
-    for m, spec in specs.items():
-        if spec.feature is None:
-            continue
-        if features is None or spec.feature not in features:
-            raise ModelInputError(f"model {m} needs the heuristic predictor {spec.feature!r} per trial")
-        h = np.asarray(features[spec.feature], dtype=float)
-        htr = h[train]                                                   # (F, n_tr)
-        if spec.reads_effort:   # effort + h: the part of h that 1 and E do not explain in training
-            z = np.einsum("fij,fj->fi", M, htr)
-            zz = np.einsum("fi,fi->f", z, z)
-            absent = zz <= COLLINEAR_REL ** 2 * np.einsum("fi,fi->f", htr, htr)
-            zy = np.einsum("fi,bfdi->bfd", z, ey)
-            c = np.where(absent[None, :, None], 0.0, zy / np.where(absent, 1.0, zz)[None, :, None])
-            dh = h[test] - np.einsum("fij,fj->fi", G, htr)               # (F, n_te)
-            _scatter(preds[m], gy + c[..., None] * dh[None, :, None, :], test)
-        else:                   # h alone: y = b0 + b1 h
-            hmean = htr.mean(axis=-1)
-            hc = htr - hmean[:, None]
-            hh = np.einsum("fi,fi->f", hc, hc)
-            flat = hh <= COLLINEAR_REL ** 2 * np.einsum("fi,fi->f", htr, htr)
-            hy = np.einsum("fi,bfdi->bfd", hc, yc)
-            slope = np.where(flat[None, :, None], 0.0, hy / np.where(flat, 1.0, hh)[None, :, None])
-            dh = h[test] - hmean[:, None]
-            _scatter(preds[m], ymean[..., None] + slope[..., None] * dh[None, :, None, :], test)
+    _heuristic_predictions(preds, specs, features, M, G, ey, gy, ymean, yc, train, test)
     chosen = {}
     for source in dict.fromkeys(spec.source for spec in specs.values() if spec.source is not None):
         R = _as_batch(risks[source])                   # (Bx, S, T)
@@ -142,6 +119,37 @@ def cv_arrays(Y: np.ndarray, E: np.ndarray, risks: Mapping[str, np.ndarray], mod
             s_at = np.take_along_axis(slope, pick[:, None], axis=1)[:, 0]
             _scatter(preds[risk_name], ymean[..., None] + s_at[..., None] * _at_sigma(dr, pick), test)
     return preds, chosen
+
+
+def _heuristic_predictions(preds, specs, features, M, G, ey, gy, ymean, yc, train, test) -> None:
+    """The heuristic models' held-out predictions into `preds` (cv_arrays' operators:
+    M, G per fold; ey, gy effort residuals and predictions; ymean, yc training means
+    and centred values): ``effort+h`` through the part of h beyond 1 and E, ``h``
+    alone as y = b0 + b1 h."""
+    for m, spec in specs.items():
+        if spec.feature is None:
+            continue
+        if features is None or spec.feature not in features:
+            raise ModelInputError(f"model {m} needs the heuristic predictor {spec.feature!r} per trial")
+        h = np.asarray(features[spec.feature], dtype=float)
+        htr = h[train]                                                   # (F, n_tr)
+        if spec.reads_effort:   # effort + h: the part of h that 1 and E do not explain in training
+            z = np.einsum("fij,fj->fi", M, htr)
+            zz = np.einsum("fi,fi->f", z, z)
+            absent = zz <= COLLINEAR_REL ** 2 * np.einsum("fi,fi->f", htr, htr)
+            zy = np.einsum("fi,bfdi->bfd", z, ey)
+            c = np.where(absent[None, :, None], 0.0, zy / np.where(absent, 1.0, zz)[None, :, None])
+            dh = h[test] - np.einsum("fij,fj->fi", G, htr)               # (F, n_te)
+            _scatter(preds[m], gy + c[..., None] * dh[None, :, None, :], test)
+        else:                   # h alone: y = b0 + b1 h
+            hmean = htr.mean(axis=-1)
+            hc = htr - hmean[:, None]
+            hh = np.einsum("fi,fi->f", hc, hc)
+            flat = hh <= COLLINEAR_REL ** 2 * np.einsum("fi,fi->f", htr, htr)
+            hy = np.einsum("fi,bfdi->bfd", hc, yc)
+            slope = np.where(flat[None, :, None], 0.0, hy / np.where(flat, 1.0, hh)[None, :, None])
+            dh = h[test] - hmean[:, None]
+            _scatter(preds[m], ymean[..., None] + slope[..., None] * dh[None, :, None, :], test)
 
 
 def _at_sigma(a: np.ndarray, pick: np.ndarray) -> np.ndarray:
