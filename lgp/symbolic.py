@@ -204,6 +204,48 @@ class SymbolicPlan:
         return " -> ".join(map(str, self.actions))
 
 
+def _staying(initial: Scene, target_of: dict, support_A: dict, fixed_names: set[str]) -> dict[str, bool]:
+    """For every block of A: whether it stays where it is, already at its target pose
+    on supports that also stay (pair 9-E moves 2 blocks)."""
+    stays: dict[str, bool] = {}
+
+    def stays_put(a: str) -> bool:
+        if a not in stays:
+            stays[a] = False  # guards against cycles while recursing
+            block, goal = initial.block(a), target_of.get(a)
+            stays[a] = (
+                goal is not None
+                and same_pose(block.p_WB, block.yaw, goal.p_WB, goal.yaw, block.size)
+                and all(s in fixed_names or stays_put(s) for s in support_A[a])
+            )
+        return stays[a]
+
+    for a in initial.names:
+        stays_put(a)
+    return stays
+
+
+def _swap_targets(initial: Scene, target: Scene, covered: str, clear: list[str], target_of: dict,
+                  block_of_target: dict) -> str:
+    """The clear block of `covered`'s colour that takes its target, the pair that
+    adds the least distance swapping targets (in `target_of` and `block_of_target`)."""
+    swaps = [c for c in clear if initial.block(c).colour == initial.block(covered).colour]
+    if not swaps:
+        raise SymbolicPlanningError(
+            f"{initial.label} -> {target.label}: {covered} must go to {target_of[covered].name} next but is covered, "
+            "and no clear block of its colour can take its place"
+        )
+
+    def added(c):
+        pc, pa = initial.block(c).p_WB, initial.block(covered).p_WB
+        return np.linalg.norm(pc - target_of[covered].p_WB) + np.linalg.norm(pa - target_of[c].p_WB)
+
+    a = min(swaps, key=added)
+    target_of[a], target_of[covered] = target_of[covered], target_of[a]
+    block_of_target[target_of[a].name], block_of_target[target_of[covered].name] = a, covered
+    return a
+
+
 def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> SymbolicPlan:
     """Order grasp/place actions so B is built from the ground up.
 
@@ -222,21 +264,9 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
     support_B = support_graph(target)
     fixed_names = {f.name for f in initial.fixed} | {TABLE}
 
-    stays: dict[str, bool] = {}
-
-    def stays_put(a: str) -> bool:
-        if a not in stays:
-            stays[a] = False  # guards against cycles while recursing
-            block, goal = initial.block(a), target_of.get(a)
-            stays[a] = (
-                goal is not None
-                and same_pose(block.p_WB, block.yaw, goal.p_WB, goal.yaw, block.size)
-                and all(s in fixed_names or stays_put(s) for s in support_A[a])
-            )
-        return stays[a]
-
-    to_move = [a for a in initial.names if a in target_of and not stays_put(a)]
-    in_place = {a for a in target_of if stays_put(a)}
+    stays = _staying(initial, target_of, support_A, fixed_names)
+    to_move = [a for a in initial.names if a in target_of and not stays[a]]
+    in_place = {a for a in target_of if stays[a]}
 
     def onto(a: str) -> tuple[str, ...]:
         return tuple(s if s in fixed_names else block_of_target[s] for s in support_B[target_of[a].name])
@@ -264,21 +294,7 @@ def symbolic_plan(initial: Scene, target: Scene, assignment: dict[str, str]) -> 
             # separately): the block assigned to the lowest ready target is covered,
             # so a clear block of the same colour takes its role, the pair that adds
             # the least distance swapping targets.
-            _, _, covered = min(ready)
-            swaps = [c for c in clear if initial.block(c).colour == initial.block(covered).colour]
-            if not swaps:
-                raise SymbolicPlanningError(
-                    f"{initial.label} -> {target.label}: {covered} must go to {target_of[covered].name} next but is covered, "
-                    "and no clear block of its colour can take its place"
-                )
-
-            def added(c):
-                pc, pa = initial.block(c).p_WB, initial.block(covered).p_WB
-                return np.linalg.norm(pc - target_of[covered].p_WB) + np.linalg.norm(pa - target_of[c].p_WB)
-
-            a = min(swaps, key=added)
-            target_of[a], target_of[covered] = target_of[covered], target_of[a]
-            block_of_target[target_of[a].name], block_of_target[target_of[covered].name] = a, covered
+            a = _swap_targets(initial, target, min(ready)[2], clear, target_of, block_of_target)
         else:
             raise SymbolicPlanningError(
                 f"{initial.label} -> {target.label}: no legal move for blocks {', '.join(to_move)} "
