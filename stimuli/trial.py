@@ -138,10 +138,9 @@ def _fixed(where: str, data: list) -> tuple[FixedBox, ...]:
     return tuple(boxes)
 
 
-def parse_trial(data: dict, path: Path | None = None) -> Trial:
-    """Build and validate a Trial from the mapping in a trial file."""
-    where = str(data.get("id", path)) if isinstance(data, dict) else str(path)
-    _check_keys(where, data, _TRIAL_KEYS)
+def _trial_id(data: dict, path: Path | None) -> tuple[str, int | None, str | None]:
+    """(id, pair, level) of a trial file: a paper-style id <pair><E|H> whose pair and
+    level fields agree with it, or a free name (of no pair) without them."""
     tid = str(data.get("id", ""))
     m = TRIAL_ID.match(tid)
     if m:
@@ -155,6 +154,60 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     else:
         raise StimulusError(f"{path}: trial id {tid!r} is neither of the form <pair><E|H> (e.g. 7H) nor a name of "
                             "capital letters, digits, _ and - starting with a letter (e.g. G0001; ids are upper case)")
+    return tid, pair, level
+
+
+def _scattered(tid: str, s: dict, n_listed: int) -> tuple[tuple, ScatterRegion, dict]:
+    """(names and colours, region, {min_gap, clearance}) of A's scattered blocks,
+    checked: the region inside the workspace, the gaps in range, and the room for
+    the count before any list of that length is made; `n_listed` blocks are listed besides."""
+    _check_keys(f"{tid}-A scattered", s, _SCATTER_KEYS)
+    where = f"{tid}-A scattered"
+    r = s.get("region") or {}
+    _check_keys(f"{where} region", r, {"x", "y", "r_S"})
+    if "x" not in r or "y" not in r:
+        raise StimulusError(f"{where} region: needs x: [min, max] and y: [min, max]")
+    region = ScatterRegion(_range(f"{where} region x", r["x"]), _range(f"{where} region y", r["y"]),
+                           _range(f"{where} region r_S", r["r_S"]) if "r_S" in r else None)
+    kw = {k: _number(f"{where} {k}", s[k]) for k in ("min_gap", "clearance") if k in s}
+    for k, v in kw.items():
+        if not 0.0 <= v <= SOLID_SIZE[1]:
+            raise StimulusError(f"{tid}-A scattered {k}: {v} m must lie in [0, {SOLID_SIZE[1]:g}] m")
+    bounds = [*region.x, *region.y, *(region.r_S or ())]
+    if not (np.all(np.isfinite(bounds)) and np.all(np.abs(bounds[:4]) <= WORKSPACE_XY)
+            and region.x[0] <= region.x[1] and region.y[0] <= region.y[1]):
+        raise StimulusError(f"{tid}-A scattered region: x {region.x}, y {region.y} must be finite ranges "
+                            f"[min, max] inside the workspace |x|, |y| <= {WORKSPACE_XY:g} m")
+    if "colours" in s:
+        colours = [_text(f"{where} colours", c) for c in _blocks(where, s["colours"], n_listed, "colours")]
+    else:
+        count = _integer(f"{where} count", s.get("count", 0), 0)
+        # the room first: a count of 10**12 must not become a list of 10**12 colours
+        room_check(f"{tid}-A", count, region, kw.get("min_gap", StartState.min_gap),
+                   kw.get("clearance", StartState.clearance))
+        _too_many(where, count + n_listed, "count")
+        colours = [_text(f"{where} colour", s.get("colour", "natural"))] * count
+    prefix = _text(f"{where} prefix", s.get("prefix", "s"))
+    scattered = tuple((f"{prefix}{i + 1}", c) for i, c in enumerate(colours))
+    return scattered, region, kw
+
+
+def _recolour(tid: str, rc: dict, n_listed: int) -> tuple[int, str]:
+    """(count, colour) of A's listed blocks to recolour: at most the `n_listed` listed."""
+    _check_keys(f"{tid}-A recolour", rc, {"count", "colour"})
+    if "count" not in rc or "colour" not in rc:
+        raise StimulusError(f"{tid}-A recolour: needs count and colour")
+    recolour = (_integer(f"{tid}-A recolour count", rc["count"], 0), _text(f"{tid}-A recolour colour", rc["colour"]))
+    if recolour[0] > n_listed:
+        raise StimulusError(f"{tid}-A recolour: {recolour[0]} blocks asked, only {n_listed} listed")
+    return recolour
+
+
+def parse_trial(data: dict, path: Path | None = None) -> Trial:
+    """Build and validate a Trial from the mapping in a trial file."""
+    where = str(data.get("id", path)) if isinstance(data, dict) else str(path)
+    _check_keys(where, data, _TRIAL_KEYS)
+    tid, pair, level = _trial_id(data, path)
     fixed = _fixed(f"{tid} fixed", data.get("fixed"))
     build_site = tuple(_vector(f"{tid} build_site", data.get("build_site", list(BUILD_SITE)), 2))
     if not (np.all(np.isfinite(build_site)) and np.all(np.abs(build_site) <= WORKSPACE_XY)):
@@ -170,46 +223,8 @@ def parse_trial(data: dict, path: Path | None = None) -> Trial:
     _check_keys(f"{tid}-A", init, _INITIAL_KEYS)
     fixed_blocks = tuple(_block(f"{tid}-A", b) for b in _blocks(f"{tid}-A", init.get("blocks", [])))
     Scene(fixed_blocks, fixed, f"{tid}-A").validate()
-    scattered, region, kw = (), None, {}
-    if "scattered" in init:
-        s = init["scattered"]
-        _check_keys(f"{tid}-A scattered", s, _SCATTER_KEYS)
-        where = f"{tid}-A scattered"
-        r = s.get("region") or {}
-        _check_keys(f"{where} region", r, {"x", "y", "r_S"})
-        if "x" not in r or "y" not in r:
-            raise StimulusError(f"{where} region: needs x: [min, max] and y: [min, max]")
-        region = ScatterRegion(_range(f"{where} region x", r["x"]), _range(f"{where} region y", r["y"]),
-                               _range(f"{where} region r_S", r["r_S"]) if "r_S" in r else None)
-        kw = {k: _number(f"{where} {k}", s[k]) for k in ("min_gap", "clearance") if k in s}
-        for k, v in kw.items():
-            if not 0.0 <= v <= SOLID_SIZE[1]:
-                raise StimulusError(f"{tid}-A scattered {k}: {v} m must lie in [0, {SOLID_SIZE[1]:g}] m")
-        bounds = [*region.x, *region.y, *(region.r_S or ())]
-        if not (np.all(np.isfinite(bounds)) and np.all(np.abs(bounds[:4]) <= WORKSPACE_XY)
-                and region.x[0] <= region.x[1] and region.y[0] <= region.y[1]):
-            raise StimulusError(f"{tid}-A scattered region: x {region.x}, y {region.y} must be finite ranges "
-                                f"[min, max] inside the workspace |x|, |y| <= {WORKSPACE_XY:g} m")
-        if "colours" in s:
-            colours = [_text(f"{where} colours", c) for c in _blocks(where, s["colours"], len(fixed_blocks), "colours")]
-        else:
-            count = _integer(f"{where} count", s.get("count", 0), 0)
-            # the room first: a count of 10**12 must not become a list of 10**12 colours
-            room_check(f"{tid}-A", count, region, kw.get("min_gap", StartState.min_gap),
-                       kw.get("clearance", StartState.clearance))
-            _too_many(where, count + len(fixed_blocks), "count")
-            colours = [_text(f"{where} colour", s.get("colour", "natural"))] * count
-        prefix = _text(f"{where} prefix", s.get("prefix", "s"))
-        scattered = tuple((f"{prefix}{i + 1}", c) for i, c in enumerate(colours))
-    recolour = None
-    if "recolour" in init:
-        rc = init["recolour"]
-        _check_keys(f"{tid}-A recolour", rc, {"count", "colour"})
-        if "count" not in rc or "colour" not in rc:
-            raise StimulusError(f"{tid}-A recolour: needs count and colour")
-        recolour = (_integer(f"{tid}-A recolour count", rc["count"], 0), _text(f"{tid}-A recolour colour", rc["colour"]))
-        if recolour[0] > len(fixed_blocks):
-            raise StimulusError(f"{tid}-A recolour: {recolour[0]} blocks asked, only {len(fixed_blocks)} listed")
+    scattered, region, kw = _scattered(tid, init["scattered"], len(fixed_blocks)) if "scattered" in init else ((), None, {})
+    recolour = _recolour(tid, init["recolour"], len(fixed_blocks)) if "recolour" in init else None
     names = [b.name for b in fixed_blocks] + [n for n, _ in scattered]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
