@@ -119,12 +119,7 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
     cameras = {tid: trial_camera(both, *size) for tid, both in scenes.items()}
     code = _code_version()
     record_path = out / "renders.json"
-    old = {}
-    if record_path.exists():
-        try:
-            old = {p["file"]: p for p in json.loads(record_path.read_text()).get("pictures", [])}
-        except (ValueError, KeyError, TypeError):
-            old = {}
+    old = _previous(record_path)
     out.mkdir(parents=True, exist_ok=True)
     rows, todo = [], []
     scratch = tempfile.TemporaryDirectory(prefix="lgp-scenes-")
@@ -142,48 +137,70 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
         scene_file.write_bytes(pickle.dumps(scene))
         todo.append((str(scene_file), str(out / name), camera))
     t0 = time.perf_counter()
-    seconds: list[float] = []
-    if todo:
-        if executor is not None:  # warm workers: a chunk costs one renderer (0.2 s) and its first picture's shaders
-            jobs = max(1, min(getattr(executor, "jobs", 1), len(todo)))
-        else:  # a fresh process costs a second or two to start (pydrake, shaders): worth it for many pictures only
-            jobs = max(1, min(jobs, len(todo) // 8))
-        kept = len(rows) - len(todo)
-        log(f"rendering {len(todo)} of {len(rows)} pictures ({size[0]}x{size[1]}, RenderEngineVtk) with {jobs} process(es)"
-            + (f"; {kept} reused from {_where(out)}" if kept else ""))
-        chunks = [todo[i::jobs] for i in range(jobs)]
-        if executor is not None:
-            import functools
-
-            for s in executor.map(_render_chunk, chunks):
-                seconds += s
-        elif jobs == 1:
-            seconds = _render_chunk(chunks[0])
-        else:
-            import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor
-
-            with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
-                for s in pool.map(_render_chunk, chunks):
-                    seconds += s
-    else:
-        log(f"all {len(rows)} pictures reused from {_where(out)}")
+    _render_all(todo, len(rows), size, jobs, executor, log, out)
     scratch.cleanup()
     for r in rows:
         r["sha256"] = _sha256(out / r["file"])
-    record = {"renderer": "drake RenderEngineVtk (VTK OpenGL, offscreen)", "seed": seed, "layout": layout,
-              "layout_of_A": ("sample 0 of the seed for every trial: models.effort.sample_rng(seed, 0)" if layout == "sample0" else
-                              "a trial of pair p: sample p - 1 of the seed (models.effort.sample_rng(seed, p - 1)); no pair: sample 0"),
-              "camera": {"elevation_deg": ELEVATION_DEG, "azimuth_deg": AZIMUTH_DEG, "fov_y_deg": FOV_Y_DEG,
-                         "width": size[0], "height": size[1], "min_area_m": MIN_AREA,
-                         "fit": "one camera per trial, the same for its A and B, framing both scenes (stimuli.render.trial_camera)"},
-              "cameras": {tid: cam.as_dict() for tid, cam in cameras.items()},
-              "code": code, "rendered": len(todo), "render_seconds": round(time.perf_counter() - t0, 2),
-              "pictures": rows}
+    record = _run_record(seed, layout, size, cameras, code, len(todo), time.perf_counter() - t0, rows)
     tmp = record_path.with_name(".renders.json.tmp")
     tmp.write_text(json.dumps(record, indent=1) + "\n")
     os.replace(tmp, record_path)
     return record
+
+
+def _previous(record_path: Path) -> dict:
+    """file -> row of the pictures the last run into the folder recorded ({} when none, or unreadable)."""
+    if not record_path.exists():
+        return {}
+    try:
+        return {p["file"]: p for p in json.loads(record_path.read_text()).get("pictures", [])}
+    except (ValueError, KeyError, TypeError):
+        return {}
+
+
+def _render_all(todo: list, n_pictures: int, size, jobs: int, executor, log, out: Path) -> list[float]:
+    """Render the pictures `todo` (of `n_pictures`), one chunk per process: the
+    executor's warm workers, else fresh spawned processes when there are many
+    pictures; seconds each. Says what it renders and what it reuses."""
+    if not todo:
+        log(f"all {n_pictures} pictures reused from {_where(out)}")
+        return []
+    seconds: list[float] = []
+    if executor is not None:  # warm workers: a chunk costs one renderer (0.2 s) and its first picture's shaders
+        jobs = max(1, min(getattr(executor, "jobs", 1), len(todo)))
+    else:  # a fresh process costs a second or two to start (pydrake, shaders): worth it for many pictures only
+        jobs = max(1, min(jobs, len(todo) // 8))
+    kept = n_pictures - len(todo)
+    log(f"rendering {len(todo)} of {n_pictures} pictures ({size[0]}x{size[1]}, RenderEngineVtk) with {jobs} process(es)"
+        + (f"; {kept} reused from {_where(out)}" if kept else ""))
+    chunks = [todo[i::jobs] for i in range(jobs)]
+    if executor is not None:
+        for s in executor.map(_render_chunk, chunks):
+            seconds += s
+    elif jobs == 1:
+        seconds = _render_chunk(chunks[0])
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
+            for s in pool.map(_render_chunk, chunks):
+                seconds += s
+    return seconds
+
+
+def _run_record(seed: int, layout: str, size, cameras: dict, code: str, rendered: int, render_seconds: float,
+                rows: list) -> dict:
+    """The run's record (renders.json): renderer, seed, layout, cameras, code and every picture."""
+    return {"renderer": "drake RenderEngineVtk (VTK OpenGL, offscreen)", "seed": seed, "layout": layout,
+            "layout_of_A": ("sample 0 of the seed for every trial: models.effort.sample_rng(seed, 0)" if layout == "sample0" else
+                            "a trial of pair p: sample p - 1 of the seed (models.effort.sample_rng(seed, p - 1)); no pair: sample 0"),
+            "camera": {"elevation_deg": ELEVATION_DEG, "azimuth_deg": AZIMUTH_DEG, "fov_y_deg": FOV_Y_DEG,
+                       "width": size[0], "height": size[1], "min_area_m": MIN_AREA,
+                       "fit": "one camera per trial, the same for its A and B, framing both scenes (stimuli.render.trial_camera)"},
+            "cameras": {tid: cam.as_dict() for tid, cam in cameras.items()},
+            "code": code, "rendered": rendered, "render_seconds": round(render_seconds, 2),
+            "pictures": rows}
 
 
 def _where(folder: Path) -> str:
