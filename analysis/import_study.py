@@ -82,6 +82,43 @@ def _read(path: Path, budget: int | None = None) -> tuple[list[str], list[tuple[
     return lines[0][1], lines[1:], len(raw)
 
 
+def _responses(path: Path, task: str, pid: str, prows: list[tuple[int, dict]], where: str,
+               problems: list[str]) -> list[dict]:
+    """Rows of the human-data format of one participant's main-phase answers in one
+    file (`prows`: (line, fields) of all their rows, first at `where`); adds to
+    `problems` an unknown or repeated trial, a response that is not a number, and a
+    study of other than the paper's 24 trials or a participant cut short."""
+    out: list[dict] = []
+    main = [(line, r) for line, r in prows if r["phase"] == "main"]
+    trials_seen: dict[str, int] = {}
+    n_expected = prows[0][1]["n_trials"]
+    for line, r in main:
+        tid = r["trial"].upper()
+        if tid not in TRIAL_IDS:
+            problems.append(f"{path}: line {line}: trial {r['trial']!r} is not one of the 24 trial ids (1E, 1H, ..., 12H)")
+            continue
+        if tid in trials_seen:
+            problems.append(f"{path}: line {line}: participant {pid} answered trial {tid} twice (first on line {trials_seen[tid]})")
+            continue
+        trials_seen[tid] = line
+        value = parse_response(r["response"])  # the parser of --human-data: one rule for both
+        if isinstance(value, str):
+            problems.append(f"{path}: line {line}: {value}")
+            continue
+        dataset = ("simulated-" if r["simulated"] == "SIMULATED" else "") + task
+        out.append({"dataset": dataset, "participant": pid, "trial": tid, "response": r["response"],
+                    "study": r["study"], "position": r["position"], "condition": r["condition"],
+                    "first_in_pair": r.get("first_in_pair", ""), "rt_ms": r["rt_ms"],
+                    "collapses": r.get("collapses", ""), "source": f"{path.name}:{line}"})
+    if n_expected != str(len(TRIAL_IDS)):
+        problems.append(f"{where}: the study has {n_expected} trials, not the paper's 24: the analysis needs the 24 trials")
+    elif len(main) < len(TRIAL_IDS):
+        last = prows[-1][0]
+        problems.append(f"{path}: line {last}: truncated: participant {pid} ({task}) has {len(main)} of "
+                        f"{len(TRIAL_IDS)} trials; the file ends after line {last}")
+    return out
+
+
 def import_files(paths, study: str | None = None) -> list[dict]:
     """Rows of the human-data format from study CSVs `paths`; `study` the id every file
     must carry (default: the first file's). Raises StudyDataError listing every problem."""
@@ -131,33 +168,7 @@ def import_files(paths, study: str | None = None) -> list[dict]:
             sim = {r["simulated"] == "SIMULATED" for _, r in prows}
             for s in sim:
                 simulated_kinds.setdefault(s, where)
-            main = [(line, r) for line, r in prows if r["phase"] == "main"]
-            trials_seen: dict[str, int] = {}
-            n_expected = prows[0][1]["n_trials"]
-            for line, r in main:
-                tid = r["trial"].upper()
-                if tid not in TRIAL_IDS:
-                    problems.append(f"{path}: line {line}: trial {r['trial']!r} is not one of the 24 trial ids (1E, 1H, ..., 12H)")
-                    continue
-                if tid in trials_seen:
-                    problems.append(f"{path}: line {line}: participant {pid} answered trial {tid} twice (first on line {trials_seen[tid]})")
-                    continue
-                trials_seen[tid] = line
-                value = parse_response(r["response"])  # the parser of --human-data: one rule for both
-                if isinstance(value, str):
-                    problems.append(f"{path}: line {line}: {value}")
-                    continue
-                dataset = ("simulated-" if r["simulated"] == "SIMULATED" else "") + task
-                out.append({"dataset": dataset, "participant": pid, "trial": tid, "response": r["response"],
-                            "study": r["study"], "position": r["position"], "condition": r["condition"],
-                            "first_in_pair": r.get("first_in_pair", ""), "rt_ms": r["rt_ms"],
-                            "collapses": r.get("collapses", ""), "source": f"{path.name}:{line}"})
-            if n_expected != str(len(TRIAL_IDS)):
-                problems.append(f"{where}: the study has {n_expected} trials, not the paper's 24: the analysis needs the 24 trials")
-            elif len(main) < len(TRIAL_IDS):
-                last = prows[-1][0]
-                problems.append(f"{path}: line {last}: truncated: participant {pid} ({task}) has {len(main)} of "
-                                f"{len(TRIAL_IDS)} trials; the file ends after line {last}")
+            out += _responses(path, task, pid, prows, where, problems)
     if len(simulated_kinds) == 2:
         problems.append(f"{simulated_kinds[True]}: SIMULATED participants mixed with real ones (real data from "
                         f"{simulated_kinds[False]}): import them separately")
