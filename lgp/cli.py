@@ -78,7 +78,7 @@ MAX_N_PERM = 100_000          # --n-perm: permutations per permutation test
 MAX_TRIAL_COUNT = 10_000      # stimuli.generate --count: trial files to write
 
 
-def _size(n_bytes: float) -> str:
+def bytes_text(n_bytes: float) -> str:
     """1.5 GiB, 87 TiB, ...: a byte count in binary units."""
     for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"):
         if n_bytes < 1024 or unit == "EiB":
@@ -95,13 +95,13 @@ def _estimates() -> dict[str, Callable[[int], str]]:
         "MAX_SAMPLES": lambda v: (f"{v:,} layouts x {n_trials} trials = {v * n_trials:,} KOMO plans, {v / SAMPLES:,.3g} times "
                                   f"the paper's M = {SAMPLES}"),
         "MAX_N_SIMS": lambda v: (f"the noise of one 10-block trial alone takes {v:,} x 10 blocks x 3 x 8 bytes = "
-                                 f"{_size(v * 240)} and {n_trials} trials x {n_sigmas} sigmas x {v:,} = "
+                                 f"{bytes_text(v * 240)} and {n_trials} trials x {n_sigmas} sigmas x {v:,} = "
                                  f"{v * n_trials * n_sigmas:,} simulations, {v / N_SIMS:,.3g} times the paper's N = {N_SIMS}"),
-        "MAX_N_BOOT": lambda v: (f"{v:,} resamples x {n_trials} trial means x 8 bytes = {_size(v * n_trials * 8)} per "
+        "MAX_N_BOOT": lambda v: (f"{v:,} resamples x {n_trials} trial means x 8 bytes = {bytes_text(v * n_trials * 8)} per "
                                  f"dataset, {v / N_BOOT:,.3g} times the paper's {N_BOOT} resamples of work"),
         "MAX_N_PERM": lambda v: f"{v:,} refits of the model per permutation test",
         "MAX_TRIAL_COUNT": lambda v: (f"{v:,} trials, each sampled and simulated for stability and written as a file of "
-                                      f"about 2 kB: {_size(v * 2048)} on disk"),
+                                      f"about 2 kB: {bytes_text(v * 2048)} on disk"),
     }
 
 

@@ -299,7 +299,7 @@ def test_responses_too_large_to_zscore_are_refused_naming_the_participant(tmp_pa
 def _reference_validation(table: pd.DataFrame, allowed) -> list[str]:
     """The row-by-row validation the vectorised one replaced (same rules, same
     messages): the problems of the first failing check, or [] when valid."""
-    from analysis.data import _line_ranges, _parse_response, is_simulated_dataset
+    from analysis.data import is_simulated_dataset, line_ranges, parse_response
 
     def clean(v):
         return "" if v is None or (isinstance(v, float) and math.isnan(v)) else str(v).strip()
@@ -318,7 +318,7 @@ def _reference_validation(table: pd.DataFrame, allowed) -> list[str]:
             problems.append((line, "empty participant id"))
         if tr not in TRIAL_IDS:
             problems.append((line, f"unknown trial id {tr!r}; expected one of the run's trials 1E, 1H, ..., 12H"))
-        v = _parse_response(r)
+        v = parse_response(r)
         if isinstance(v, str):
             problems.append((line, v))
         values.append(v)
@@ -338,7 +338,7 @@ def _reference_validation(table: pd.DataFrame, allowed) -> list[str]:
         absent = [tr for tr in TRIAL_IDS if tr not in set(group["trial"])]
         if absent:
             ls = group["line"].tolist()
-            problems.append((min(ls), f"participant {p!r} in dataset {d!r} (rows on lines {_line_ranges(ls)}) "
+            problems.append((min(ls), f"participant {p!r} in dataset {d!r} (rows on lines {line_ranges(ls)}) "
                                       f"is missing trial(s) {', '.join(absent)}"))
     return sorted(problems, key=lambda q: q[0])
 

@@ -69,7 +69,7 @@ def test_a_count_past_its_limit_is_refused_at_the_door_with_its_cost(capsys, tmp
 def test_the_estimates_are_the_arithmetic_they_state():
     """218 TiB = 1e12 runs x 10 blocks x 3 coordinates x 8 bytes; 175 TiB = 1e12 x 24 x 8."""
     assert abs(1e12 * 240 / 2 ** 40 - 218) < 0.5 and abs(1e12 * 24 * 8 / 2 ** 40 - 175) < 0.5
-    assert cli._size(1023) == "1023 bytes" and cli._size(1024 ** 3 * 2.24) == "2.24 GiB"
+    assert cli.bytes_text(1023) == "1023 bytes" and cli.bytes_text(1024 ** 3 * 2.24) == "2.24 GiB"
 
 
 def test_counts_at_the_limit_pass():

@@ -19,7 +19,7 @@ from analysis.data.means import (BOOTSTRAP_BLOCK_BYTES, bootstrap_trial_means,  
                                  exclude_constant_participants, participant_matrices, resample_trial_means,
                                  trial_mean_intervals, trial_means, zscore_responses)
 from analysis.data.validation import (BYTES_PER_PARTICIPANT, MAX_PARTICIPANTS,  # noqa: F401
-                                      _line_ranges, _parse_response, load_human_data, validate_human_data,
+                                      line_ranges, load_human_data, validate_human_data,
                                       MAX_FIELD_CHARS, CsvShapeError, csv_records, parse_response)
 # TRIAL_IDS: the 24 trial ids in the paper's order (pair 1 easy, pair 1 hard, ..., 12H);
 # PAIRS: the 12 easy/hard pairs.

@@ -164,7 +164,7 @@ def validate_human_data(
         absent = [t for t in trial_ids() if t not in answered]
         line_list = group["line"].tolist()
         problems.append((min(line_list), f"participant {participant!r} in dataset {dataset!r} "
-                                         f"(rows on lines {_line_ranges(line_list)}) is missing "
+                                         f"(rows on lines {line_ranges(line_list)}) is missing "
                                          f"trial(s) {', '.join(absent)}"))
     _raise_if(problems, source)
     problems += _unscalable(table)
@@ -228,7 +228,7 @@ def _unscalable(table: pd.DataFrame) -> list[tuple[int, str]]:
     for (dataset, participant), row in broken.iterrows():
         line_list = table.loc[(table["dataset"] == dataset) & (table["participant"] == participant), "line"].tolist()
         out.append((min(line_list), f"participant {participant!r} in dataset {dataset!r} (rows on lines "
-                                    f"{_line_ranges(line_list)}): responses too large to z-score (largest "
+                                    f"{line_ranges(line_list)}): responses too large to z-score (largest "
                                     f"|response| {row['biggest']:.3g}; the mean or SD overflows)"))
     return out
 
@@ -270,9 +270,6 @@ def parse_response(raw) -> float | str:
             return f"response {_short(text)} is beyond the range of a float (about 1.8e308)"
         return f"non-finite response {text!r} (expected a finite number)"
     return value
-
-
-_parse_response = parse_response  # the name of old
 
 
 def _short(text: str, n: int = 40) -> str:
@@ -326,9 +323,9 @@ def csv_records(text: str, source: str, max_field: int = MAX_FIELD_CHARS) -> lis
 
 
 def _parse_responses(raw: pd.Series) -> tuple[np.ndarray, list[tuple[int, str]]]:
-    """Vectorised `_parse_response` over a column: (floats, [(row, message)] for
+    """Vectorised `parse_response` over a column: (floats, [(row, message)] for
     the rows that are not finite numbers). Plain number cells are converted in
-    one pass; only the others go through `_parse_response` one by one."""
+    one pass; only the others go through `parse_response` one by one."""
     values = np.full(len(raw), np.nan)
     if pd.api.types.is_numeric_dtype(raw) and not pd.api.types.is_bool_dtype(raw):
         with np.errstate(invalid="ignore"):
@@ -394,7 +391,7 @@ def _raise_if(problems: list[tuple[int, str]], source: str) -> None:
     raise HumanDataError(message, line=problems[0][0], problems=listed)
 
 
-def _line_ranges(lines: list[int]) -> str:
+def line_ranges(lines: list[int]) -> str:
     """[2, 3, 4, 7] -> '2-4, 7'."""
     lines = sorted(lines)
     spans, start, prev = [], lines[0], lines[0]
