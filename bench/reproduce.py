@@ -50,7 +50,7 @@ def main(argv=None) -> int:
     p.add_argument("--jobs", type=int, nargs="+", default=[1, 2])
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "benchmarks.md")
     p.add_argument("--grids", action="store_true",
-                   help="cold default run and cold --sigma-grid wide run, alternating, --jobs 2 (issue 22)")
+                   help="cold default run and cold --sigma-grid wide run, alternating, --jobs 2")
     p.add_argument("--repeats", type=int, default=1, help="with --grids: pairs of runs")
     p.add_argument("--keep", type=Path, help="with --grids: keep the runs' output folders under this folder")
     args = p.parse_args(argv)
@@ -121,7 +121,7 @@ def grids(args) -> int:
         "",
         f"Cold `python -m lgp.reproduce{' --quick' if args.quick else ''} --jobs 2 --no-replays` (11 sigmas) against the same "
         "with `--sigma-grid wide` (31 sigmas: 0.05..0.30 d step 0.01 plus the paper's points), alternating, each a "
-        "fresh subprocess and empty cache; written by `python bench/reproduce.py --grids`. Goal (issue 22): wide "
+        "fresh subprocess and empty cache; written by `python bench/reproduce.py --grids`. Goal: wide "
         "within 2.5x the default.",
         "",
         f"- machine: {cpu_model()}",

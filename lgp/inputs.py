@@ -1,4 +1,4 @@
-"""The one bounded reader of every input file (issue 27, item 4).
+"""The one bounded reader of every input file.
 
 ``read_bounded(path, limit, what)`` returns the bytes of a *regular file* of at
 most `limit` bytes, or raises `InputFileError` in one line naming the file and

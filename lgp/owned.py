@@ -1,5 +1,5 @@
 """What a command can prove it wrote, how a new run's files replace an earlier
-run's, and locks that cover nested output folders (issue 30).
+run's, and locks that cover nested output folders.
 
 A command that writes a folder of outputs (``python -m lgp.reproduce``: manifest.json;
 ``python -m stimuli.experiment``: study.json) lists every file it wrote, with its

@@ -25,8 +25,8 @@ _INITIAL_KEYS = {"blocks", "scattered", "recolour"}
 _SCATTER_KEYS = {"count", "colour", "colours", "region", "min_gap", "clearance", "prefix"}
 _BLOCK_KEYS = {"name", "p_WB", "yaw", "colour", "size"}
 #: Most blocks a state (A or B) of a trial may hold: the paper's trials have at most
-#: 26, a generated one a few dozen. A 10,000-block trial took 29 s to validate
-#: before it was refused (and MuJoCo could not allocate it): refused at once now.
+#: 26, a generated one a few dozen. Checking a 10,000-block trial takes 29 s and
+#: MuJoCo cannot allocate it, so a larger count is refused before any block is read.
 MAX_BLOCKS = 500
 
 
