@@ -1,4 +1,4 @@
-"""A Dask scheduler address that cannot be one is refused in one line (issue 30):
+"""A Dask scheduler address that cannot be one is refused in one line:
 ``tcp://`` (no host), ``inproc://x``, a web address or an unknown scheme at the
 door; a peer that answers junk or HTTP (or nothing) after one look at its first
 bytes, with no Client ever made, so no ``Client.__del__`` traceback and no 20 s

@@ -241,7 +241,7 @@ def test_revalidating_a_loaded_table_keeps_its_csv_lines(tmp_path):
     assert again.loc[again["trial"] == "1H", "line"].tolist()[0] == 4
 
 
-# ---- edge cases of real files (issue 16, item 5) -----------------------------------
+# ---- edge cases of real files -----------------------------------
 
 @pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be", "utf-32", "utf-8-sig"])
 def test_a_file_with_a_byte_order_mark_is_read_in_its_encoding(tmp_path, encoding):

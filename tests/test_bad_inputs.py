@@ -1,4 +1,4 @@
-"""Bad inputs from an adversarial user (issue 27, items 4, 5, 7, 8, 12): each is
+"""Bad inputs from an adversarial user: each is
 refused at the boundary in one named line, quickly, before anything is
 allocated by its size or any earlier output is removed.
 

@@ -50,7 +50,7 @@ def test_interrupted_write_leaves_no_file(tmp_path):
 
 @pytest.mark.parametrize("umask", [0o022, 0o027, 0o002])
 def test_results_get_the_mode_the_umask_gives(tmp_path, umask):
-    """Defect 4 of issue 9: the atomic write kept mkstemp's private 0600."""
+    """The atomic write must not keep mkstemp's private 0600: results get the mode the umask gives."""
     old = os.umask(umask)
     try:
         write_csv_atomic(_table(), tmp_path / "r.csv")
@@ -241,7 +241,7 @@ def test_editing_a_module_the_computation_imports_changes_the_key(tmp_path):
 def test_the_effort_key_does_not_hash_the_command_line(tmp_path):
     """The effort CLI is models/effort/__main__.py: its help strings and the shared
     argument checks of lgp.cli are no input of an effort, so editing them keeps
-    every cached effort (before the split, models.effort imported lgp.cli)."""
+    every cached effort (models.effort must not import lgp.cli)."""
 
     closure = set(import_closure("models.effort", "stimuli"))
     assert "models.effort" in closure and "lgp.planner" in closure

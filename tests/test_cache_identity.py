@@ -1,4 +1,4 @@
-"""A cache entry is tied to its key and read within bounds (issue 27, items 6 and 4):
+"""A cache entry is tied to its key and read within bounds:
 an entry copied over another's passes its checksum but names another key, so it
 is reported and recomputed, never used as the other trial's result; an entry
 that is a symlink to /dev/zero, a FIFO or a file outside the cache is refused

@@ -1,6 +1,6 @@
-"""A cache entry is checked for what it holds, not only for its checksum (issue 30):
-an entry re-signed with wrong contents (``effort: abc`` gave a TypeError; ``-1e308``
-was published as ``-3.3e+307,inf``) is reported and recomputed; a damaged
+"""A cache entry is checked for what it holds, not only for its checksum:
+an entry re-signed with wrong contents (``effort: abc``, which would raise a TypeError; ``-1e308``,
+which would be published as ``-3.3e+307,inf``) is reported and recomputed; a damaged
 ``compute_times.json`` never stops a rerun; and the end of a run counts a
 recomputed entry as computed."""
 from __future__ import annotations

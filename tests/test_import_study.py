@@ -1,4 +1,4 @@
-"""`python -m analysis.import_study` under bad input and faults (issue 30): every
+"""`python -m analysis.import_study` under bad input and faults: every
 refusal one line with exit 1 (2 for usage), no formula reaches its CSV, every read
 bounded (a FIFO or /dev/zero never hangs or fills memory), unique temporary names
 and an atomic rename, the number parser of ``--human-data``, and a full disk named.

@@ -32,7 +32,7 @@ LAYERS = [
     ("arm", ["lgp.arm"], None),
     ("KOMO", ["lgp.komo", "lgp.komo.*"], None),
     ("planner", ["lgp.planner", "lgp.planner.*"], None),
-    # the logic layer that searches (issue 24): skeletons over the planner's KOMO;
+    # the logic layer that searches: skeletons over the planner's KOMO;
     # the package lgp re-exports lgp.plan (lazily: planner="paper" or "search"), so it sits here
     ("search", ["lgp.search", "lgp.search.*", "lgp"], None),
     ("models", ["models", "models.*"], None),
@@ -44,7 +44,7 @@ LAYERS = [
     # stimuli.design searches for stimuli through the pipeline's stages and caches (lgp.app)
     ("application", [*APP_WING, "stimuli.sheet", "stimuli.generate", "stimuli.render", "stimuli.render.*",
                      "stimuli.experiment", "stimuli.experiment.*", "stimuli.design", "stimuli.design.*", "analysis.import_study", "analysis.mental_jenga",
-                     # they read trial files, plans and lgp.reproduce's caches (issue 32)
+                     # they read trial files, plans and lgp.reproduce's caches
                      "analysis.heuristics", "analysis.power", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]

@@ -1,5 +1,5 @@
-"""Counts and sizes bounded at the door (issue 30): a count on the command line past
-its limit is refused in one line with what it would cost (it crashed with a
+"""Counts and sizes bounded at the door: a count on the command line past
+its limit is refused in one line with what it would cost (else a
 MemoryError after minutes of work); more --jobs than cores are capped, saying so,
 unless --oversubscribe; a trial file with a 5000-digit number or 10,000 blocks is
 refused in one line naming the limit, before it is built."""

@@ -1,4 +1,4 @@
-"""No script from a trial file runs in a page (issue 27, item 2): the replay's
+"""No script from a trial file runs in a page: the replay's
 caption puts the trial's description into a <script> as JSON, which must not let
 ``</script><script>alert(2)</script>`` close the element. Checked by reading the
 HTML and by opening it in headless Chromium (no dialog may fire, and the

@@ -1,6 +1,6 @@
 """The vectorised noise rule (models.risk.noise.NoiseRule, all runs of a chunk at
 once) gives the same block centres, to the bit, as the per-run rule it replaced,
-transcribed here (same arithmetic) as the reference (git: models/risk/noise.py before issue 17)."""
+transcribed here (same arithmetic) as an independent reference."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""The "settle" noise rule (issue 22; docs/risk.md, "Noise rule"): the same
+"""The "settle" noise rule (docs/risk.md, "Noise rule"): the same
 horizontal noise and side-pair separation as "lift", but every block set to rest
 on what lies beneath its new outline, so no block starts in the air and what
 falls is what topples. The 10-tower under "settle" is checked against a

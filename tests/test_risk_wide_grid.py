@@ -1,4 +1,4 @@
-"""The analysis on the wide sigma grid (issue 22): the RMSE profile and the
+"""The analysis on the wide sigma grid: the RMSE profile and the
 chosen sigma use whatever grid the risk table has, so SIMULATED participants
 drawn at a sigma past the paper's grid are fitted there."""
 import numpy as np
