@@ -9,7 +9,7 @@ import stimuli
 from lgp.paper import BLOCK_SIZE as D
 from lgp.scene import Block, Scene
 from models.risk import RiskModel, risk_table
-from models.risk.build import (MEASURES, BuildTask, _sequential_worker, build_risk, build_risk_aggregates,
+from models.risk.build import (MEASURES, BuildTask, collapse_stages, build_risk, build_risk_aggregates,
                                measure_table)
 from models.risk.core import wilson_interval
 
@@ -31,7 +31,7 @@ def test_a_block_placed_past_its_settled_supports_edge_collapses_the_build_at_th
     z[2, 1, 0] = -3.0   # 0.6 d apart, so it collapses: the settled bottom was carried forward
     z[3, 0, 0] = 3.0    # both 0.3 d to +x: aligned on the carried bottom, stands
     z[3, 1, 0] = 3.0
-    at = _sequential_worker(BuildTask(tuple(_two_stage_plan()), sigma, z, RiskModel(noise_rule="settle")))
+    at = collapse_stages(BuildTask(tuple(_two_stage_plan()), sigma, z, RiskModel(noise_rule="settle")))
     assert at.tolist() == [0, 2, 2, 0]
 
 

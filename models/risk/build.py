@@ -333,7 +333,7 @@ def _sequential(trial, plans, sigmas, z_B, a_index, n_sims, samples, model: Risk
             for a in range(0, n_sims, chunk):
                 tasks.append((key, s))
                 args.append(BuildTask(tuple(plan), s, z_B[a:a + chunk], model))
-    results = map_tasks(_sequential_worker, args, total, executor, jobs, progress, size=lambda res: res.shape[0])
+    results = map_tasks(collapse_stages, args, total, executor, jobs, progress, size=lambda res: res.shape[0])
     collapsed: dict[tuple, list[np.ndarray]] = {}
     for task, res in zip(tasks, results):
         collapsed.setdefault(task, []).append(res)
@@ -353,7 +353,7 @@ def _sequential(trial, plans, sigmas, z_B, a_index, n_sims, samples, model: Risk
     return pd.DataFrame(rows, columns=STAGE_COLUMNS)
 
 
-def _sequential_worker(task: BuildTask) -> np.ndarray:
+def collapse_stages(task: BuildTask) -> np.ndarray:
     """Runs of one sequential build: for each run (rows of z_B), the stage at which
     it collapsed (1-based), 0 when it stood to the end."""
     model, z_B = task.model, task.z_B
