@@ -143,8 +143,9 @@ def block_speeds(v_WB: np.ndarray, w_WB: np.ndarray, half_diagonals: np.ndarray)
 
 
 def half_diagonals(sizes: np.ndarray) -> np.ndarray:
-    """Half the space diagonal of each block (sizes (n, 3), m). Halving is exact in
-    floating point, so |w| * (d / 2) is to the bit the (|w| * d) / 2 it replaced."""
+    """Half the space diagonal of each block (sizes (n, 3), m), computed once per
+    layout. Halving is exact in floating point, so |w| * (d / 2) equals (|w| * d) / 2
+    to the bit: the speed bound does not depend on where the halving happens."""
     return row_norms(np.asarray(sizes, dtype=float).reshape(-1, 3)) / 2
 
 
