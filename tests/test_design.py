@@ -16,7 +16,7 @@ from lgp.paper import BLOCK_SIZE as d
 from lgp.scene import Block, Scene
 from stimuli.design import objective
 from stimuli.design.checks import Discarded, screen_candidate
-from stimuli.design.grammar import KINDS, STARTS, Candidate, draw
+from stimuli.design.grammar import KINDS, RULES, STARTS, Candidate, draw
 from stimuli.design.screen import StackModel, screen_normals
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -104,6 +104,7 @@ def test_a_valid_candidate_passes_the_screen_with_its_numbers():
 
 def test_the_grammar_draws_every_kind_and_start_and_the_same_seed_the_same_candidate():
     cands = [draw(i, 5) for i in range(400)]
+    assert tuple(RULES) == KINDS  # one rule per structure kind, in the order a draw picks from
     assert {c.kind for c in cands} == set(KINDS) and {c.start for c in cands} == set(STARTS)
     assert all(draw(i, 5).data == cands[i].data for i in (0, 17, 399))
     assert draw(3, 6).data != cands[3].data

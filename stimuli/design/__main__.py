@@ -91,13 +91,13 @@ def main(argv=None) -> int:
         designed = [stimuli.load_file(p) for p in paths]
         paper = None
         if not args.no_paper:
-            from stimuli.design.run import _paper_features
+            from stimuli.design.run import paper_features
 
             t1 = time.perf_counter()
             paper_trials = stimuli.load_paper()
             log(f"the paper's 24 beside it: M = {cfg.samples}, N = {cfg.n_sims} x {len(cfg.faithful_sigmas)} sigmas (cached stages)")
             p_effort, p_risk = faithful(paper_trials, cfg, ex, cache)
-            paper = (_paper_features(cfg).merge(p_effort[["trial", "effort"]], on="trial")
+            paper = (paper_features(cfg).merge(p_effort[["trial", "effort"]], on="trial")
                      .merge(wide(p_risk), left_on="trial", right_index=True))
             design.timings["paper"] = time.perf_counter() - t1
         outputs.write_tables(design, out, paper)

@@ -248,7 +248,7 @@ class Design:
     risk: pd.DataFrame | None = None  # faithful risk table of the finalists (trial, sigma, risk, ...)
 
 
-def _paper_features(cfg: DesignConfig) -> pd.DataFrame:
+def paper_features(cfg: DesignConfig) -> pd.DataFrame:
     """The screen's numbers of the paper's 24 (for the correlation matrix and the screen's check)."""
     import stimuli
     from stimuli.design.checks import features
