@@ -89,34 +89,40 @@ def centred_interval(point, boot, level: float = 0.95, bounds: tuple[float, floa
     return (float(max(point + min(lo, 0.0), bounds[0])), float(min(point + max(hi, 0.0), bounds[1])))
 
 
+#: How the in-sample direct bootstrap test is labelled: Eq. 1 nests effort-only (b1 = b2), so its
+#: refit r is at least effort-only's in every resample and "full beats effort" has p = 0 whatever the data.
+IN_SAMPLE_METHOD = ("direct bootstrap in sample (paper's method, NOT CALIBRATED: Eq. 1 nests effort-only, so full "
+                    "beats effort with p = 0 whatever the data; decide by the held-out permutation test)")
+#: What every bootstrap interval in the outputs is (column ``interval``).
+INTERVAL = "95% bootstrap interval centred on the point estimate (resamples minus their median, added to it)"
+
+
 def summarize_bootstrap(boot: pd.DataFrame, fits: pd.DataFrame | None = None,
                         level: float = 0.95) -> pd.DataFrame:
-    """Median and percentile interval of each model's bootstrap correlations.
+    """Median and interval of each model's bootstrap correlations.
 
     Returns one row per (dataset, model): dataset, model, r (full-sample fit, if
-    `fits` from `fit_models` is given), r_median, r_low, r_high (the paper's
-    method: the 2.5 and 97.5 percentiles for level 0.95, numpy's linear
-    interpolation; it need not contain r), n_boot; with `fits` also
-    r_low_centred, r_high_centred (`centred_interval`: the same resamples
-    shifted to r, always containing it).
+    `fits` from `fit_models` is given), r_median, r_low, r_high, n_boot, interval:
+    r_low, r_high is `centred_interval` of the resamples around r (around the
+    median without `fits`), so it always contains its point. The paper's
+    percentile interval (the 2.5 and 97.5 percentiles of the resampled r) is not
+    an output: resampled trial means carry extra noise, so it can miss r
+    altogether (docs/results.md has how often).
     """
-    tail = 100 * (1 - level) / 2
+    groups = {k: g["r"].to_numpy() for k, g in boot.groupby(["dataset", "model"], sort=False)}
     summary = (boot.groupby(["dataset", "model"], sort=False)["r"]
-               .agg(r_median="median",
-                    r_low=lambda r: np.percentile(r, tail),
-                    r_high=lambda r: np.percentile(r, 100 - tail),
-                    n_boot="size")
-               .reset_index())
+               .agg(r_median="median", n_boot="size").reset_index())
     if fits is not None:
         summary = summary.merge(fits[["dataset", "model", "r"]], on=["dataset", "model"], how="left")
-        groups = {k: g["r"].to_numpy() for k, g in boot.groupby(["dataset", "model"], sort=False)}
-        centred = [centred_interval(r, groups[(d, m)], level, (-1.0, 1.0)) for d, m, r in
-                   zip(summary["dataset"], summary["model"], summary["r"])]
-        summary["r_low_centred"] = [c[0] for c in centred]
-        summary["r_high_centred"] = [c[1] for c in centred]
-        summary = summary[["dataset", "model", "r", "r_median", "r_low", "r_high", "r_low_centred", "r_high_centred",
-                           "n_boot"]]
-    return summary
+    point = summary["r"] if fits is not None else summary["r_median"]
+    centred = [centred_interval(r, groups[(d, m)], level, (-1.0, 1.0)) for d, m, r in
+               zip(summary["dataset"], summary["model"], point)]
+    summary["r_low"] = [c[0] for c in centred]
+    summary["r_high"] = [c[1] for c in centred]
+    summary["interval"] = INTERVAL
+    columns = ["dataset", "model"] + (["r"] if fits is not None else []) + ["r_median", "r_low", "r_high", "n_boot",
+                                                                            "interval"]
+    return summary[columns]
 
 
 def bootstrap_tests(boot: pd.DataFrame, fits: pd.DataFrame,
@@ -147,8 +153,10 @@ def bootstrap_tests(boot: pd.DataFrame, fits: pd.DataFrame,
                 # NaN compares False, so `not (better > worse)` counts it as a reversal.
                 p = float(np.mean(~(s_better > s_worse)))
             rows.append((dataset, a, b, r_a, r_b, better, p, len(wide)))
-    return pd.DataFrame(rows, columns=["dataset", "model_a", "model_b", "r_a", "r_b", "better",
-                                       "p_value", "n_boot"])
+    out = pd.DataFrame(rows, columns=["dataset", "model_a", "model_b", "r_a", "r_b", "better",
+                                      "p_value", "n_boot"])
+    out["method"] = IN_SAMPLE_METHOD
+    return out
 
 
 def _correlations_one_dataset(task) -> np.ndarray:

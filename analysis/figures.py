@@ -135,11 +135,13 @@ def plot_trial_means(means: pd.DataFrame, predictions: pd.DataFrame, out_dir: st
 
 def plot_model_correlations(summary: pd.DataFrame, out_dir: str | Path,
                             stem: str = "fig4_model_correlations") -> list[Path]:
-    """Figure 4 analog: per dataset, the median bootstrap correlation of each
-    model (filled circle) with the 2.5-97.5 percentile interval.
+    """Figure 4 analog: per dataset, each model's correlation r of the full-sample
+    fit (filled circle; the bootstrap median without r) with its 95% bootstrap
+    interval centred on it (r_low, r_high of `summarize_bootstrap`). The paper
+    drew the percentile interval, which can miss r (docs/results.md).
 
-    `summary` has columns dataset, model, r_median, r_low, r_high
-    (`summarize_bootstrap`). Returns the PNG and PDF paths.
+    `summary` has columns dataset, model, r_median, r_low, r_high and optionally r.
+    Returns the PNG and PDF paths.
     """
     datasets = ordered_datasets(summary["dataset"].unique())
     models = _models_in(summary)
@@ -152,8 +154,8 @@ def plot_model_correlations(summary: pd.DataFrame, out_dir: str | Path,
     for off, model in zip(offsets, models):
         s = summary[summary["model"] == model].set_index("dataset").reindex(datasets)
         xs = np.arange(len(datasets)) + off
-        med = s["r_median"].to_numpy()
-        err = np.vstack([med - s["r_low"].to_numpy(), s["r_high"].to_numpy() - med])
+        med = s["r" if "r" in s else "r_median"].to_numpy()
+        err = np.clip(np.vstack([med - s["r_low"].to_numpy(), s["r_high"].to_numpy() - med]), 0, None)
         spec = ModelSpec.parse(model)  # a build-risk measure's risk-only model: squares beside its full model's circles
         ax.errorbar(xs, med, yerr=err, fmt="s" if spec.risk and spec.base == "risk" else "o",
                     ms=8 if len(models) <= 3 else 5, capsize=3, color=model_colour(model), label=model_label(model))
@@ -164,7 +166,8 @@ def plot_model_correlations(summary: pd.DataFrame, out_dir: str | Path,
     ax.set_ylim(min(0.0, float(np.nanmin(summary["r_low"])) - 0.05), 1.02)
     ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
     n_boot = int(summary["n_boot"].iloc[0]) if "n_boot" in summary else 0
-    title = f"Model correlations: median and 95% interval over {n_boot} bootstrap resamples"
+    point = "r of the fit" if "r" in summary else "median r"
+    title = f"Model correlations: {point} and its 95% interval over {n_boot} bootstrap resamples, centred on it"
     return _finish(fig, title, datasets, out_dir, stem)
 
 
@@ -392,8 +395,7 @@ def plot_model_comparison(summary: pd.DataFrame, out_dir: str | Path, stem: str 
         ax.legend(handles=handles, fontsize=8, loc="center left", bbox_to_anchor=(1.0, 0.5), frameon=False)
 
     ax = axes[0]
-    centred = "r_low_centred" in summary
-    bars(ax, summary, "r", "r_low_centred" if centred else "r_low", "r_high_centred" if centred else "r_high", models)
+    bars(ax, summary, "r", "r_low", "r_high", models)
     ax.set_ylabel("correlation with mean z-scores (r)")
     low = np.nanmin(summary["r_low"]) if "r_low" in summary else np.nanmin(summary["r"])
     ax.set_ylim(min(0.0, float(low) - 0.05), 1.02)
@@ -401,8 +403,7 @@ def plot_model_comparison(summary: pd.DataFrame, out_dir: str | Path, stem: str 
     if gain is not None:
         ax = axes[1]
         # Eq. 1 and its two no-physics competitors with as many parameters (risk-only's losses dwarf the scale)
-        bars(ax, gain, "gain", "gain_low_centred" if "gain_low_centred" in gain else "gain_low",
-             "gain_high_centred" if "gain_high_centred" in gain else "gain_high",
+        bars(ax, gain, "gain", "gain_low", "gain_high",
              [m for m in ("full", "effort+height", "effort+stacked") if m in set(gain["model"])])
         ax.set_ylabel("RMSE of effort-only minus\nthe model's (z units)")
         ax.set_title("Gain over effort-only (Eq. 1 and effort + a heuristic): above 0 it predicts better. In sample it "

@@ -364,11 +364,12 @@ def test_run_analysis_fits_every_heuristic_model_like_effort_and_every_centred_i
     np.testing.assert_allclose(ins["r"], fits.loc[ins.index, "r"], rtol=1e-10)
     for table, score in ((mc, "r"), (mc, "rmse"), (out["bootstrap_summary"], "r"), (out["model_comparison_gain"], "gain")):
         ok = table[np.isfinite(table[score])]
-        assert (ok[f"{score}_low_centred"] <= ok[score]).all() and (ok[score] <= ok[f"{score}_high_centred"]).all()
+        assert (ok[f"{score}_low"] <= ok[score]).all() and (ok[score] <= ok[f"{score}_high"]).all()
+        assert not any(c.endswith("_centred") for c in table.columns) and table["interval"].str.contains("centred").all()
     held = out["model_comparison_held_out_tests"]
     assert {("full", "effort+height"), ("full", "effort+stacked")} <= set(zip(held["model_a"], held["model_b"]))
     assert held["p_value"].between(0, 1).all() and (held.loc[held.scheme == STRUCTURE_SCHEME, "n_folds"] >= 2).all()
-    assert (out["model_comparison_tests"]["method"].str.contains("biased")).all()
+    assert (out["model_comparison_tests"]["method"].str.contains("NOT CALIBRATED")).all()
     assert set(out["permutation_test"]["kind"]) == set(KINDS)
     assert out["permutation_test"].loc[out["permutation_test"]["kind"] == "shuffle", "calibration"].str.startswith(
         "NOT CALIBRATED").all()

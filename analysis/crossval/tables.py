@@ -1,6 +1,6 @@
 """The comparison as tables: every model's scores under every scheme on the full
 sample (`model_comparison`) and in every bootstrap resample (`bootstrap_comparison`),
-their percentile intervals (`summarize_comparison`) and each model's gain over
+their bootstrap intervals centred on the point (`summarize_comparison`) and each model's gain over
 effort-only (`gain_over_effort`)."""
 from __future__ import annotations
 
@@ -119,31 +119,24 @@ def bootstrap_comparison(boot_means: Mapping[str, np.ndarray], effort, grids: Ma
 
 def summarize_comparison(point: pd.DataFrame, boot: pd.DataFrame, boot_fixed_risk: pd.DataFrame | None = None,
                          level: float = 0.95) -> pd.DataFrame:
-    """`point` (model_comparison's scores) with percentile intervals from `boot`
-    (bootstrap_comparison): rmse_low/high, r_low/high, pairs_low/high; with
-    `boot_fixed_risk` (the same resamples, risk not redrawn) also the widths of
-    the fixed-risk intervals and how much redrawing risk widens them
-    (r_widening = width with risk redrawn / width without)."""
-    tail = 100 * (1 - level) / 2
+    """`point` (model_comparison's scores) with bootstrap intervals from `boot`
+    (bootstrap_comparison), each centred on its point estimate
+    (analysis.bootstrap.centred_interval: it always contains it): rmse_low/high,
+    r_low/high, pairs_low/high, n_boot, interval; with `boot_fixed_risk` (the
+    same resamples, risk not redrawn) also the fixed-risk intervals and how much
+    redrawing risk widens them (r_widening = width with risk redrawn / width
+    without). The paper's percentile intervals are not outputs (they can miss
+    the point; docs/results.md)."""
+    from analysis.bootstrap import INTERVAL
+
     keys = ["dataset", "scheme", "model"]
-
-    def bands(b: pd.DataFrame, suffix: str = "") -> pd.DataFrame:
-        g = b.groupby(keys, sort=False)
-        out = pd.DataFrame({
-            f"rmse_low{suffix}": g["rmse"].quantile(tail / 100), f"rmse_high{suffix}": g["rmse"].quantile(1 - tail / 100),
-            f"r_low{suffix}": g["r"].quantile(tail / 100), f"r_high{suffix}": g["r"].quantile(1 - tail / 100),
-            f"pairs_low{suffix}": g["pairs_E_lt_H"].quantile(tail / 100),
-            f"pairs_high{suffix}": g["pairs_E_lt_H"].quantile(1 - tail / 100)})
-        if not suffix:
-            out["n_boot"] = g.size()
-        return out.reset_index()
-
-    table = point.merge(bands(boot), on=keys, how="left")
-    table = _with_centred(table, boot, keys, ("rmse", "r"), level)
+    table = _with_centred(point.copy(), boot, keys, ("rmse", "r", "pairs"), level)
+    table["n_boot"] = table[keys].apply(tuple, axis=1).map(boot.groupby(keys, sort=False).size()).to_numpy()
+    table["interval"] = INTERVAL
     if boot_fixed_risk is not None:
-        fixed = bands(boot_fixed_risk, "_fixed_risk")
-        table = table.merge(fixed[keys + ["rmse_low_fixed_risk", "rmse_high_fixed_risk", "r_low_fixed_risk",
-                                          "r_high_fixed_risk"]], on=keys, how="left")
+        fixed = _with_centred(point[keys + ["rmse", "r", "pairs_E_lt_H"]].copy(), boot_fixed_risk, keys, ("rmse", "r"),
+                              level, "_fixed_risk")
+        table = table.merge(fixed.drop(columns=["rmse", "r", "pairs_E_lt_H"]), on=keys, how="left")
         with np.errstate(invalid="ignore", divide="ignore"):
             table["rmse_widening"] = ((table["rmse_high"] - table["rmse_low"])
                                       / (table["rmse_high_fixed_risk"] - table["rmse_low_fixed_risk"]))
@@ -152,46 +145,46 @@ def summarize_comparison(point: pd.DataFrame, boot: pd.DataFrame, boot_fixed_ris
     return table
 
 
-def _with_centred(table: pd.DataFrame, boot: pd.DataFrame, keys, scores, level: float) -> pd.DataFrame:
-    """Columns <score>_low_centred, <score>_high_centred: the bootstrap interval
+#: Each score's column in the bootstrap table and its range.
+_SCORE_COLUMN = {"rmse": "rmse", "r": "r", "pairs": "pairs_E_lt_H"}
+
+
+def _with_centred(table: pd.DataFrame, boot: pd.DataFrame, keys, scores, level: float,
+                  suffix: str = "") -> pd.DataFrame:
+    """Columns <score>_low<suffix>, <score>_high<suffix>: the bootstrap interval
     shifted to the point estimate (analysis.bootstrap.centred_interval), always
-    containing it, beside the paper's percentile interval (<score>_low/high)."""
+    containing it."""
     from analysis.bootstrap import centred_interval
 
     groups = dict(iter(boot.groupby(keys, sort=False)))
     for score in scores:
+        col = _SCORE_COLUMN[score]
+        bounds = {"r": (-1.0, 1.0), "rmse": (0.0, np.inf)}.get(score, (0.0, np.inf))
         lo, hi = [], []
         for _, row in table.iterrows():
             g = groups.get(tuple(row[k] for k in keys))
-            c = centred_interval(row[score], g[score].to_numpy() if g is not None else [], level,
-                                 (-1.0, 1.0) if score == "r" else (0.0, np.inf))
+            c = centred_interval(row[col], g[col].to_numpy() if g is not None else [], level, bounds)
             lo.append(c[0])
             hi.append(c[1])
-        table[f"{score}_low_centred"], table[f"{score}_high_centred"] = lo, hi
+        table[f"{score}_low{suffix}"], table[f"{score}_high{suffix}"] = lo, hi
     return table
 
 
 def gain_over_effort(point: pd.DataFrame, boot: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
     """How much lower each model's RMSE is than effort-only's (effort RMSE - model
     RMSE; positive: the model predicts better), per dataset and scheme, with the
-    percentile interval of the per-resample difference (gain_low, gain_high) and
-    the same shifted to the gain (gain_low_centred, gain_high_centred: always
-    containing it). In sample Eq. 1's gain is >= 0 by construction; out of
-    sample it can be negative."""
-    from analysis.bootstrap import centred_interval
+    bootstrap interval of the per-resample difference centred on the gain
+    (gain_low, gain_high: always containing it). In sample Eq. 1's gain is >= 0 by
+    construction; out of sample it can be negative."""
+    from analysis.bootstrap import INTERVAL, centred_interval
 
-    tail = (1 - level) / 2
     keys = ["dataset", "scheme"]
     pt = point.pivot_table(index=keys, columns="model", values="rmse", sort=False)
     bt = boot.pivot_table(index=keys + ["resample"], columns="model", values="rmse", sort=False)
     rows = []
     for model in [m for m in pt.columns if m != "effort"]:
-        g = (bt["effort"] - bt[model]).groupby(level=keys, sort=False)
-        lo, hi = g.quantile(tail), g.quantile(1 - tail)
         diffs = dict(iter((bt["effort"] - bt[model]).groupby(level=keys, sort=False)))
         for key in pt.index:
             gain = float(pt.loc[key, "effort"] - pt.loc[key, model])
-            rows.append((*key, model, gain, float(lo[key]), float(hi[key]),
-                         *centred_interval(gain, diffs[key].to_numpy(), level)))
-    return pd.DataFrame(rows, columns=keys + ["model", "gain", "gain_low", "gain_high", "gain_low_centred",
-                                              "gain_high_centred"])
+            rows.append((*key, model, gain, *centred_interval(gain, diffs[key].to_numpy(), level), INTERVAL))
+    return pd.DataFrame(rows, columns=keys + ["model", "gain", "gain_low", "gain_high", "interval"])
