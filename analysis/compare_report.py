@@ -42,7 +42,7 @@ def side_by_side(comparison: pd.DataFrame) -> pd.DataFrame:
                 if s not in g.index:
                     continue
                 x = g.loc[s]
-                lo, hi = ("r_low_centred", "r_high_centred") if "r_low_centred" in x else ("r_low", "r_high")
+                lo, hi = "r_low", "r_high"
                 ci = f" [{x[lo]:.3f}, {x[hi]:.3f}]" if lo in x and np.isfinite(x[lo]) else ""
                 row[f"r {SHORT[s]}"] = f"{x['r']:.3f}{ci}" if np.isfinite(x["r"]) else "n/a"
             for s in SCHEMES:
@@ -132,12 +132,20 @@ def comparison_lines(analysis: dict, markdown) -> list[str]:
         return []
     lines = ["## Model comparison: in-sample and out of sample", "", CANNOT_FAIL, "",
              "r (95% bootstrap interval centred on r: participants and risk runs resampled, the cross-validation redone "
-             "in each resample; the paper's percentile interval, which need not contain r, is r_low/r_high in "
-             "model_comparison.csv), RMSE (z units) and pairs ordered E < H (tie rule of analysis.pairs):", "",
+             "in each resample; every interval in model_comparison.csv is centred on its point; the paper's percentile "
+             "interval, which can miss r, is not reported), RMSE (z units) and pairs ordered E < H (tie rule of analysis.pairs):", "",
              markdown(side_by_side(analysis["model_comparison"])), "",
-             "Direct bootstrap tests, Eq. 1 against effort-only:", "",
+             "Direct bootstrap tests, Eq. 1 against effort-only (the paper's method, NOT CALIBRATED: shown to compare, "
+             "not to decide):", "",
              markdown(tests_table(analysis["model_comparison_tests"])), "",
              widening_text(analysis["model_comparison"]), ""]
+    if "noise_ceiling" in analysis:
+        c = analysis["noise_ceiling"]
+        lines += ["Noise ceiling beside the scores above (analysis.reliability): split-half reliability of the trial "
+                  "means, Spearman-Brown corrected, and r_ceiling = sqrt(reliability), the r a model predicting the "
+                  "true trial means would reach (95% interval centred on it, participants resampled):", "",
+                  markdown(c[["dataset", "participants", "split_half_r", "reliability", "reliability_low",
+                              "reliability_high", "r_ceiling", "r_ceiling_low", "r_ceiling_high"]].round(3)), ""]
     if "model_comparison_held_out_permutation" in analysis:
         perm = analysis["model_comparison_held_out_permutation"]
         lines += ["**The decision: the held-out comparison test (calibrated).** p of \"model_a predicts held-out "
