@@ -411,7 +411,7 @@ def plot_model_comparison(summary: pd.DataFrame, out_dir: str | Path, stem: str 
                      fontsize=9)
     n_boot = int(summary["n_boot"].max()) if "n_boot" in summary and summary["n_boot"].notna().any() else 0
     title = ("Models in sample and out of sample (sigma chosen inside each fold); bars: full sample, whiskers: 95% "
-             f"interval over {n_boot} bootstrap resamples" + (", centred on the bar" if centred else ""))
+             f"interval over {n_boot} bootstrap resamples, centred on the bar")
     return _finish(fig, title, datasets, out_dir, stem)
 
 
