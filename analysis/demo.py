@@ -8,6 +8,13 @@ model's own effort and risk tables (from `python -m lgp.reproduce`), with stated
 betas, sigma and noise, and runs the analysis on them. Every file it writes is
 named ``simulated_*`` and every figure title says "SIMULATED participants". The
 numbers say nothing about people; they show the figures and check the pipeline.
+
+The heuristic baselines (analysis.heuristics: B's height, blocks, stacked blocks,
+transport distance, actions, support depth, and effort + height, effort +
+stacked) are computed from the paper's trial files at the run's M and --seed and
+passed to the analysis as lgp.reproduce --human-data passes them, with the sets
+of identical B's for the folds by structure; so the demo's comparison tables and
+figures show them.
 """
 from __future__ import annotations
 
@@ -17,9 +24,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.models import ModelInputError
 from analysis.run import run_analysis
-from analysis.simulate import simulate_participants
+from analysis.simulate import read_results, simulate_participants  # noqa: F401 (read_results: demo's own name)
 from lgp import cli
 from lgp.paper import PAPER_SIGMA
 
@@ -33,23 +39,16 @@ NOISE_SD = 0.1
 PROG = "python -m analysis.demo"
 
 
-def read_results(results: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """effort_samples.csv and risk.csv of a full `lgp.reproduce` run, checked."""
-    tables = []
-    for name, columns in (("effort_samples.csv", ("trial", "sample", "effort")), ("risk.csv", ("trial", "sigma", "risk"))):
-        path = results / name
-        if not path.is_file():
-            raise ModelInputError(f"{path} does not exist: --results must be the output folder of a full "
-                                  "`python -m lgp.reproduce` run")
-        try:
-            table = pd.read_csv(path, dtype={"trial": str})
-        except (ValueError, UnicodeDecodeError) as e:  # pandas' ParserError is a ValueError
-            raise ModelInputError(f"{path}: not a readable CSV ({e})") from e
-        missing = [c for c in columns if c not in table.columns]
-        if missing:
-            raise ModelInputError(f"{path}: missing column(s) {', '.join(missing)}")
-        tables.append(table)
-    return tables[0], tables[1]
+def heuristics(effort: pd.DataFrame, seed: int):
+    """(features, same): the heuristic predictors of the paper's 24 trials at the
+    effort table's M (its samples per trial) and `seed`, and the sets of trials
+    whose B is identical (analysis.heuristics)."""
+    import stimuli
+    from analysis.heuristics import identical_targets, trial_features
+
+    paper = stimuli.load_paper()
+    samples = int(effort.groupby("trial")["sample"].nunique().max())
+    return trial_features(paper, samples, seed), identical_targets(paper)
 
 
 def main(argv=None) -> int:
@@ -69,7 +68,9 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(args.seed)
     people = simulate_participants(effort, risk, tuple(args.betas), SIGMA, PARTICIPANTS, args.noise, rng,
                                    datasets=list(PARTICIPANTS))
-    run_analysis(people, effort, risk, args.out, seed=args.seed, n_boot=args.n_boot, n_perm=args.n_perm, jobs=2)
+    features, same = heuristics(effort, args.seed)
+    run_analysis(people, effort, risk, args.out, seed=args.seed, n_boot=args.n_boot, n_perm=args.n_perm, jobs=2,
+                 features=features, same=same)
     print(f"SIMULATED-participant analysis written to {Path(args.out).resolve()}")
     return 0
 

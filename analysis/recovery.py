@@ -271,8 +271,8 @@ def _pct(v) -> str:
 
 
 def read_tables(results: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """effort_samples.csv and risk.csv of a `lgp.reproduce` run (analysis.demo.read_results)."""
-    from analysis.demo import read_results
+    """effort_samples.csv and risk.csv of a `lgp.reproduce` run (analysis.simulate.read_results)."""
+    from analysis.simulate import read_results
 
     return read_results(results)
 

@@ -9,6 +9,7 @@ refuses such datasets unless told ``allow_simulated=True``.
 """
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -16,7 +17,7 @@ import pandas as pd
 
 from analysis.data import DATASETS, SIMULATED_PREFIX, is_simulated_dataset
 from analysis.data.trialset import trial_ids
-from analysis.models import full_model_cost, risk_at_sigma
+from analysis.models import ModelInputError, full_model_cost, risk_at_sigma
 from lgp.errors import InputError
 
 
@@ -64,3 +65,22 @@ def simulate_participants(effort, risk_by_sigma: pd.DataFrame,
             "response": responses.reshape(-1),
         }))
     return pd.concat(frames, ignore_index=True)
+
+
+def read_results(results: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """effort_samples.csv and risk.csv of a full `lgp.reproduce` run, checked."""
+    tables = []
+    for name, columns in (("effort_samples.csv", ("trial", "sample", "effort")), ("risk.csv", ("trial", "sigma", "risk"))):
+        path = results / name
+        if not path.is_file():
+            raise ModelInputError(f"{path} does not exist: --results must be the output folder of a full "
+                                  "`python -m lgp.reproduce` run")
+        try:
+            table = pd.read_csv(path, dtype={"trial": str})
+        except (ValueError, UnicodeDecodeError) as e:  # pandas' ParserError is a ValueError
+            raise ModelInputError(f"{path}: not a readable CSV ({e})") from e
+        missing = [c for c in columns if c not in table.columns]
+        if missing:
+            raise ModelInputError(f"{path}: missing column(s) {', '.join(missing)}")
+        tables.append(table)
+    return tables[0], tables[1]

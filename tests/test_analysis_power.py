@@ -234,3 +234,25 @@ def test_freedman_lane_p_is_calibrated_under_effort_only_and_noise(table):
     rows = res[(res.procedure == "freedman-lane full>effort") & res.verdict.str.startswith("full beats")]
     rate = rows["count"].sum() / rows["n_studies"].sum()
     assert 0.015 <= rate <= 0.095, rows
+
+
+def test_read_trial_table_refuses_a_missing_or_broken_run_naming_results_and_reads_a_good_one(tmp_path):
+    """--results: a folder without the run's tables, a table without its columns, a
+    trial without risk at a sigma, each refused naming the flag; a complete (synthetic)
+    run is read with the heuristics of the paper's trial files and folds by structure."""
+    with pytest.raises(pw.PowerInputError, match=r"^--results: .*effort_samples.csv: cannot read"):
+        pw.read_trial_table(tmp_path)
+    rng = np.random.default_rng(0)
+    effort = pd.DataFrame({"trial": np.repeat(T, 2), "sample": np.tile([0, 1], 24), "effort": rng.uniform(1, 5, 48)})
+    effort.to_csv(tmp_path / "effort_samples.csv", index=False)
+    pd.DataFrame({"trial": T, "sigma": 0.1}).to_csv(tmp_path / "risk.csv", index=False)
+    with pytest.raises(pw.PowerInputError, match=r"^--results: .*risk.csv: missing column\(s\) risk"):
+        pw.read_trial_table(tmp_path)
+    risk = pd.DataFrame([(t, s, 0.0) for s in (0.1, 0.2) for t in T], columns=["trial", "sigma", "risk"])
+    risk.iloc[:-1].to_csv(tmp_path / "risk.csv", index=False)                 # 12H lacks sigma 0.2
+    with pytest.raises(pw.PowerInputError, match="no risk for trial 12H at sigma 0.2"):
+        pw.read_trial_table(tmp_path, samples=2)
+    risk.to_csv(tmp_path / "risk.csv", index=False)
+    t = pw.read_trial_table(tmp_path, samples=2)
+    assert t.trials == tuple(T) and np.allclose(t.effort, effort.groupby("trial", sort=False)["effort"].mean())
+    assert "1E 1H 9E 9H 11E 11H" in t.grouping and set(t.features) == set(pw.FEATURES)

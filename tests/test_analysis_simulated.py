@@ -171,3 +171,9 @@ def test_demo_labels_every_output_as_simulated(tmp_path, quick_run):
     demo.main(["--results", str(quick_run), "--out", str(tmp_path / "sim"), "--n-boot", "20"])
     written = list((tmp_path / "sim").iterdir())
     assert written and all(p.name.startswith("simulated_") for p in written)
+    # the heuristic baselines are in its comparison, fitted like effort-only, on folds by structure
+    from analysis.spec import HEURISTIC_MODELS
+
+    mc = pd.read_csv(tmp_path / "sim" / "simulated_model_comparison.csv")
+    assert set(HEURISTIC_MODELS) <= set(mc["model"])
+    assert "1E 1H 9E 9H 11E 11H" in pd.read_csv(tmp_path / "sim" / "simulated_settings.csv")["folds_by_structure"].iloc[0]

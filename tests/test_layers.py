@@ -45,7 +45,7 @@ LAYERS = [
     ("application", [*APP_WING, "stimuli.sheet", "stimuli.generate", "stimuli.render", "stimuli.render.*",
                      "stimuli.experiment", "stimuli.experiment.*", "stimuli.design", "stimuli.design.*", "analysis.import_study", "analysis.mental_jenga",
                      # they read trial files, plans and lgp.reproduce's caches
-                     "analysis.heuristics", "analysis.power", "*.__main__"], None),
+                     "analysis.heuristics", "analysis.power", "analysis.demo", "*.__main__"], None),
 ]
 APPLICATION = LAYERS[-1][0]
 RANK = {name: k for k, (name, _, _) in enumerate(LAYERS)}
