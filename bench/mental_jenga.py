@@ -6,10 +6,15 @@
 2. how often do those verdicts agree with the authors' Box2D run (exp2_info `fall`)?
 3. the "above" set the noise moves against the authors' feature `above` (+1: theirs
    counts the black brick);
-4. cost per run (CPU and wall, with the load), and the projection to the issue's
-   speed target (42 scenes x 31 sigmas x 100 runs on 2 cores).
+4. speed, side by side in one process: the run loop as it was (`old_run` below, a
+   copy of models.counterfactual before the exact speed-ups: stop only when every
+   tree of the model sleeps, every run simulated) against the current one
+   (stop once the bricks still on the scene all sleep; equal starts simulated once),
+   on every scene at a few sigmas; whether each run's fallen bricks are the same;
+   how many of the full grid's starts are distinct; and the projection to the
+   issue's target (42 scenes x 31 sigmas x 100 runs on 2 cores).
 
-    python bench/mental_jenga.py --repo /work/shared/mental-jenga/repo-exp2 [--write]
+    python bench/mental_jenga.py --repo /work/shared/mental-jenga/repo-exp2 [--runs 10] [--write]
 """
 from __future__ import annotations
 
@@ -24,14 +29,108 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.common import machine, write_section  # noqa: E402
-from models.counterfactual import FallSettings, JengaWorld, Perturbation, counterfactual_runs, deterministic_falls  # noqa: E402
+from models.counterfactual import FallSettings, JengaWorld, Perturbation, counterfactual_runs, deterministic_falls, draw_normals  # noqa: E402
+from models.risk.engine import CHECK_INTERVAL, REST_SLACK, REST_SPEED, REST_WINDOW, block_speeds  # noqa: E402
 from stimuli.mental_jenga import read_info, read_scenes  # noqa: E402
+
+SPEED_SIGMAS = (0.06, 0.15, 0.24)
+GRID = tuple(round(0.01 * k, 2) for k in range(31))
+
+
+def old_run(world: JengaWorld, p_WB: np.ndarray) -> np.ndarray:
+    """JengaWorld.run as it was before the speed-ups (commit 738a001), kept here to
+    time it side by side: it stops when every tree of the model sleeps, parked bricks
+    included."""
+    mj, m, d = world.mj, world.model, world.data
+    mj.mj_resetData(m, d)
+    world.qpos[:] = world.q_settled
+    world.qpos[:, :3] = p_WB
+    fallen = np.zeros(world.n, bool)
+    active = ~world.black
+    for i in np.flatnonzero(world.black):
+        world._park(i)
+    mj.mj_forward(m, d)
+    fall_z = world.scene.fall_z
+    rest_since, rest_speed = 0.0, np.inf
+    n_checks = int(np.ceil(world.duration / CHECK_INTERVAL - 1e-9))
+    for k in range(1, n_checks + 1):
+        t = min(world.duration, k * CHECK_INTERVAL)
+        world._step_to(t)
+        below = active & (world.qpos[:, 2] < fall_z)
+        if below.any():
+            for i in np.flatnonzero(below):
+                world._park(i)
+            fallen |= below
+            active &= ~below
+            mj.mj_forward(m, d)
+            rest_since, rest_speed = t, np.inf
+            continue
+        if not active.any() or int(d.ntree_awake) == 0:
+            break
+        speed = block_speeds(world.qvel[active, :3], world.qvel[active, 3:], world.radii[active])
+        fastest = float(speed.max())
+        if fastest >= REST_SPEED:
+            rest_since, rest_speed = t, np.inf
+        elif rest_speed == np.inf:
+            rest_since, rest_speed = t, fastest
+        elif t - rest_since >= REST_WINDOW - 1e-9:
+            if fastest <= rest_speed + REST_SLACK:
+                break
+            rest_since, rest_speed = t, fastest
+    return fallen
+
+
+def speed(scenes, n_runs: int, rules=("paper-3d", "authors-x")) -> dict:
+    """Old loop against new, per scene, interleaved (same process, same load)."""
+    out = {"old_cpu": 0.0, "new_cpu": 0.0, "runs": 0, "new_simulated": 0, "same_ids": 0, "same_count": 0}
+    for s in scenes:
+        for rule in rules:
+            world = JengaWorld(s)
+            P = Perturbation(world)
+            z = draw_normals(n_runs, world.n, 0, s.trial)
+            starts = [P.positions(rule, sg, z) for sg in SPEED_SIGMAS]
+            c0 = time.process_time()
+            old = [old_run(world, p[r]) for p in starts for r in range(n_runs)]
+            c1 = time.process_time()
+            new = counterfactual_runs(s, rule, SPEED_SIGMAS, n_runs)
+            c2 = time.process_time()
+            out["old_cpu"] += c1 - c0
+            out["new_cpu"] += c2 - c1
+            out["runs"] += len(old)
+            out["new_simulated"] += len({p[r].tobytes() for p in starts for r in range(n_runs)})
+            names = [b.name for b in s.bricks]
+            for f, (_, row) in zip(old, new.iterrows()):
+                ids = " ".join(nm for nm, x in zip(names, f) if x)
+                out["same_ids"] += int(ids == row["ids"])
+                out["same_count"] += int(int(f.sum()) == row["fallen"])
+    return out
+
+
+def distinct_starts(scenes, n_runs: int = 100, rules=("paper-3d", "authors-x")) -> dict:
+    """How many of the full grid's runs (31 sigmas x n_runs per scene and rule) start
+    from distinct positions, i.e. are simulated."""
+    out = {}
+    for rule in rules:
+        total = distinct = 0
+        for s in scenes:
+            world = JengaWorld(s)
+            P = Perturbation(world)
+            z = draw_normals(n_runs, world.n, 0, s.trial)
+            keys = set()
+            for sg in GRID:
+                p = P.positions(rule, sg, z)
+                keys.update(p[r].tobytes() for r in range(n_runs))
+            total += len(GRID) * n_runs
+            distinct += len(keys)
+        out[rule] = (distinct, total)
+    return out
 
 
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repo", default="/work/shared/mental-jenga/repo-exp2")
     ap.add_argument("--write", action="store_true", help="write the section of docs/benchmarks.md")
+    ap.add_argument("--runs", type=int, default=10, help="runs per sigma in the side-by-side timing")
     args = ap.parse_args()
     repo = Path(args.repo)
     load0 = machine()
@@ -56,13 +155,15 @@ def main() -> int:
         agree_above += int(Perturbation(JengaWorld(s)).above.sum() + 1 == feats[f"trial_{s.trial}"]["above"])
     same_count = int(sum(a == b for a, b in zip(counts_ref, counts_mine)))
     r_counts = float(np.corrcoef(counts_ref, counts_mine)[0, 1])
-    # cost: 3 scenes x 2 sigmas x 5 runs, authors-x
-    t0, c0 = time.time(), time.process_time()
-    n_runs = 0
-    for s in (scenes[0], scenes[20], scenes[35]):
-        n_runs += len(counterfactual_runs(s, "authors-x", [0.12, 0.24], 5))
-    wall, cpu = (time.time() - t0) / n_runs, (time.process_time() - c0) / n_runs
+    t0 = time.time()
+    sp = speed(scenes, args.runs)
+    wall = time.time() - t0
+    grid = distinct_starts(scenes)
+    old_per_run = sp["old_cpu"] / sp["runs"]
+    new_per_run = sp["new_cpu"] / sp["runs"]
+    new_per_sim = sp["new_cpu"] / sp["new_simulated"]
     target = 42 * 31 * 100
+    proj = {rule: d * new_per_sim for rule, (d, _) in grid.items()}
     text = f"""## Mental Jenga (bench/mental_jenga.py)
 
 Machine at start: {load0}; at end: {machine()}.
@@ -74,8 +175,18 @@ Machine at start: {load0}; at end: {machine()}.
 | the same, the authors' linear damping off | {agree_nodamp}/{n_red} agree |
 | fallen count per scene equal to the authors' | {same_count}/42 scenes (r = {r_counts:.2f}) |
 | bricks the noise moves ("above" set) = the authors' `above` feature - 1 | {agree_above}/42 scenes |
-| cost of one run (authors-x, sigma 0.12/0.24, {n_runs} runs) | {cpu:.3f} s CPU, {wall:.3f} s wall |
-| projected: 42 x 31 x 100 = {target:,} runs on 2 cores | {target * cpu / 2 / 60:.0f} min of CPU per core (target: 3 min) |
+
+Speed, side by side in one process ({sp['runs']:,} runs: 42 scenes x 2 rules x sigma {", ".join(map(str, SPEED_SIGMAS))} x {args.runs} runs;
+{wall:.0f} s wall): the run loop before the speed-ups (`old_run`) against `counterfactual_runs` now.
+
+| measure | before | now |
+|---|---|---|
+| CPU per run | {old_per_run:.4f} s | {new_per_run:.4f} s (ratio before/now {old_per_run / new_per_run:.2f}) |
+| runs simulated | {sp['runs']:,} | {sp['new_simulated']:,} (equal starts once) |
+| CPU per simulated run | {old_per_run:.4f} s | {new_per_sim:.4f} s (ratio {old_per_run / new_per_sim:.2f}) |
+| runs whose fallen bricks are the same bricks as before | | {sp['same_ids']:,}/{sp['runs']:,} (counts: {sp['same_count']:,}) |
+| full grid 42 x 31 x 100 = {target:,} runs per rule: distinct starts | | paper-3d {grid['paper-3d'][0]:,}, authors-x {grid['authors-x'][0]:,} |
+| projected CPU for the full grid, one rule (paper-3d) | {target * old_per_run / 60:.0f} min | {proj['paper-3d'] / 60:.0f} min ({proj['paper-3d'] / 120:.0f} min per core of 2; target: 3 min on 2 cores) |
 """
     print(text)
     if args.write:

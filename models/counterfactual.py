@@ -103,6 +103,7 @@ class JengaWorld:
         self.qpos = self.data.qpos.reshape(n, 7)
         self.qvel = self.data.qvel.reshape(n, 6)
         self.radii = half_diagonals([b.size for b in scene.bricks])
+        self.trees = self.model.body_treeid[1:].copy()  # kinematic tree of each brick (MuJoCo sleeps per tree)
         self.black = np.array([b.black for b in scene.bricks])
         self.ts = time_scale(scene.scale, GRAVITY)
         if settings.damping:  # Box2D's linearDamping: dv/dt = -c v on the linear dofs only
@@ -172,8 +173,8 @@ class JengaWorld:
                 mj.mj_forward(m, d)
                 rest_since, rest_speed = t, np.inf
                 continue
-            if not active.any() or int(d.ntree_awake) == 0:
-                break
+            if not active.any() or not self.data.tree_awake[self.trees[active]].any():
+                break  # every brick still on the scene sleeps: nothing on it moves again (the parked ones are far away)
             speed = block_speeds(self.qvel[active, :3], self.qvel[active, 3:], self.radii[active])
             fastest = float(speed.max())
             if fastest >= REST_SPEED:
@@ -311,10 +312,14 @@ def counterfactual_runs(scene: JengaScene, rule: str, sigmas, n_runs: int, seed:
     z = draw_normals(n_runs, world.n, seed, scene.trial)
     rows = []
     names = [b.name for b in scene.bricks]
+    done: dict[bytes, np.ndarray] = {}  # a run is a function of its start: equal starts are simulated once
     for sigma in sigmas:
         P = noise.positions(rule, float(sigma), z)
         for r in range(n_runs):
-            f = world.run(P[r])
+            key = P[r].tobytes()
+            if key not in done:
+                done[key] = world.run(P[r])
+            f = done[key]
             rows.append((scene.label, rule, float(sigma), r, int(f.sum()), " ".join(nm for nm, x in zip(names, f) if x)))
     return pd.DataFrame(rows, columns=["trial", "rule", "sigma", "run", "fallen", "ids"])
 
