@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from models.risk.engine import CHECK_INTERVAL, REST_SLACK, REST_SPEED, REST_WINDOW, block_speeds, half_diagonals
+from models.risk.engine import CHECK_INTERVAL, RestWatch, block_speeds, half_diagonals
 from models.risk.mujoco_engine import SOLIMP, SOLREF, TIMESTEP, quiet_log
 from models.risk.engine import DENSITY
 from stimuli.mental_jenga import (FRICTION_A, LINEAR_DAMPING_A, PRESETTLE_STEPS_A, SETTLE_STEPS_A, STEP_A,
@@ -159,7 +159,7 @@ class JengaWorld:
             self._park(i)
         mj.mj_forward(m, d)
         fall_z = self.scene.fall_z
-        rest_since, rest_speed = 0.0, np.inf
+        watch = RestWatch()
         n_checks = int(math.ceil(self.duration / CHECK_INTERVAL - 1e-9))
         for k in range(1, n_checks + 1):
             t = min(self.duration, k * CHECK_INTERVAL)
@@ -171,20 +171,13 @@ class JengaWorld:
                 fallen |= below
                 active &= ~below
                 mj.mj_forward(m, d)
-                rest_since, rest_speed = t, np.inf
+                watch.reset(t)
                 continue
             if not active.any() or not self.data.tree_awake[self.trees[active]].any():
                 break  # every brick still on the scene sleeps: nothing on it moves again (the parked ones are far away)
             speed = block_speeds(self.qvel[active, :3], self.qvel[active, 3:], self.radii[active])
-            fastest = float(speed.max())
-            if fastest >= REST_SPEED:
-                rest_since, rest_speed = t, np.inf
-            elif rest_speed == np.inf:
-                rest_since, rest_speed = t, fastest
-            elif t - rest_since >= REST_WINDOW - 1e-9:
-                if fastest <= rest_speed + REST_SLACK:
-                    break
-                rest_since, rest_speed = t, fastest
+            if watch.update(t, float(speed.max())):
+                break
         return fallen
 
 

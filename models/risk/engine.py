@@ -35,6 +35,33 @@ REST_WINDOW = 0.3
 REST_SLACK = 0.0002
 
 
+class RestWatch:
+    """The rest rule of a run (module comment above): fed the fastest point speed of
+    the moving blocks at each check, `update(t, fastest)` says when the run is at
+    rest: every point slower than REST_SPEED for REST_WINDOW s in a row, without
+    speeding up by more than REST_SLACK over that window (a speed-up starts the
+    window again). `reset(t)` starts over, e.g. after a block was taken out."""
+
+    __slots__ = ("since", "speed")
+
+    def __init__(self):
+        self.since, self.speed = 0.0, np.inf
+
+    def reset(self, t: float) -> None:
+        self.since, self.speed = t, np.inf
+
+    def update(self, t: float, fastest: float) -> bool:
+        if fastest >= REST_SPEED:
+            self.since, self.speed = t, np.inf
+        elif self.speed == np.inf:
+            self.since, self.speed = t, fastest
+        elif t - self.since >= REST_WINDOW - 1e-9:
+            if fastest <= self.speed + REST_SLACK:
+                return True
+            self.since, self.speed = t, fastest  # speeding up: watch again
+        return False
+
+
 @dataclass(frozen=True)
 class Rollout:
     """One simulated run: block centres at the start and at the end (n, 3), the
@@ -82,7 +109,7 @@ class Engine:
             return Rollout(p_start, p_start, 0.0, False)
         certain = stop_distance * smallest_width(scene)
         xy_start = p_start[:, :2]
-        t, rest_since, rest_speed = 0.0, 0.0, np.inf
+        t, watch = 0.0, RestWatch()
         n_checks = int(round(duration / CHECK_INTERVAL))
         for k in range(1, n_checks + 1):
             t = min(duration, k * CHECK_INTERVAL)
@@ -94,15 +121,8 @@ class Engine:
                 return Rollout(p_start, p, t, t < duration)
             if self._asleep():
                 return Rollout(p_start, p, t, t < duration)
-            fastest = float(speed.max()) if len(speed) else 0.0
-            if fastest >= REST_SPEED:
-                rest_since, rest_speed = t, np.inf
-            elif rest_speed == np.inf:
-                rest_since, rest_speed = t, fastest
-            elif t - rest_since >= REST_WINDOW - 1e-9:
-                if fastest <= rest_speed + REST_SLACK:
-                    return Rollout(p_start, p, t, t < duration)
-                rest_since, rest_speed = t, fastest  # speeding up: watch again
+            if watch.update(t, float(speed.max()) if len(speed) else 0.0):
+                return Rollout(p_start, p, t, t < duration)
         p, _ = self._state()
         return Rollout(p_start, p, t, False)
 
