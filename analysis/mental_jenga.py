@@ -2,10 +2,10 @@
 Mental Jenga (Zhou, Smith, Tenenbaum & Gerstenberg 2023), read from a user's clone
 of `cicl-stanford/mental_jenga` (stimuli/mental_jenga.py).
 
-    python -m analysis.mental_jenga --repo PATH --experiment 2 --out DIR [--runs 100] [--jobs 2]
+    python -m analysis.mental_jenga --repo PATH --experiment 2 --out DIR [--runs 100] [--jobs 2] [--engine physx]
 
 Per noise rule and sigma on a grid: the model's mean count of red bricks off the
-table per scene (models/counterfactual.py, MuJoCo) against the human mean per
+table per scene (models/counterfactual.py, MuJoCo, or PhysX with --engine physx) against the human mean per
 scene: Pearson r and RMSE of the raw counts (no linear map: the model predicts a
 count in the same unit as the answer). The best sigma is the one of least RMSE
 (ties to the smaller sigma), with a bootstrap interval over participants
@@ -43,32 +43,41 @@ KIND = "mjruns"
 # ----------------------------------------------------------------------------- simulation (cached, both cores)
 
 
-def _code_key() -> dict:
+def _code_key(engine: str = "mujoco") -> dict:
     from lgp.app.cache import library_versions, modules_digest
 
-    return {"code": modules_digest("models.counterfactual"), "libraries": library_versions(("mujoco", "numpy"))}
+    libs = ("mujoco", "numpy") if engine == "mujoco" else ("mujoco", "numpy", "sapien")
+    return {"code": modules_digest("models.counterfactual"), "libraries": library_versions(libs)}
 
 
-def _simulate(scene, rule, sigmas, n_runs, seed):
+def _simulate(scene, rule, sigmas, n_runs, seed, engine="mujoco"):
     from models.counterfactual import counterfactual_runs
 
     t0 = time.process_time()
-    df = counterfactual_runs(scene, rule, sigmas, n_runs, seed)
+    df = counterfactual_runs(scene, rule, sigmas, n_runs, seed, engine=engine)
     return df, time.process_time() - t0
 
 
-def simulate_all(scenes, rules, sigmas, n_runs: int, seed: int, cache_dir: Path, jobs: int = 2, log=sys.stderr):
+def simulate_all(scenes, rules, sigmas, n_runs: int, seed: int, cache_dir: Path, jobs: int = 2, log=sys.stderr,
+                 engine: str = "mujoco"):
     """Per-run table of every (scene, rule): trial, rule, sigma, run, fallen, ids;
     each (scene, rule) a cache entry keyed by its inputs, computed on `jobs` processes."""
     from lgp.app.cache import Cache, input_key
     from models.counterfactual import FallSettings
 
     cache = Cache(cache_dir)
-    base = {**_code_key(), "settings": FallSettings().as_dict(), "sigmas": list(map(float, sigmas)), "runs": n_runs, "seed": seed}
+    base = {**_code_key(engine), "settings": FallSettings().as_dict(), "sigmas": list(map(float, sigmas)), "runs": n_runs, "seed": seed}
+    extra = {}  # MuJoCo runs keep the keys they had
+    if engine == "physx":
+        from dataclasses import asdict
+
+        from models.risk.physx_engine import PROFILES
+
+        extra = {"engine": engine, "physx": asdict(PROFILES["faithful"])}
     tables, todo = {}, []
     for s in scenes:
         for rule in rules:
-            key = input_key(scene=s.digest, label=s.label, rule=rule, **base)
+            key = input_key(scene=s.digest, label=s.label, rule=rule, **base, **extra)
             df = cache.get(KIND, key)
             if df is not None:
                 tables[s.label, rule] = df
@@ -80,7 +89,7 @@ def simulate_all(scenes, rules, sigmas, n_runs: int, seed: int, cache_dir: Path,
               f"({len(todo) * len(sigmas) * n_runs} runs) on {jobs} processes", file=log, flush=True)
         t0 = time.time()
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_simulate, s, rule, list(sigmas), n_runs, seed): (s, rule, key) for s, rule, key in todo}
+            futures = {pool.submit(_simulate, s, rule, list(sigmas), n_runs, seed, engine): (s, rule, key) for s, rule, key in todo}
             for k, f in enumerate(as_completed(futures), 1):
                 s, rule, key = futures[f]
                 df, c = f.result()
@@ -174,7 +183,7 @@ def sigma_units(rule: str, sigma: float) -> dict:
 
 
 def analyse(repo, experiment: int, out, sigmas=DEFAULT_GRID, n_runs: int = 100, seed: int = 0, jobs: int = 2,
-            rules=RULES, cache_dir=None, log=sys.stderr, fixed: dict | None = None) -> dict:
+            rules=RULES, cache_dir=None, log=sys.stderr, fixed: dict | None = None, engine: str = "mujoco") -> dict:
     """The whole check (module docstring). `fixed` ({rule: sigma}, e.g. the best sigmas
     of another experiment's summary.json): r and RMSE at those sigmas too, the
     held-out test of a sigma chosen elsewhere."""
@@ -192,7 +201,7 @@ def analyse(repo, experiment: int, out, sigmas=DEFAULT_GRID, n_runs: int = 100, 
     human = wide.mean(axis=0)  # per scene, over every participant who answered it
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
-    runs, run_info = simulate_all(scenes, rules, sigmas, n_runs, seed, Path(cache_dir or out / "cache"), jobs, log)
+    runs, run_info = simulate_all(scenes, rules, sigmas, n_runs, seed, Path(cache_dir or out / "cache"), jobs, log, engine)
     wall = time.time() - t0
     label_of = {s.label: s.trial for s in scenes}
     runs["scene"] = runs["trial"].map(label_of)
@@ -200,14 +209,14 @@ def analyse(repo, experiment: int, out, sigmas=DEFAULT_GRID, n_runs: int = 100, 
     sig = np.array(sorted(map(float, sigmas)))
     fit_rows, summary = [], {"experiment": experiment, "scenes_used": len(scenes), "scenes_skipped": len(skipped),
                              "skipped": skipped, "participants": int(wide.shape[0]), "runs_per_sigma": n_runs,
-                             "seed": seed, "engine": "mujoco", "linear_map": False, "rules": {}}
+                             "seed": seed, "engine": engine, "linear_map": False, "rules": {}}
     for rule in rules:
         M = np.array([[means[(means.rule == rule) & (means.sigma == s) & (means.scene == t)]["mean"].iloc[0]
                        for t in trials] for s in sig])
         h = human.to_numpy()
         for k, s in enumerate(sig):
             r, rmse = fit_stats(M[k], h)
-            fit_rows.append({"rule": rule, "engine": "mujoco", "sigma": s, "r": r, "rmse": rmse})
+            fit_rows.append({"rule": rule, "engine": engine, "sigma": s, "r": r, "rmse": rmse})
         kb = best_sigma_index(M, h)
         r_best, rmse_best = fit_stats(M[kb], h)
         r_ho, rmse_ho, chosen = held_out_r(M, h)
@@ -288,6 +297,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sigmas", default=None, help="comma-separated grid (default 0, 0.01, ..., 0.30)")
     ap.add_argument("--rules", default=",".join(RULES))
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--engine", default="mujoco", help="mujoco (default) or physx (the sapien package)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--cache", default=None, help="cache folder (default OUT/cache)")
     ap.add_argument("--fixed", default=None, metavar="SUMMARY",
@@ -297,6 +307,10 @@ def main(argv=None) -> int:
         sigmas = DEFAULT_GRID if args.sigmas is None else tuple(float(v) for v in args.sigmas.split(","))
         rules = tuple(args.rules.split(","))
         bad = [r for r in rules if r not in RULES]
+        from models.counterfactual import WORLDS
+
+        if args.engine not in WORLDS:
+            raise MentalJengaError(f"unknown --engine {args.engine!r}; known: {', '.join(WORLDS)}")
         if bad or args.runs < 1 or any(not np.isfinite(s) or s < 0 for s in sigmas):
             raise MentalJengaError(f"--rules must be among {', '.join(RULES)}, --runs >= 1, sigmas finite and >= 0")
         fixed = None
@@ -306,7 +320,7 @@ def main(argv=None) -> int:
                 fixed = {rule: float(v["best_sigma"]) for rule, v in other["rules"].items()}
             except (OSError, ValueError, KeyError, TypeError) as e:
                 raise MentalJengaError(f"{args.fixed}: not a summary.json of analysis.mental_jenga ({type(e).__name__}: {e})") from None
-        s = analyse(args.repo, args.experiment, args.out, sigmas, args.runs, args.seed, args.jobs, rules, args.cache, fixed=fixed)
+        s = analyse(args.repo, args.experiment, args.out, sigmas, args.runs, args.seed, args.jobs, rules, args.cache, fixed=fixed, engine=args.engine)
     except (MentalJengaError, ValueError) as e:
         print(f"analysis.mental_jenga: {e}", file=sys.stderr)
         return 2

@@ -106,6 +106,37 @@ def speed(scenes, n_runs: int, rules=("paper-3d", "authors-x")) -> dict:
     return out
 
 
+def engine_agreement(scenes, human: dict, sigma: float, n_runs: int, engine: str = "physx") -> dict:
+    """MuJoCo against `engine` on every scene: deterministic verdicts per red brick
+    and counts per scene; then the paper's rule at `sigma` (n_runs, the same normals
+    in both engines, each on its own settled scene): mean count per scene, r between
+    the engines, and each engine's r and RMSE against the human means."""
+    from analysis.mental_jenga import fit_stats
+
+    out = {"red": 0, "same_verdict": 0, "same_count": 0, "counts": {"mujoco": [], engine: []},
+           "means": {"mujoco": [], engine: []}, "cpu": {"mujoco": 0.0, engine: 0.0}, "h": []}
+    for s in scenes:
+        det = {}
+        for e in ("mujoco", engine):
+            c0 = time.process_time()
+            det[e] = deterministic_falls(s, engine=e)
+            runs = counterfactual_runs(s, "paper-3d", [sigma], n_runs, engine=e)
+            out["cpu"][e] += time.process_time() - c0
+            out["counts"][e].append(int(det[e].sum()))
+            out["means"][e].append(float(runs.fallen.mean()))
+        red = ~np.array([b.black for b in s.bricks])
+        out["red"] += int(red.sum())
+        out["same_verdict"] += int((det["mujoco"][red] == det[engine][red]).sum())
+        out["same_count"] += int(det["mujoco"].sum() == det[engine].sum())
+        out["h"].append(human[s.trial])
+    h = np.array(out["h"])
+    out["fit"] = {e: fit_stats(np.array(out["means"][e]), h) for e in ("mujoco", engine)}
+    out["fit0"] = {e: fit_stats(np.array(out["counts"][e], float), h) for e in ("mujoco", engine)}
+    out["r_counts"] = float(np.corrcoef(out["counts"]["mujoco"], out["counts"][engine])[0, 1])
+    out["r_means"] = float(np.corrcoef(out["means"]["mujoco"], out["means"][engine])[0, 1])
+    return out
+
+
 def distinct_starts(scenes, n_runs: int = 100, rules=("paper-3d", "authors-x")) -> dict:
     """How many of the full grid's runs (31 sigmas x n_runs per scene and rule) start
     from distinct positions, i.e. are simulated."""
@@ -131,11 +162,16 @@ def main() -> int:
     ap.add_argument("--repo", default="/work/shared/mental-jenga/repo-exp2")
     ap.add_argument("--write", action="store_true", help="write the section of docs/benchmarks.md")
     ap.add_argument("--runs", type=int, default=10, help="runs per sigma in the side-by-side timing")
+    ap.add_argument("--engines", action="store_true", help="only MuJoCo against PhysX (its own section)")
+    ap.add_argument("--engine-sigma", type=float, default=0.18, help="the paper's rule's sigma for the engine comparison")
+    ap.add_argument("--engine-runs", type=int, default=20)
     args = ap.parse_args()
     repo = Path(args.repo)
     load0 = machine()
     info = read_info(repo, 2)
     scenes = read_scenes(repo, 2)
+    if args.engines:
+        return engines_section(args, repo, scenes, load0)
     big = {s.trial: s for s in read_scenes(repo, 2, scale=0.2)}
     feats = json.loads((repo / "code/R/data/features/black_exp2.json").read_text())
     n_red = agree_scale = agree_ref = agree_nodamp = agree_above = 0
@@ -191,6 +227,39 @@ Speed, side by side in one process ({sp['runs']:,} runs: 42 scenes x 2 rules x s
     print(text)
     if args.write:
         write_section(Path(__file__).resolve().parents[1] / "docs" / "benchmarks.md", "Mental Jenga (bench/mental_jenga.py)", text)
+    return 0
+
+
+def engines_section(args, repo: Path, scenes, load0: str) -> int:
+    from stimuli.mental_jenga import read_predictions
+
+    pred = read_predictions(repo, 2)
+    human = pred.groupby("trial").response.mean().to_dict()
+    t0 = time.time()
+    a = engine_agreement(scenes, human, args.engine_sigma, args.engine_runs)
+    wall = time.time() - t0
+    sg, n = args.engine_sigma, args.engine_runs
+    text = f"""## Mental Jenga engines (bench/mental_jenga.py --engines)
+
+Machine at start: {load0}; at end: {machine()}. {wall:.0f} s wall.
+MuJoCo (the measure's settings) against PhysX 5 (sapien, the risk engine's faithful
+profile: 1 ms steps, TGS 20 position iterations, 2 mm contact offset), each scene
+settled in each engine; noisy runs: the paper's rule at {sg:g} d, {n} runs per scene,
+the same normals in both engines.
+
+| measure (experiment 2, 42 scenes, {a['red']} red bricks) | MuJoCo | PhysX |
+|---|---|---|
+| deterministic verdicts per red brick, PhysX = MuJoCo | {a['same_verdict']}/{a['red']} | |
+| deterministic count per scene equal | {a['same_count']}/42 (r = {a['r_counts']:.2f}) | |
+| deterministic count vs people: r, RMSE | {a['fit0']['mujoco'][0]:.2f}, {a['fit0']['mujoco'][1]:.2f} | {a['fit0']['physx'][0]:.2f}, {a['fit0']['physx'][1]:.2f} |
+| mean count at {sg:g} d vs people: r, RMSE | {a['fit']['mujoco'][0]:.2f}, {a['fit']['mujoco'][1]:.2f} | {a['fit']['physx'][0]:.2f}, {a['fit']['physx'][1]:.2f} |
+| r between the engines' mean counts at {sg:g} d | {a['r_means']:.2f} | |
+| CPU (deterministic + {n} runs per scene, with settling) | {a['cpu']['mujoco']:.0f} s | {a['cpu']['physx']:.0f} s |
+"""
+    print(text)
+    if args.write:
+        write_section(Path(__file__).resolve().parents[1] / "docs" / "benchmarks.md",
+                      "Mental Jenga engines (bench/mental_jenga.py --engines)", text)
     return 0
 
 

@@ -181,6 +181,125 @@ class JengaWorld:
         return fallen
 
 
+class PhysxJengaWorld:
+    """The same counterfactual run in PhysX 5 (through sapien; the risk engine's
+    faithful profile, models/risk/physx_engine.py: 1 ms steps, TGS with 20 position
+    iterations, contact offset 2 mm, no restitution). The scene settles in PhysX
+    (PRESETTLE time, black brick present); every run builds a fresh PhysX scene
+    (a reused one carries contact caches from run to run) with the red bricks at
+    the start given, and follows the MuJoCo world's protocol: the authors' linear
+    damping, a brick whose centre passes the fall line is taken out and counted,
+    the run stops at rest (RestWatch, speeds from poses between checks, as the
+    risk engine measures them in PhysX) or when every brick on the scene sleeps.
+    Same attributes as JengaWorld (n, scene, black, q_settled (n, 7: x y z, w x y z),
+    settled_outlines), so Perturbation draws the same noise on it."""
+
+    def __init__(self, scene: JengaScene, settings: FallSettings = FallSettings()):
+        from models.risk.physx_engine import PROFILES, _import_sapien
+
+        self.sapien, self.config = _import_sapien(), PROFILES["faithful"]
+        self.scene, self.settings = scene, settings
+        self.n = len(scene.bricks)
+        self.black = np.array([b.black for b in scene.bricks])
+        self.radii = half_diagonals([b.size for b in scene.bricks])
+        self.ts = time_scale(scene.scale, GRAVITY)
+        self.damping = LINEAR_DAMPING_A / self.ts if settings.damping else 0.0
+        self.duration = SETTLE_STEPS_A * STEP_A * self.ts
+        q0 = np.array([[*b.p_WB, *_quat_y(b.pitch)] for b in scene.bricks])
+        bodies, step = self._build(q0, np.ones(self.n, bool))
+        step(PRESETTLE_STEPS_A * STEP_A * self.ts)
+        self.q_settled = self._poses(bodies)
+
+    settled_outlines = JengaWorld.settled_outlines
+
+    def _build(self, q: np.ndarray, present: np.ndarray):
+        sapien, s = self.sapien, self.config
+        px = sapien.physx
+        px.set_scene_config(bounce_threshold=s.bounce_threshold, enable_pcm=s.enable_pcm, enable_tgs=s.enable_tgs,
+                            enable_ccd=False, enable_enhanced_determinism=s.enable_enhanced_determinism,
+                            enable_friction_every_iteration=True, gravity=[0.0, 0.0, -GRAVITY])
+        px.set_shape_config(contact_offset=s.contact_offset, rest_offset=s.rest_offset)
+        px.set_body_config(solver_position_iterations=s.solver_position_iterations,
+                           solver_velocity_iterations=s.solver_velocity_iterations, sleep_threshold=s.sleep_threshold)
+        world = sapien.Scene([px.PhysxCpuSystem()])
+        world.set_timestep(s.timestep)
+        brick = px.PhysxMaterial(FRICTION_A, FRICTION_A, s.restitution)
+        t = self.scene.table
+        for name, half, pos, mat in (("ground", (10.0, 10.0, 0.5), (0.0, 0.0, -0.5), brick),
+                                     ("table", t.size / 2, t.p_WO, px.PhysxMaterial(self.scene.table_friction,
+                                                                                   self.scene.table_friction, s.restitution))):
+            b = world.create_actor_builder()
+            b.add_box_collision(half_size=[float(v) for v in half], material=mat)
+            b.set_initial_pose(sapien.Pose([float(v) for v in pos]))
+            b.build_static(name=name)
+        bodies = {}
+        for i, brk in enumerate(self.scene.bricks):
+            if not present[i]:
+                continue
+            b = world.create_actor_builder()
+            b.add_box_collision(half_size=[float(v) for v in brk.size / 2], material=brick, density=DENSITY)
+            b.set_initial_pose(sapien.Pose([float(v) for v in q[i, :3]], [float(v) for v in q[i, 3:]]))
+            entity = b.build(name=brk.name)
+            body = entity.find_component_by_type(px.PhysxRigidDynamicComponent)
+            body.set_linear_damping(self.damping)
+            body.set_angular_damping(0.0)
+            bodies[i] = body
+        steps = [0]
+
+        def step_to(time: float) -> None:
+            target = int(np.floor(time / s.timestep + 0.5))
+            while steps[0] < target:
+                world.step()
+                steps[0] += 1
+
+        self._world = world
+        return bodies, step_to
+
+    def _poses(self, bodies) -> np.ndarray:
+        out = np.zeros((self.n, 7))
+        for i, b in bodies.items():
+            pose = b.entity_pose
+            out[i, :3], out[i, 3:] = pose.p, pose.q
+        return out
+
+    def run(self, p_WB: np.ndarray | None = None) -> np.ndarray:
+        """As JengaWorld.run: (n,) bools, True for a red brick that fell off the table."""
+        q = self.q_settled.copy()
+        if p_WB is not None:
+            q[:, :3] = p_WB
+        bodies, step_to = self._build(q, ~self.black)
+        fallen = np.zeros(self.n, bool)
+        fall_z = self.scene.fall_z
+        watch = RestWatch()
+        last = self._poses(bodies)
+        n_checks = int(math.ceil(self.duration / CHECK_INTERVAL - 1e-9))
+        for k in range(1, n_checks + 1):
+            t = min(self.duration, k * CHECK_INTERVAL)
+            step_to(t)
+            now, prev = self._poses(bodies), last
+            last = now
+            below = [i for i in bodies if now[i, 2] < fall_z]
+            if below:  # out of the world, counted
+                for i in below:
+                    bodies.pop(i).entity.remove_from_scene()
+                    fallen[i] = True
+                watch.reset(t)
+                continue
+            if not bodies or all(b.is_sleeping for b in bodies.values()):
+                break
+            idx = np.array(sorted(bodies))
+            angle = 2 * np.arccos(np.clip(np.abs(np.sum(now[idx, 3:] * prev[idx, 3:], axis=1)), 0.0, 1.0))
+            v = (now[idx, :3] - prev[idx, :3]) / CHECK_INTERVAL
+            w = angle[:, None] * np.array([0.0, 0.0, 1.0]) / CHECK_INTERVAL
+            if watch.update(t, float(block_speeds(v, w, self.radii[idx]).max())):
+                break
+        return fallen
+
+
+#: The engines a counterfactual run can use, by name.
+WORLDS = {"mujoco": JengaWorld, "physx": PhysxJengaWorld}
+
+
 class Perturbation:
     """The noise rules on one settled scene (module docstring), vectorised over runs."""
 
@@ -295,12 +414,19 @@ def draw_normals(n_runs: int, n_bricks: int, seed: int, trial: int) -> np.ndarra
     return np.random.default_rng([seed, trial]).standard_normal((n_runs, n_bricks, 3))
 
 
+def make_world(scene: JengaScene, settings: FallSettings = FallSettings(), engine: str = "mujoco"):
+    """The scene settled in `engine` (WORLDS), ready for runs."""
+    if engine not in WORLDS:
+        raise InputError(f"unknown engine {engine!r} for the fall measure; known: {', '.join(WORLDS)}")
+    return WORLDS[engine](scene, settings)
+
+
 def counterfactual_runs(scene: JengaScene, rule: str, sigmas, n_runs: int, seed: int = 0,
-                        settings: FallSettings = FallSettings()):
+                        settings: FallSettings = FallSettings(), engine: str = "mujoco"):
     """Tidy table: trial, rule, sigma, run, fallen (count of red bricks off the table), ids."""
     import pandas as pd
 
-    world = JengaWorld(scene, settings)
+    world = make_world(scene, settings, engine)
     noise = Perturbation(world)
     z = draw_normals(n_runs, world.n, seed, scene.trial)
     rows = []
@@ -317,6 +443,6 @@ def counterfactual_runs(scene: JengaScene, rule: str, sigmas, n_runs: int, seed:
     return pd.DataFrame(rows, columns=["trial", "rule", "sigma", "run", "fallen", "ids"])
 
 
-def deterministic_falls(scene: JengaScene, settings: FallSettings = FallSettings()) -> np.ndarray:
+def deterministic_falls(scene: JengaScene, settings: FallSettings = FallSettings(), engine: str = "mujoco") -> np.ndarray:
     """Which bricks fall when the black brick is removed and nothing else changes."""
-    return JengaWorld(scene, settings).run()
+    return make_world(scene, settings, engine).run()
