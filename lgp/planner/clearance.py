@@ -164,13 +164,14 @@ def plan_with_clearance(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str,
     1. The plan with APPROACH legs (quarter turns, swivels and IK branches chosen as
        usual, `solver`) is feasible for the program without legs and clear of every
        solid (within the 1.3 mm its legs stray from vertical): it is the reference
-       and the initial guess.
+       and the initial guess (`_reference`).
     2. The program without legs (same quarter turns) is solved by CLEARANCE_SOLVER.
        Wherever a carried block's bottom corners come within CLEARANCE / 2 of the
        table top, or no face plane of either box separates it from another block
        or fixed box (`separation`) and they overlap by more than
-       OVERLAP_TOLERANCE * 3/4, a constraint is added at that row, and at the rows where the same block
-       is within CLEARANCE_MARGIN of the same solid: its bottom corners CLEARANCE
+       OVERLAP_TOLERANCE * 3/4 (`_entered`), a constraint is added at that row, and at the
+       rows where the same block is within CLEARANCE_MARGIN of the same solid
+       (`_near`, `_constrain`): its bottom corners CLEARANCE
        above the table; its corners beyond one face plane of the solid (over its
        top, or beside one of its four sides; touching allowed): of the faces that
        separate the reference's block from it at that row, the one the solved
@@ -178,26 +179,14 @@ def plan_with_clearance(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str,
        the reference (the program stays feasible) and the motion keeps the
        reference's way round each solid (beside a neighbour until above it, inside
        the bucket until over its wall) but not its 5 cm detours. Re-solved at most
-       CLEARANCE_ROUNDS times, else PlanningError naming the action.
+       CLEARANCE_ROUNDS times, else PlanningError naming the action (`_stuck`).
     """
-    legs = Design(APPROACH, slices_per_phase)
-    komo, seeds, turns = declare(symbolic, arm, rng, legs)
-    komo, reference, turns = quarter_turns.solve(symbolic, arm, komo, seeds, turns, formulation, solver, legs)
-    if not usable(reference, APPROACH):
-        o = reference.worst_objective
-        k = int(round(o.time[0])) if o is not None and o.time else None
-        action = symbolic.actions[k - 1] if k and 1 <= k <= len(symbolic.actions) else None
-        raise PlanningError(f"the reference plan with {APPROACH:g} m legs (the start of the design without legs) failed"
-                            f"{f' at action {k} {action}' if action else ''}: {reference.status}, constraint violation "
-                            f"{reference.max_violation:.2e}", action)
-    initial = symbolic.initial
+    reference, turns = _reference(symbolic, arm, rng, formulation, solver, slices_per_phase)
     S = slices_per_phase
     komo = skeleton.transcribe(symbolic, arm, skeleton.waypoints(symbolic, 0.0), turns, len(symbolic.actions) + 1,
                                Design(0.0, S))
     carried = skeleton.carried_slices(symbolic, S)
-    corners = {b.name: box_corners(b.size) for b in initial.blocks}
-    bottom = {n: c[c[:, 2] < 0] for n, c in corners.items()}
-    half = {b.name: np.asarray(b.size, float) / 2 for b in initial.blocks}
+    blocks = {b.name: _Carried(box_corners(b.size), np.asarray(b.size, float) / 2) for b in symbolic.initial.blocks}
     elapsed = reference.solve_time
     declared: dict[tuple[str, int, str], int] = {}  # (block, row, solid) -> corners constrained
     result = reference
@@ -211,59 +200,128 @@ def plan_with_clearance(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str,
         elapsed += result.solve_time
         if not usable(result, 0.0):
             break
-        near = []  # (block, row, solid or None for the table, gap or height, corners in W)
-        for name, i in carried:
-            X = result.X_WB[name][i]
-            p_WC = corners[name] @ X[:3, :3].T + X[:3, 3]
-            height = float(np.min(p_WC[:, 2][corners[name][:, 2] < 0]))
-            if height < CLEARANCE_MARGIN:
-                near.append((name, i, None, height, p_WC))
-            obstacles = _obstacles(initial, result.X_WB, name, i)
-            for o, g in zip(obstacles, separation(X, half[name], p_WC, obstacles)):
-                if g < CLEARANCE_MARGIN:
-                    near.append((name, i, o, float(g), p_WC))
-
-        def entered(o, g):
-            return g < (CLEARANCE / 2 if o is None else -0.75 * OVERLAP_TOLERANCE)
-
-        worst = [w for w in near if entered(w[2], w[3])]
+        near = _near(result, symbolic.initial, carried, blocks)
+        worst = [w for w in near if _entered(w.solid, w.gap)]
         if not worst:
             break
-        hit = {(n, None if o is None else o.key) for n, _, o, _, _ in worst}
-        added = 0
-        for name, i, o, g, p_WC in near:
-            if (name, None if o is None else o.key) not in hit:
-                continue
-            key = (name, i, "table" if o is None else o.key)
-            if o is None:
-                if key not in declared:
-                    komo.add_objective([i / S], "position", (name,), "ineq", scale=(0.0, 0.0, -1.0),
-                                       target=[0.0, 0.0, CLEARANCE], points=bottom[name])
-                    declared[key], added = 4, added + 1
-                continue
-            if declared.get(key, 0) == 8 or (key in declared and not entered(o, g)):
-                continue
-            X = reference.X_WB[name][i]
-            p_WC_reference = corners[name] @ X[:3, :3].T + X[:3, 3]
-            face = _separating_face(face_gaps(p_WC_reference, [o])[0], face_gaps(p_WC, [o])[0])
-            # The corners that lead along the face's normal, at the reference and now
-            # (4 of 8 each: a near-vertical hand turns the block mostly about z);
-            # all 8 if the solid is entered again at this row.
-            points = np.arange(8)
-            if key not in declared:
-                axis, sign = (0, 0, 1, 1, 2)[face], (1.0, -1.0, 1.0, -1.0, 1.0)[face]
-                lead = [np.argsort(sign * ((P - o.p_WO) @ o.R_WO)[:, axis])[:4] for P in (p_WC_reference, p_WC)]
-                points = np.union1d(*lead)
-            _addseparation(komo, name, corners[name][points], i, o, face)
-            declared[key] = len(points) if key not in declared else 8
-            added += 1
+        added = _constrain(komo, near, worst, declared, reference, blocks, S)
         if round_ == CLEARANCE_ROUNDS or not added:
-            name, i, o, g, _ = min(worst, key=lambda w: w[3])
-            k = int(np.ceil(i / S))
-            action = symbolic.actions[k - 1] if 1 <= k <= len(symbolic.actions) else None
-            where = (f"comes within {g * 1000:.3f} mm of the table top (less than {CLEARANCE / 2 * 1000:g} mm)" if o is None
-                     else f"still enters {o.key} by {-g * 1000:.3f} mm")
-            raise PlanningError(f"action {k} {action}: carried block {name} {where} at t = {i / S:g} s after {round_ + 1} "
-                                f"solves without legs", action)
+            raise _stuck(symbolic, worst, S, round_ + 1)
     result.solve_time = elapsed
     return komo, result
+
+
+def _reference(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str, solver: str, slices_per_phase: int):
+    """The legs design's plan (the reference and first guess) and its quarter turns;
+    PlanningError naming the action if it is not usable."""
+    legs = Design(APPROACH, slices_per_phase)
+    komo, seeds, turns = declare(symbolic, arm, rng, legs)
+    komo, reference, turns = quarter_turns.solve(symbolic, arm, komo, seeds, turns, formulation, solver, legs)
+    if not usable(reference, APPROACH):
+        o = reference.worst_objective
+        k = int(round(o.time[0])) if o is not None and o.time else None
+        action = symbolic.actions[k - 1] if k and 1 <= k <= len(symbolic.actions) else None
+        raise PlanningError(f"the reference plan with {APPROACH:g} m legs (the start of the design without legs) failed"
+                            f"{f' at action {k} {action}' if action else ''}: {reference.status}, constraint violation "
+                            f"{reference.max_violation:.2e}", action)
+    return reference, turns
+
+
+@dataclass(frozen=True)
+class _Carried:
+    """A block that may be carried: its 8 corners (8, 3) in its frame, half extents."""
+
+    corners: np.ndarray
+    half: np.ndarray
+
+    @property
+    def bottom(self) -> np.ndarray:
+        return self.corners[self.corners[:, 2] < 0]
+
+
+@dataclass(frozen=True)
+class _Near:
+    """A carried block `name` at row i within CLEARANCE_MARGIN of a solid (None: the
+    table): its gap (height above the table, or `separation`) and corners p_WC in W."""
+
+    name: str
+    i: int
+    solid: Obstacle | None
+    gap: float
+    p_WC: np.ndarray
+
+    @property
+    def key(self) -> tuple[str, int, str]:
+        return (self.name, self.i, "table" if self.solid is None else self.solid.key)
+
+    @property
+    def pair(self) -> tuple[str, str | None]:
+        return (self.name, None if self.solid is None else self.solid.key)
+
+
+def _entered(solid: Obstacle | None, gap: float) -> bool:
+    """Whether a gap means the block entered the solid (the table: came within CLEARANCE / 2)."""
+    return gap < (CLEARANCE / 2 if solid is None else -0.75 * OVERLAP_TOLERANCE)
+
+
+def _near(result: KomoResult, initial: Scene, carried, blocks: dict[str, _Carried]) -> list[_Near]:
+    """Every (carried block, row, solid) of the solved motion within CLEARANCE_MARGIN."""
+    near = []
+    for name, i in carried:
+        b = blocks[name]
+        X = result.X_WB[name][i]
+        p_WC = b.corners @ X[:3, :3].T + X[:3, 3]
+        height = float(np.min(p_WC[:, 2][b.corners[:, 2] < 0]))
+        if height < CLEARANCE_MARGIN:
+            near.append(_Near(name, i, None, height, p_WC))
+        obstacles = _obstacles(initial, result.X_WB, name, i)
+        for o, g in zip(obstacles, separation(X, b.half, p_WC, obstacles)):
+            if g < CLEARANCE_MARGIN:
+                near.append(_Near(name, i, o, float(g), p_WC))
+    return near
+
+
+def _constrain(komo: Komo, near: list[_Near], worst: list[_Near], declared: dict, reference: KomoResult,
+               blocks: dict[str, _Carried], S: int) -> int:
+    """Constraints at every near row of a (block, solid) pair that `worst` entered;
+    `declared` {(block, row, solid): corners constrained} grows. Returns how many added."""
+    hit = {w.pair for w in worst}
+    added = 0
+    for w in near:
+        if w.pair not in hit:
+            continue
+        name, i, o, key = w.name, w.i, w.solid, w.key
+        if o is None:
+            if key not in declared:
+                komo.add_objective([i / S], "position", (name,), "ineq", scale=(0.0, 0.0, -1.0),
+                                   target=[0.0, 0.0, CLEARANCE], points=blocks[name].bottom)
+                declared[key], added = 4, added + 1
+            continue
+        if declared.get(key, 0) == 8 or (key in declared and not _entered(o, w.gap)):
+            continue
+        X = reference.X_WB[name][i]
+        p_WC_reference = blocks[name].corners @ X[:3, :3].T + X[:3, 3]
+        face = _separating_face(face_gaps(p_WC_reference, [o])[0], face_gaps(w.p_WC, [o])[0])
+        # The corners that lead along the face's normal, at the reference and now
+        # (4 of 8 each: a near-vertical hand turns the block mostly about z);
+        # all 8 if the solid is entered again at this row.
+        points = np.arange(8)
+        if key not in declared:
+            axis, sign = (0, 0, 1, 1, 2)[face], (1.0, -1.0, 1.0, -1.0, 1.0)[face]
+            lead = [np.argsort(sign * ((P - o.p_WO) @ o.R_WO)[:, axis])[:4] for P in (p_WC_reference, w.p_WC)]
+            points = np.union1d(*lead)
+        _addseparation(komo, name, blocks[name].corners[points], i, o, face)
+        declared[key] = len(points) if key not in declared else 8
+        added += 1
+    return added
+
+
+def _stuck(symbolic: SymbolicPlan, worst: list[_Near], S: int, solves: int) -> PlanningError:
+    """The PlanningError of a carry still entering a solid after `solves` solves, naming the action."""
+    w = min(worst, key=lambda w: w.gap)
+    k = int(np.ceil(w.i / S))
+    action = symbolic.actions[k - 1] if 1 <= k <= len(symbolic.actions) else None
+    where = (f"comes within {w.gap * 1000:.3f} mm of the table top (less than {CLEARANCE / 2 * 1000:g} mm)"
+             if w.solid is None else f"still enters {w.solid.key} by {-w.gap * 1000:.3f} mm")
+    return PlanningError(f"action {k} {action}: carried block {w.name} {where} at t = {w.i / S:g} s after {solves} "
+                         f"solves without legs", action)
