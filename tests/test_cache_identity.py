@@ -76,25 +76,22 @@ def test_a_special_entry_is_refused_before_it_is_read_and_then_replaced(tmp_path
 
 
 @pytest.mark.slow
-def test_a_run_with_one_trials_risk_entry_copied_over_anothers_recomputes_it(tmp_path):
+def test_a_run_with_one_trials_risk_entry_copied_over_anothers_recomputes_it(tmp_path, capsys):
     """The issue's probe end to end: 7H's risk entry copied over 4H's; the rerun
-    reports it, recomputes 4H and writes the first run's risk.csv (it wrote 7H twice)."""
-    import subprocess
-    import sys
-    from pathlib import Path
-
+    reports it, recomputes 4H and writes the first run's risk.csv (it wrote 7H twice).
+    Both runs in this process (a run's imports paid once; the cache is on disk)."""
+    from lgp import cli, reproduce
     from lgp.app.cache import read_entry
 
-    root = Path(__file__).resolve().parents[1]
-    run = [sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "2", "--n-sims", "10",
+    run = ["--trials", "7H", "4H", "--samples", "2", "--n-sims", "10",
            "--sigmas", "0.05", "0.1", "--jobs", "1", "--no-replays", "--verbose", "--out", str(tmp_path / "out")]
-    env = {**os.environ, "PYTHONPATH": str(root)}
-    first = subprocess.run(run, cwd=root, env=env, capture_output=True, text=True, timeout=300)
-    assert first.returncode == 0, first.stderr[-2000:]
+    assert cli.run_cli(reproduce.main, run, prog=reproduce.PROG) == 0, capsys.readouterr().err[-2000:]
+    capsys.readouterr()
     before = (tmp_path / "out" / "risk.csv").read_bytes()
     entries = {read_entry(p)["trial"].iloc[0]: p for p in (tmp_path / "out" / "cache").glob("riskruns-*.csv")}
     shutil.copy(entries["7H"], entries["4H"])
-    second = subprocess.run(run, cwd=root, env=env, capture_output=True, text=True, timeout=300)
-    assert second.returncode == 0, second.stderr[-2000:]
-    assert "of trial 7H, not riskruns" in second.stderr and "riskruns 1 hit, 0 miss, 1 recomputed" in second.stderr, second.stderr
+    code = cli.run_cli(reproduce.main, run, prog=reproduce.PROG)
+    err = capsys.readouterr().err
+    assert code == 0, err[-2000:]
+    assert "of trial 7H, not riskruns" in err and "riskruns 1 hit, 0 miss, 1 recomputed" in err, err
     assert (tmp_path / "out" / "risk.csv").read_bytes() == before

@@ -5,9 +5,7 @@ and only the client writes the cache."""
 import os
 import signal
 import socket
-import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -29,28 +27,7 @@ def _distributed():
     # Workers unpickle functions by module name; this test file is not importable there.
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
-ROOT = Path(__file__).resolve().parents[1]
 RUN = ["--trials", "1E", "4H", "10E", "--samples", "2", "--n-sims", "4", "--sigmas", "0.05", "0.08", "--no-replays"]
-
-
-def _reproduce_together(runs):
-    """`lgp.reproduce --out OUT *RUN *EXTRA` for each (OUT, *EXTRA) of `runs`, all started
-    at once (independent runs: own folders, own caches); each must exit 0."""
-    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    procs = [subprocess.Popen([sys.executable, "-m", "lgp.reproduce", "--out", str(out), *RUN, *extra], cwd=ROOT, env=env,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for out, *extra in runs]
-    done = []
-    try:
-        for proc in procs:
-            out, err = proc.communicate(timeout=600)
-            assert proc.returncode == 0, err[-2000:]
-            done.append(subprocess.CompletedProcess(proc.args, proc.returncode, out, err))
-    finally:
-        for proc in procs:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-    return done
 
 
 def _slow_square(x):
@@ -60,8 +37,13 @@ def _slow_square(x):
 
 @pytest.mark.slow
 def test_local_dask_with_one_or_two_workers_writes_the_process_pools_csvs(tmp_path):
-    _reproduce_together([(tmp_path / "pool", "--jobs", "2"), (tmp_path / "dask1", "--scheduler", "local-dask", "--jobs", "1"),
-                         (tmp_path / "dask2", "--scheduler", "local-dask", "--jobs", "2")])
+    # in this process, one after the other (the pipeline's imports paid once): the
+    # pool's workers and the Dask workers are processes of their own all the same
+    from lgp import reproduce
+
+    for out, *extra in [(tmp_path / "pool", "--jobs", "2"), (tmp_path / "dask1", "--scheduler", "local-dask", "--jobs", "1"),
+                        (tmp_path / "dask2", "--scheduler", "local-dask", "--jobs", "2")]:
+        assert reproduce.main(["--out", str(out), *RUN, *extra]) == 0, out.name
     for run in ("dask1", "dask2"):
         for name in ("effort.csv", "risk.csv"):
             assert (tmp_path / run / name).read_bytes() == (tmp_path / "pool" / name).read_bytes(), (run, name)
@@ -152,14 +134,15 @@ def test_interruption_cancels_the_queued_futures(tmp_path):
         assert len(list(tmp_path.glob("*.done"))) == finished < 10
 
 
-@pytest.mark.slow  # a subprocess that imports the pipeline: ~5 s on a loaded machine
-def test_refused_scheduler_address_fails_at_once_with_one_line():
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+@pytest.mark.slow  # the pipeline's imports
+def test_refused_scheduler_address_fails_at_once_with_one_line(tmp_path, capsys):
+    from lgp import cli, reproduce
+
     t0 = time.perf_counter()
-    r = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--scheduler", "tcp://127.0.0.1:1", "--trials", "1E"],
-                       cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
-    assert r.returncode == 1
-    lines = [l for l in r.stderr.splitlines() if l.strip() and not l.startswith("lgp.reproduce:")]
+    code = cli.run_cli(reproduce.main, ["--scheduler", "tcp://127.0.0.1:1", "--trials", "1E", "--out", str(tmp_path / "r")],
+                       prog=reproduce.PROG)
+    assert code == 1
+    lines = [l for l in capsys.readouterr().err.splitlines() if l.strip() and not l.startswith("lgp.reproduce:")]
     assert len(lines) == 1 and lines[0].startswith("python -m lgp.reproduce: error: no Dask scheduler answered at tcp://127.0.0.1:1")
     assert time.perf_counter() - t0 < 60
 

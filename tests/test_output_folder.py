@@ -89,16 +89,22 @@ def test_concurrent_writers_of_one_file_use_unique_temporary_names(tmp_path):
 @pytest.mark.slow
 def test_two_real_runs_in_one_folder_one_runs_the_other_is_refused(tmp_path):
     out = tmp_path / "out"
-    first = subprocess.Popen([sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "10", "--n-sims", "60",
+    first = subprocess.Popen([sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "2", "--n-sims", "10",
                               "--sigmas", "0.05", "0.1", "--jobs", "1", "--no-replays", "--out", str(out)],
                              cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 60
-    while not (out / OutputLock.NAME).exists() and time.monotonic() < deadline:
-        time.sleep(0.05)
-    time.sleep(0.5)
-    second = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--trials", "1E", "--samples", "2", "--n-sims", "8",
-                             "--seed", "1", "--no-replays", "--out", str(out)], cwd=ROOT, env=ENV, capture_output=True,
-                            text=True, timeout=120)
+    deadline = time.monotonic() + 120
+    while not (out / OutputLock.NAME).exists() and time.monotonic() < deadline and first.poll() is None:
+        time.sleep(0.02)
+    # the first run is stopped (kill -STOP) while it holds the folder, however long the
+    # second takes to start on a loaded machine, and continued once the second is refused
+    os.kill(first.pid, signal.SIGSTOP)
+    try:
+        assert (out / OutputLock.NAME).exists(), "the first run never took the folder"
+        second = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--trials", "1E", "--samples", "2", "--n-sims", "8",
+                                 "--seed", "1", "--no-replays", "--out", str(out)], cwd=ROOT, env=ENV, capture_output=True,
+                                text=True, timeout=120)
+    finally:
+        os.kill(first.pid, signal.SIGCONT)
     _, err = first.communicate(timeout=300)
     assert first.returncode == 0, err[-2000:]
     assert second.returncode == 1 and f"process {first.pid}" in second.stderr, second.stderr
