@@ -5,6 +5,7 @@ from __future__ import annotations
 from lgp.atomic import write_csv_atomic
 
 import os
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,20 @@ from analysis.models import (MEASURE_BASES, MODELS, RISK_MEASURES, effort_per_tr
 from analysis.pairs import pair_table
 from analysis.sigma import PAPER_SIGMA, choose_sigma, sigma_profile
 from lgp.errors import InputError
+
+
+class AnalysisResult(dict):
+    """What the analysis computed, nothing written yet: its tables by name (each
+    written as ``<prefix><name>.csv`` by `write_analysis`), the figures to draw
+    (plot function and its keyword arguments but the folder), the file prefix
+    ("simulated_" for SIMULATED participants) and the trial set it ran on (None:
+    the paper's 24)."""
+
+    def __init__(self, tables: dict, prefix: str = "", figures=(), trials=None):
+        super().__init__(tables)
+        self.prefix = prefix
+        self.figures = list(figures)
+        self.trials = None if trials is None else tuple(trials)
 
 
 def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
@@ -113,54 +128,83 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         on a set without them they are left out and the table ``skipped`` (what,
         reason) says why; the paper's set never has this table.
     """
+    options = {k: v for k, v in locals().items() if k != "out_dir"}
+    return write_analysis(compute_analysis(**options), out_dir)
+
+
+def compute_analysis(human_df, effort_by_trial, risk_table: pd.DataFrame, seed: int, n_boot: int = 1000, jobs: int = 2,
+                     sigma: float | None = None, sigmas=None, figures: bool = True, build_risk: pd.DataFrame | None = None,
+                     risk_measure: str | None = None, compare: bool = True, n_perm: int = N_PERM,
+                     risk_draw: str = "binomial", pair_names: dict | None = None, features: pd.DataFrame | None = None,
+                     same=(), trials=None) -> AnalysisResult:
+    """`run_analysis` without writing: the AnalysisResult (see run_analysis for the parameters)."""
     if trials is not None and tuple(str(t).strip().upper() for t in trials) != trial_ids():
-        args = {k: v for k, v in locals().items() if k != "trials"}
+        options = dict(locals())
         with using_trials(trials):
-            return run_analysis(**args)
-    out_dir = Path(out_dir)
-    skipped = _skipped(compare)
+            result = compute_analysis(**{**options, "trials": None})
+        result.trials = tuple(str(t).strip().upper() for t in trials)
+        return result
     check_count(n_boot, "the number of bootstrap resamples")
     check_count(n_perm, "the number of permutations")
     if risk_draw not in RISK_DRAWS:
         raise InputError(f"unknown risk draw {risk_draw!r}; expected one of {', '.join(RISK_DRAWS)}")
     E = effort_per_trial(effort_by_trial)
-    available = risk_sigmas(risk_table)
-    results: dict[str, pd.DataFrame] = {}
-    figure_paths: list[Path] = []
-
+    skipped = _skipped(compare)
     if human_df is None:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        if sigma is None:
-            sigma = float(available[np.argmin(np.abs(available - PAPER_SIGMA))])
-            rule = "paper's sigma (or nearest in risk table); no human data to fit"
-        else:
-            rule = "given by caller"
-        R = risk_at_sigma(risk_table, sigma)
-        if pair_numbers():
-            results["orderings"] = _model_pairs(E, R)
-        results["settings"] = pd.DataFrame([{
-            "human_data": False, "simulated": False, "seed": seed, "n_boot": 0, "jobs": jobs,
-            "sigma": sigma, "sigma_rule": rule}])
-        if figures and pair_numbers():
-            figure_paths += plot_effort_risk(E, risk_table, sigma, out_dir, names=pair_names)
-        if skipped is not None:
-            results["skipped"] = skipped
-        return _write(results, out_dir, "", figure_paths)
+        result = _model_only(E, risk_table, seed, jobs, sigma, figures, pair_names)
+    else:
+        result = _with_responses(human_df, E, risk_table, seed=seed, n_boot=n_boot, jobs=jobs, sigma=sigma, sigmas=sigmas,
+                                 figures=figures, build_risk=build_risk, risk_measure=risk_measure, compare=compare,
+                                 n_perm=n_perm, risk_draw=risk_draw, pair_names=pair_names, features=features, same=same)
+    if skipped is not None:
+        result["skipped"] = skipped
+    return result
 
+
+def write_analysis(result: AnalysisResult, out_dir: str | Path) -> dict[str, pd.DataFrame]:
+    """Write an AnalysisResult into `out_dir`: every table as ``<prefix><name>.csv``,
+    every figure (PNG and PDF) and ``<prefix>files.csv`` listing them. Returns the
+    tables with ``files`` (kind, path) added, as run_analysis always has."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with using_trials(result.trials) if result.trials is not None else nullcontext():
+        figure_paths = [p for plot, options in result.figures for p in plot(**options, out_dir=out_dir)]
+    return _write(dict(result), out_dir, result.prefix, figure_paths)
+
+
+def _model_only(E: pd.Series, risk_table: pd.DataFrame, seed: int, jobs: int, sigma: float | None, figures: bool,
+                pair_names) -> AnalysisResult:
+    """Without human data: the effort and risk pair tables at the paper's sigma (or `sigma`) and the pair figure."""
+    available = risk_sigmas(risk_table)
+    if sigma is None:
+        sigma = float(available[np.argmin(np.abs(available - PAPER_SIGMA))])
+        rule = "paper's sigma (or nearest in risk table); no human data to fit"
+    else:
+        rule = "given by caller"
+    results, plots = {}, []
+    if pair_numbers():
+        results["orderings"] = _model_pairs(E, risk_at_sigma(risk_table, sigma))
+    results["settings"] = pd.DataFrame([{
+        "human_data": False, "simulated": False, "seed": seed, "n_boot": 0, "jobs": jobs,
+        "sigma": sigma, "sigma_rule": rule}])
+    if figures and pair_numbers():
+        plots.append((plot_effort_risk, dict(effort_by_trial=E, risk_table=risk_table, sigma=sigma, names=pair_names)))
+    return AnalysisResult(results, "", plots)
+
+
+def _with_responses(human_df, E: pd.Series, risk_table: pd.DataFrame, *, seed, n_boot, jobs, sigma, sigmas, figures,
+                    build_risk, risk_measure, compare, n_perm, risk_draw, pair_names, features, same) -> AnalysisResult:
+    """The fits, sigma profile, bootstrap, tests and (with `compare`) the out-of-sample comparison of responses."""
     if isinstance(human_df, (str, Path)):
         responses = load_human_data(human_df)
     else:
         responses = validate_human_data(human_df, allow_simulated=True)
-    out_dir.mkdir(parents=True, exist_ok=True)
     simulated = is_simulated(responses)
     prefix = "simulated_" if simulated else ""
-
     kept, excluded = exclude_constant_participants(responses)
     zscored = zscore_responses(kept, ddof=0)
-    rng = np.random.default_rng(seed)
-    boot_means = resample_trial_means(zscored, n_boot, rng)
+    boot_means = resample_trial_means(zscored, n_boot, np.random.default_rng(seed))
     means = trial_mean_intervals(zscored, boot_means)
-
     profile = sigma_profile(means, E, risk_table, sigmas)
     choice = choose_sigma(profile)
     if sigma is None:
@@ -169,6 +213,55 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     else:
         rule = "given by caller"
     R = risk_at_sigma(risk_table, sigma)
+    models, comparisons, build_sigma, inputs = _models(R, sigma, build_risk, risk_measure, features)
+    fits, predictions = fit_models(means, E, inputs, sigma, models=models, features=features)
+    boot = bootstrap_model_correlations(boot_means, E, inputs, models=models, jobs=jobs, features=features)
+    counts = zscored.groupby("dataset")["participant"].nunique()
+    results = {
+        "settings": pd.DataFrame([{
+            "human_data": not simulated, "simulated": simulated, "seed": seed, "n_boot": n_boot,
+            "jobs": jobs, "sigma": sigma, "sigma_rule": rule, "zscore_sd": "population (ddof=0)",
+            "risk_measure": risk_measure or "paper (final-state risk table)",
+            "build_risk_sigma": build_sigma if build_sigma is not None else np.nan,
+            "participants": "; ".join(f"{d}={n}" for d, n in counts.items()),
+            "excluded": len(excluded)}]),
+        "excluded_participants": excluded,
+        "zscored": zscored.drop(columns=["line"], errors="ignore"),
+        "trial_means": means,
+        "sigma_profile": profile,
+        "sigma_choice": choice,
+        "fits": fits,
+        "predictions": predictions,
+        "bootstrap_correlations": boot,
+        "bootstrap_summary": summarize_bootstrap(boot, fits),
+        "bootstrap_tests": bootstrap_tests(boot, fits, comparisons),
+        "orderings": _orderings(E, R, means, predictions, simulated),
+    }
+    if not pair_numbers():
+        del results["orderings"]
+    for key in ("fits", "bootstrap_summary", "bootstrap_tests"):
+        results[key] = results[key].assign(scheme="in-sample")
+    if compare:
+        source_R = risk_grid(risk_table, sigmas) if risk_measure is None else measure_grid(build_risk, risk_measure)
+        grids = {"R": source_R}
+        if build_risk is not None:
+            grids.update({m: measure_grid(build_risk, m) for m in RISK_MEASURES})
+        in_sample = {"R": sigma if risk_measure is None else build_sigma}
+        in_sample.update({m: build_sigma for m in RISK_MEASURES if build_sigma is not None})
+        draw = risk_draw if source_R.runs is not None else "none"
+        groups = structure_groups(trial_ids(), source_R.risk, same)
+        results.update(_comparison(means, boot_means, E, grids, models, comparisons, in_sample, seed, n_perm, draw,
+                                   _feature_vectors(features), groups))
+        results["settings"] = results["settings"].assign(
+            n_perm=n_perm, risk_draw=draw, cv_sigma_rule="chosen inside each fold: least mean training RMSE of Eq. 1",
+            folds_by_structure=grouping_label(groups, trial_ids()))
+    plots = _figures(results, E, risk_table, sigma, prefix, compare, pair_names) if figures else []
+    return AnalysisResult(results, prefix, plots)
+
+
+def _models(R, sigma: float, build_risk, risk_measure, features):
+    """The models and comparisons of the fits, the build-risk table's sigma nearest
+    `sigma` (None without one) and the risk inputs of the fits."""
     models, comparisons, build_sigma = list(MODELS), list(COMPARISONS), None
     if risk_measure is not None and risk_measure not in RISK_MEASURES:
         raise InputError(f"unknown risk measure {risk_measure!r}; expected one of {', '.join(RISK_MEASURES)}")
@@ -187,9 +280,21 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     if features is not None:
         models += list(HEURISTIC_MODELS)
         comparisons += [("full", "effort+height"), ("full", "effort+stacked")]
-    fits, predictions = fit_models(means, E, inputs, sigma, models=models, features=features)
-    boot = bootstrap_model_correlations(boot_means, E, inputs, models=models, jobs=jobs, features=features)
+    return models, comparisons, build_sigma, inputs
 
+
+def _feature_vectors(features):
+    """The heuristic predictors as vectors over the trials (None without features)."""
+    if features is None:
+        return None
+    from analysis.models import feature_vector
+    from analysis.spec import FEATURES
+
+    return {f: feature_vector(features, f) for f in FEATURES}
+
+
+def _orderings(E: pd.Series, R: pd.Series, means: pd.DataFrame, predictions: pd.DataFrame, simulated: bool) -> pd.DataFrame:
+    """Pair tables of effort, risk, the responses and every fitted model, per dataset."""
     pairs = [_model_pairs(E, R)]
     for dataset, group in means.groupby("dataset", sort=True):
         pairs.append(pair_table(group.set_index("trial")["mean_z"]).assign(
@@ -197,71 +302,30 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         for model, p in predictions[predictions["dataset"] == dataset].groupby("model", sort=False):
             pairs.append(pair_table(p.set_index("trial")["predicted"]).assign(
                 dataset=dataset, source=model))
-    counts = zscored.groupby("dataset")["participant"].nunique()
+    return _tidy_pairs(pd.concat(pairs, ignore_index=True))
 
-    results.update({
-        "settings": pd.DataFrame([{
-            "human_data": not simulated, "simulated": simulated, "seed": seed, "n_boot": n_boot,
-            "jobs": jobs, "sigma": sigma, "sigma_rule": rule, "zscore_sd": "population (ddof=0)",
-            "risk_measure": risk_measure or "paper (final-state risk table)",
-            "build_risk_sigma": build_sigma if build_sigma is not None else np.nan,
-            "participants": "; ".join(f"{d}={n}" for d, n in counts.items()),
-            "excluded": len(excluded)}]),
-        "excluded_participants": excluded,
-        "zscored": zscored.drop(columns=["line"], errors="ignore"),
-        "trial_means": means,
-        "sigma_profile": profile,
-        "sigma_choice": choice,
-        "fits": fits,
-        "predictions": predictions,
-        "bootstrap_correlations": boot,
-        "bootstrap_summary": summarize_bootstrap(boot, fits),
-        "bootstrap_tests": bootstrap_tests(boot, fits, comparisons),
-        "orderings": _tidy_pairs(pd.concat(pairs, ignore_index=True)),
-    })
-    if not pair_numbers():
-        del results["orderings"]
-    for key in ("fits", "bootstrap_summary", "bootstrap_tests"):
-        results[key] = results[key].assign(scheme="in-sample")
+
+def _figures(results: dict, E: pd.Series, risk_table: pd.DataFrame, sigma: float, prefix: str, compare: bool,
+             pair_names) -> list:
+    """The figures of an analysis with responses, in the order they are listed: (plot, keyword arguments)."""
+    full = results["fits"][results["fits"]["model"] == "full"].set_index("dataset")[["b0", "b1", "b2"]]
+    plots = []
+    if pair_numbers():
+        plots.append((plot_trial_means, dict(means=results["trial_means"], predictions=results["predictions"],
+                                             stem=f"{prefix}fig3_trial_means")))
+    plots.append((plot_model_correlations, dict(summary=results["bootstrap_summary"],
+                                                stem=f"{prefix}fig4_model_correlations")))
+    plots.append((plot_sigma_profile, dict(profile=results["sigma_profile"], choice=results["sigma_choice"],
+                                           stem=f"{prefix}sigma_profile")))
     if compare:
-        source_R = risk_grid(risk_table, sigmas) if risk_measure is None else measure_grid(build_risk, risk_measure)
-        grids = {"R": source_R}
-        if build_risk is not None:
-            grids.update({m: measure_grid(build_risk, m) for m in RISK_MEASURES})
-        in_sample = {"R": sigma if risk_measure is None else build_sigma}
-        in_sample.update({m: build_sigma for m in RISK_MEASURES if build_sigma is not None})
-        draw = risk_draw if source_R.runs is not None else "none"
-        feats = None
-        if features is not None:
-            from analysis.models import feature_vector
-            from analysis.spec import FEATURES
-
-            feats = {f: feature_vector(features, f) for f in FEATURES}
-        groups = structure_groups(trial_ids(), source_R.risk, same)
-        results.update(_comparison(means, boot_means, E, grids, models, comparisons, in_sample, seed, n_perm, draw,
-                                   feats, groups))
-        results["settings"] = results["settings"].assign(
-            n_perm=n_perm, risk_draw=draw, cv_sigma_rule="chosen inside each fold: least mean training RMSE of Eq. 1",
-            folds_by_structure=grouping_label(groups, trial_ids()))
-    if figures:
-        full = fits[fits["model"] == "full"].set_index("dataset")[["b0", "b1", "b2"]]
-        if pair_numbers():
-            figure_paths += plot_trial_means(means, predictions, out_dir, stem=f"{prefix}fig3_trial_means")
-        figure_paths += plot_model_correlations(results["bootstrap_summary"], out_dir,
-                                                stem=f"{prefix}fig4_model_correlations")
-        figure_paths += plot_sigma_profile(profile, out_dir, choice, stem=f"{prefix}sigma_profile")
-        if compare:
-            figure_paths += plot_model_comparison(results["model_comparison"], out_dir,
-                                                  stem=f"{prefix}fig4_model_comparison",
-                                                  gain=results["model_comparison_gain"])
-        if pair_numbers():
-            figure_paths += plot_effort_risk(
-                E, risk_table, sigma, out_dir,
-                betas={d: tuple(full.loc[d]) for d in ordered_datasets(full.index)},  # the paper's order, as every figure
-                stem=f"{prefix}effort_risk_pairs", names=pair_names)
-    if skipped is not None:
-        results["skipped"] = skipped
-    return _write(results, out_dir, prefix, figure_paths)
+        plots.append((plot_model_comparison, dict(summary=results["model_comparison"], stem=f"{prefix}fig4_model_comparison",
+                                                  gain=results["model_comparison_gain"])))
+    if pair_numbers():
+        plots.append((plot_effort_risk, dict(
+            effort_by_trial=E, risk_table=risk_table, sigma=sigma,
+            betas={d: tuple(full.loc[d]) for d in ordered_datasets(full.index)},  # the paper's order, as every figure
+            stem=f"{prefix}effort_risk_pairs", names=pair_names)))
+    return plots
 
 
 def _skipped(compare: bool) -> pd.DataFrame | None:

@@ -25,28 +25,20 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-import pandas as pd
-
-import stimuli
 from lgp import cli
 from lgp.planner.design import check_approach_height
-from lgp.paper import PAPER_SIGMA, SIGMA_GRIDS, TRIAL_IDS
-from lgp.executor import ProcessExecutor, SerialExecutor, WorkerDied, executor_for_scheduler, stop_signals
+from lgp.paper import SIGMA_GRIDS
+from lgp.executor import WorkerDied, stop_signals
 from lgp.executor.cluster import check_address
 from lgp.app.progress import log as progress_log
-from lgp.app.cache import library_versions, write_csv_atomic
 from lgp.app.config import RunConfig
 from lgp import owned
-from lgp.app.manifest import (MANIFEST, OutputLock, TimedCache, check_output_folder, file_sha256, input_hash,
-                              write_manifest)
+from lgp.app.manifest import MANIFEST, OutputLock, check_output_folder, manifest_record, write_manifest
 from lgp.app.charts import num
-from lgp.app.page import write_index
-from lgp.app.pictures import rendered_trial_pictures
-from lgp.app.progress import Stopwatch
-from lgp.app.replays import write_replays
-from lgp.app.report import append_report, engine_description, pairs_csv_table, write_report
-from lgp.app.stages import check_targets, effort_tables, risk_key_inputs, risk_tables
+from lgp.app.result import RunResult
+from lgp.app.run import check_inputs
+from lgp.app.run import run as run_stages
+from lgp.app.write import write_all
 from lgp.app import sensitivity
 from lgp.errors import InputError
 
@@ -221,49 +213,66 @@ def _resume_note(args) -> str:
 
 
 def run(args: RunConfig, argv=None) -> int:
-    """The pipeline of one run's settings `args` (parse_args; see `main`)."""
+    """The pipeline of one run's settings `args` (parse_args; see `main`): exit code 0."""
+    reproduce(args, argv)
+    return 0
+
+
+def reproduce(config: RunConfig, argv=None) -> RunResult:
+    """Run `config` into its output folder and return what it computed.
+
+    The inputs are checked before the folder is touched; then, with the folder
+    locked, `result = run(config)` and `write_all(result, stage)` write every output
+    into a staging folder, which replaces the earlier run's own files at the end
+    (lgp/owned.py): a failed or stopped run leaves the earlier run's files untouched."""
     t0 = time.perf_counter()
-    clock = Stopwatch()  # wall time per stage, for the results page
-    # Validate every input before anything is written or computed.
-    trials, extra = stimuli.select_trials(args.trials, args.stimuli)
-    if extra:
-        _log(f"the trial folder also holds {', '.join(extra)} (not among the paper's 24): "
-             f"run them with --trials {' '.join(extra)} or --trials all")
-    human = None
-    if args.human_data:
-        from analysis import load_human_data
-
-        from analysis.data import using_trials
-
-        # The data must name exactly the analysis's trials: the paper's 24 when the run has them all
-        # (as before), else every trial of the run (a --stimuli folder of stimuli.design or stimuli.generate).
-        ids = _analysis_ids(trials)
-        with using_trials(ids):
-            human = load_human_data(args.human_data, max_participants=args.max_participants,
-                                    allow_simulated=args.allow_simulated)
-        if len(ids) < MIN_ANALYSIS_TRIALS:
-            raise InputError(f"--human-data: the fits of Eq. 1 (3 parameters, held-out folds) need at least "
-                             f"{MIN_ANALYSIS_TRIALS} trials; this run has {len(ids)} ({', '.join(ids)})")
-    out = Path(args.out)
-    check_output_folder(out, args.into_existing)  # a folder of foreign files: refused now, before any work
+    inputs = check_inputs(config)  # every input validated before anything is written or computed
+    out = Path(config.out)
+    check_output_folder(out, config.into_existing)  # a folder of foreign files: refused now, before any work
     created = _missing_folders(out)
     new_cache = not (out / "cache").exists()
     out.mkdir(parents=True, exist_ok=True)
     ok = False
     try:
-        with OutputLock(out, args.command):  # one run per output folder (and none inside or around it), for the whole run
-            earlier = check_output_folder(out, args.into_existing)  # again, now that no other run can change it
+        with OutputLock(out, config.command):  # one run per output folder (and none inside or around it), for the whole run
+            earlier = check_output_folder(out, config.into_existing)  # again, now that no other run can change it
             owned.remove_stale_staging(out)
             stage = owned.new_staging(out)  # this run's files, moved into `out` when all are written
             try:
-                code = _run_in(out, stage, earlier, args, argv, trials, human, t0, clock)
+                result = run_stages(config, stage, inputs)
+                write_all(result, stage)
+                files = _finish(result, out, stage, earlier, argv, t0)
                 ok = True
-                return code
             finally:
                 owned.remove_staging(stage)  # a failed or stopped run: the earlier run's files are untouched
     finally:
         if not ok:
             _remove_if_empty(out, created, new_cache)
+    if result.human and result.analysis is not None:
+        print(human_data_summary(result.analysis))
+    print(end_of_run(time.perf_counter() - t0, result.record, out, len(files)))
+    return result
+
+
+def _finish(result: RunResult, final: Path, stage: Path, earlier: dict, argv, t0: float) -> list[Path]:
+    """Write the manifest of the staging folder and swap it into `final`; the files now in `final`."""
+    config = result.config
+    # Every file of the staging folder is this run's (the outputs and what they
+    # brought along, e.g. replays/meshcat.min.js): the manifest lists them all.
+    files = [stage / f for f in owned.staged_files(stage)]
+    write_manifest(stage, files, command=[PROG, *(sys.argv[1:] if argv is None else argv)],
+                   **manifest_record(result, round(time.perf_counter() - t0, 1)))
+    # The swap: this run's files replace the earlier run's own (lgp/owned.py); nothing else is touched.
+    removed = owned.swap_in(final, stage, earlier, MANIFEST)
+    if removed:
+        _log(f"removed the outputs of an earlier run from {final} that this run did not write again: "
+             f"{', '.join(owned.summarise(removed))} (the cache is kept)")
+    files = [final / Path(f).relative_to(stage) for f in files]
+    if config.verbose:
+        print(f"Outputs of this run in {final.resolve()} (listed in {MANIFEST}):")
+        for path in files + [final / MANIFEST]:
+            print(f"  {path}")
+    return files
 
 
 def _missing_folders(out: Path) -> list[Path]:
@@ -290,233 +299,12 @@ def _remove_if_empty(out: Path, created: list[Path], new_cache: bool) -> None:
             return
 
 
-def _run_in(out: Path, stage: Path, earlier: dict, args, argv, trials, human, t0: float, clock) -> int:
-    """`run` once the inputs are validated and the output folder is locked: every
-    output is written under `stage` and swapped into `out` at the end (lgp/owned.py)."""
-    final, out = out, stage  # noqa: F841 (out: where this run writes; final: the folder it ends in)
-    cache = TimedCache(final / "cache", enabled=not args.no_cache)
-    _log(f"lgp.reproduce: {len(trials)} trials, M={args.samples}, N={args.n_sims}, {len(args.sigmas)} sigmas, jobs={args.jobs}"
-         f"{', scheduler ' + args.scheduler if args.scheduler else ''}; cache {cache.root}")
-
-    # One executor for the whole run: its workers start now, before this process
-    # imports Drake or MuJoCo, and stay warm across trials and stages.
-    # SchedulerUnreachable / DaskMissing: one line from lgp.cli, exit 1
-    with executor_for_scheduler(args.scheduler, args.jobs) as executor, cache.stage():
-        if hasattr(executor, "start"):
-            executor.start()
-        with cli.deferred_interrupt():  # Drake loads here; a Ctrl-C meanwhile waits until it has
-            import models.effort  # noqa: F401
-            import models.risk  # noqa: F401
-        from models.effort import summarise_effort
-        model = args.risk_model
-        check_targets(trials, model, cache)  # an unstable B fails now, not after the effort stage
-        effort_samples = effort_tables(trials, args.samples, args.seed, executor, cache, verbose=args.verbose,
-                                       spec=args.effort_spec)
-        clock.lap("effort")
-        effort = summarise_effort(effort_samples, trials)
-        risk_runs: list = []
-        risk = risk_tables(trials, args.sigmas, args.n_sims, args.seed, model, executor, cache, args.risk_chunk,
-                           runs_out=risk_runs, verbose=args.verbose)
-        clock.lap("risk")
-        sensitive = sensitivity.run_sections(sensitivity.Context(args, trials, executor, cache, out, risk_key_inputs, _log,
-                                                                     effort_tables=effort_tables)) \
-            if args.sensitivity else []
-        if args.sensitivity:
-            clock.lap("sensitivity")
-        if args.build_risk:
-            from lgp.app import build_risk
-
-            stages = build_risk.build_risk_tables(trials, args.build_sigmas or build_risk.BUILD_SIGMAS, args.n_sims,
-                                                   args.samples, args.seed, model, executor, cache,
-                                                   approach_height=args.approach_height, verbose=args.verbose)
-            clock.lap("build risk")
-        replays = None if args.no_replays else write_replays(
-            trials, args.seed, out / "replays", cache, executor, _log,
-            spec=args.effort_spec)
-        clock.lap("replays")
-        pictures = None
-        if isinstance(executor, (ProcessExecutor, SerialExecutor)):  # local, warm workers: render the page's pictures there
-            pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=args.jobs, executor=executor)
-            clock.lap("trial pictures")
-    sigma = PAPER_SIGMA if any(np.isclose(args.sigmas, PAPER_SIGMA)) else args.sigmas[len(args.sigmas) // 2]
-    written = [write_csv_atomic(effort_samples, out / "effort_samples.csv"), write_csv_atomic(effort, out / "effort.csv"),
-               write_csv_atomic(risk, out / "risk.csv")]
-    from models.risk.precision import required_precision  # sigma* per trial
-
-    precision = required_precision(pd.concat(risk_runs, ignore_index=True), n_boot=args.n_boot, seed=args.seed)
-    written.append(write_csv_atomic(precision, out / "risk_precision.csv"))
-    if replays:
-        written += [Path(p) for p in replays.values()]
-    sections, build, over_html = [], None, None
-    for s in sensitive:  # --sensitivity (lgp/app/sensitivity/)
-        written += s.files
-        sections.append("\n".join(s.lines))
-    if args.build_risk:
-        paths, section, build = build_risk.build_risk_outputs(stages, out, args.command)
-        written += paths
-        sections.append(section)
-    pairs, analysis = None, None
-    if {t.id for t in trials} >= set(TRIAL_IDS):
-        # Pair orderings, figures and fits are the paper's: on its 24 trials only;
-        # other trials of the run are in the effort and risk tables.
-        from analysis import run_analysis
-        from analysis.pairs import pair_orderings
-
-        paper = [t for t in trials if t.id in TRIAL_IDS]
-        extra = [t.id for t in trials if t.id not in TRIAL_IDS]
-        if extra:
-            _log(f"pair table, figures and fits use the paper's 24 trials; {', '.join(extra)} are in the effort and risk tables only")
-        e_samples, e_mean, r = (df[df["trial"].isin(TRIAL_IDS)] for df in (effort_samples, effort, risk))
-        pairs = pair_orderings(e_mean, r, sigma, {t.pair: t.dimension for t in paper})
-        written.append(write_csv_atomic(pairs_csv_table(pairs), out / "pairs.csv"))
-        from lgp.app import over_sigma  # "Pairs over sigma"
-
-        over = over_sigma.pairs_over_sigma(e_mean, r)
-        written.append(write_csv_atomic(over, out / "pairs_over_sigma.csv"))
-        over_figure = over_sigma.plot_risk_over_sigma(over, out / "figures" / "risk_over_sigma.png",
-                                                      {t.pair: t.dimension for t in paper})
-        written.append(over_figure)
-        sections.insert(0, "\n".join(over_sigma.report_lines(over, precision, "figures/risk_over_sigma.png")))
-        over_html = over_sigma.page_section(over, over_figure, out)
-        analysis = run_analysis(human, e_samples, r, out / ("analysis" if human is not None else "figures"),
-                                seed=args.seed, n_boot=args.n_boot, jobs=args.jobs, sigma=None if human is not None else sigma,
-                                build_risk=None if human is None or build is None else build[build["trial"].isin(TRIAL_IDS)],
-                                risk_measure=args.risk_measure, n_perm=args.n_perm,
-                                pair_names={t.pair: t.dimension for t in paper},
-                                features=_heuristics(paper, args) if human is not None and len(paper) == len(TRIAL_IDS) else None,
-                                same=_identical(paper))
-        written += [Path(path) for path in analysis["files"]["path"]]
-        if args.recovery:
-            from lgp.app.recovery import list_files, recovery_outputs
-
-            paths, section = recovery_outputs(analysis if human is not None else None, e_samples, r, out,
-                                              args.recovery_studies, args.seed, args.jobs)
-            written += paths
-            sections.append(section)
-            list_files(analysis, paths)
-        if args.sigma_from:
-            from lgp.app.sigma_from import read_sigma_from, report_lines
-            from lgp.app.report import markdown_table
-
-            link = read_sigma_from(args.sigma_from)
-            at = pair_orderings(e_mean, r, link.sigma, {t.pair: t.dimension for t in paper}) if link.sigma > 0 else None
-            choice = analysis.get("sigma_choice")
-            fitted = float(choice["sigma"].iloc[0]) if isinstance(choice, pd.DataFrame) and len(choice) and "sigma" in choice else None
-            sections.append("\n".join(report_lines(link, sigma, fitted, None if at is None else markdown_table(pairs_csv_table(at)))))
-        if args.per_participant_sigma:
-            from lgp.app.participant_sigma import participant_sigma_outputs
-
-            paths, section = participant_sigma_outputs(human, e_samples, r, out, args.participant_betas, args.command)
-            written += paths
-            sections.append(section)
-    else:
-        from analysis.pairs import declared_pair_orderings
-        from lgp.app.over_sigma import precision_lines
-
-        sections.insert(0, "\n".join(precision_lines(precision)))
-        declared = stimuli.declared_pairs(trials)
-        pairs = declared_pair_orderings(effort, risk, sigma, {t.pair: t.dimension for t in trials}, declared) if declared else None
-        if pairs is not None:
-            written.append(write_csv_atomic(pairs_csv_table(pairs), out / "pairs.csv"))
-        if args.recovery:
-            _log("--recovery simulates studies of the paper's 24 trials; not all are in this run, so it is skipped")
-        if human is not None:  # the fits on the run's own trials (analysis.data.trialset)
-            from analysis import run_analysis
-
-            ids = _analysis_ids(trials)
-            analysis = run_analysis(human, effort_samples, risk, out / "analysis", seed=args.seed, n_boot=args.n_boot,
-                                    jobs=args.jobs, n_perm=args.n_perm, trials=ids,
-                                    pair_names={t.pair: t.dimension for t in trials if t.pair is not None},
-                                    same=_identical(trials))
-            written += [Path(path) for path in analysis["files"]["path"]]
-            for _, row in (analysis["skipped"].iterrows() if "skipped" in analysis else ()):
-                _log(f"analysis of the {len(ids)} trials: {row['what']} left out: {row['reason']}")
-            if args.per_participant_sigma:
-                _log("--per-participant-sigma works on the paper's 24 trials; not all are in this run, so it is skipped")
-            if args.risk_measure:
-                _log(f"--risk-measure {args.risk_measure} works on the paper's 24 trials; the fits of this run use the "
-                     "final-state risk table")
-        _log("not all of the paper's 24 trials: "
-             + ("fits on the run's own trials (analysis/); " if human is not None
-                else "no figures or fits (they need all 24, or --human-data for the run's own trials); ")
-             + (f"pair table for the {len(pairs)} pair(s) whose E and H trials are both in the run" if pairs is not None
-                else "no pair table (no trial files declare both trials of a pair)"))
-    clock.lap("analysis")
-    software = {"libraries": library_versions(), "engine": risk_key_inputs(args.engine)["engine_settings"]}
-    compute = cache.compute_time()
-    report = write_report(out, args, effort, risk, pairs, analysis if human is not None else None,
-                          time.perf_counter() - t0, software, compute)
-    if sections:
-        append_report(report, sections)
-    written.append(report)
-    written.append(write_index(out, args, trials, effort_samples, risk, sigma, pairs, analysis, cache, clock, replays,
-                               over_sigma_html=over_html, precision=precision, pictures=pictures))
-    if (out / "page").is_dir():
-        written.append(out / "page")
-    if args.verbose:
-        _log(f"cache: {cache.summary()}")
-    parameters = {"trials": [t.id for t in trials], "samples": args.samples, "n_sims": args.n_sims,
-                  "sigmas": list(args.sigmas), "sigma_of_pairs": sigma if pairs is not None else None,
-                  "engine": args.engine, "seed": args.seed, "n_boot": args.n_boot, "quick": args.quick,
-                  "no_cache": args.no_cache, "build_risk": args.build_risk, "build_sigmas": args.build_sigmas,
-                  "risk_measure": args.risk_measure, "per_participant_sigma": args.per_participant_sigma,
-                  "n_perm": args.n_perm, "recovery": args.recovery, "recovery_studies": args.recovery_studies,
-                  "profile": args.profile, "fall_rule": args.fall_rule, "fall_threshold": args.fall_threshold,
-                  "sigma_grid": args.sigma_grid, "noise_rule": args.noise_rule, "sensitivity": args.sensitivity, "approach_height": args.approach_height,
-                  "slices_per_phase": args.slices, **{k: repr(v) if k == "budget" else v for k, v in args.planner_choice().items()}}
-    inputs = {"trial_files": {t.id: t.digest for t in trials},
-              "human_data_sha256": file_sha256(args.human_data) if args.human_data else None}
-    # Every file of the staging folder is this run's (the listed outputs and what they
-    # brought along, e.g. replays/meshcat.min.js): the manifest lists them all.
-    # (`written`, the outputs named by each stage, lie among them.)
-    files = [stage / f for f in owned.staged_files(stage)]
-    write_manifest(out, files, command=[PROG, *(sys.argv[1:] if argv is None else argv)],
-                   parameters=parameters, inputs=inputs, input_hash=input_hash(**parameters, **inputs),
-                   engine=engine_description(args.engine, software["engine"]), software=software,
-                   run_time_s=round(time.perf_counter() - t0, 1),
-                   compute_time_s=round(compute[0], 1), compute_time_unknown_results=compute[1])
-    # The swap: this run's files replace the earlier run's own (lgp/owned.py); nothing else is touched.
-    removed = owned.swap_in(final, stage, earlier, MANIFEST)
-    if removed:
-        _log(f"removed the outputs of an earlier run from {final} that this run did not write again: "
-             f"{', '.join(owned.summarise(removed))} (the cache is kept)")
-    files = [final / Path(f).relative_to(stage) for f in files]
-    if args.verbose:
-        print(f"Outputs of this run in {final.resolve()} (listed in {MANIFEST}):")
-        for path in files + [final / MANIFEST]:
-            print(f"  {path}")
-    if human is not None and analysis is not None:
-        print(human_data_summary(analysis))
-    print(end_of_run(time.perf_counter() - t0, cache, final, len(files)))
-    return 0
-
-
-#: Fewest trials the fits of --human-data run on: Eq. 1 has 3 parameters and every
-#: held-out fold must leave at least 4 trials to fit them (analysis.crossval.make_folds).
-MIN_ANALYSIS_TRIALS = 5
-
-
-def _analysis_ids(trials) -> list[str]:
-    """The trials the analysis runs on: the paper's 24 when the run holds them all (the
-    paper's analysis; other trials stay in the effort and risk tables), else every
-    trial of the run, in the run's order."""
-    ids = [t.id for t in trials]
-    return list(TRIAL_IDS) if set(ids) >= set(TRIAL_IDS) else ids
-
-
-def _heuristics(paper, args):
-    """The heuristic predictors of the paper's trials (analysis.heuristics), from the
-    layouts of A the effort stage planned (its M and seed): the comparison's
-    no-physics competitors."""
-    from analysis.heuristics import trial_features
-
-    return trial_features(paper, args.samples, args.seed)
-
-
-def human_data_summary(analysis: dict) -> str:
+def human_data_summary(analysis) -> str:
     """One line on the fit of the human data: the chosen sigma, and Eq. 1 (full)
     against effort-only on held-out pairs (leave-one-pair-out RMSE of z-scored
     judgments per dataset, lower is better; in sample Eq. 1 cannot lose)."""
+    import pandas as pd
+
     from analysis.data import ordered_datasets
 
     settings = analysis["settings"].iloc[0]
@@ -540,13 +328,6 @@ def _home(path) -> str:
     """A path with the user's home written ~ (shorter, and the same on every account)."""
     p, home = str(path), str(Path.home())
     return "~" + p[len(home):] if home != "/" and (p == home or p.startswith(home + os.sep)) else p
-
-
-def _identical(paper):
-    """Sets of the paper's trials whose B is the same structure (folds by structure)."""
-    from analysis.heuristics import identical_targets
-
-    return identical_targets(paper)
 
 
 def end_of_run(seconds: float, cache, out: Path, n_files: int) -> str:

@@ -58,7 +58,9 @@ def _fake_stages():
 
 @pytest.mark.slow  # a build-stage run and its figure
 def test_pair_table_of_aggregates_and_figure(tmp_path):
-    paths, section, long = build_risk.build_risk_outputs(_fake_stages(), tmp_path, "cmd")
+    from lgp.app.build_risk_view import build_risk_outputs
+
+    paths, section, long = build_risk_outputs(_fake_stages(), tmp_path, "cmd")
     pairs = pd.read_csv(tmp_path / "build_risk_pairs.csv")
     row = pairs[(pairs["pair"] == 6) & (pairs["measure"] == "max") & (pairs["sigma"] == 0.065)].iloc[0]
     assert (row["E"], row["H"], bool(row["E_lt_H"])) == (0.2, 0.4, True)

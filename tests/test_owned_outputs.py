@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 
 from lgp import owned
+from lgp.app import run as app_run
+from lgp.app import write as app_write
 from lgp.app.manifest import OutputFolderBusy, OutputLock, check_output_folder
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -274,20 +276,20 @@ def test_a_run_that_fails_at_any_stage_leaves_the_earlier_runs_files_byte_identi
         reproduce.main([*tiny[2:], "--trials", "13E", "--stimuli", str(folder)])
     unchanged()
     # Ctrl-C in the risk stage of a run with new settings
-    real_risk = reproduce.risk_tables
+    real_risk = app_run.risk_tables
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(reproduce, "risk_tables", interrupted)
+    monkeypatch.setattr(app_run, "risk_tables", interrupted)
     assert reproduce.main([*tiny, "--seed", "2"]) == 130
     unchanged()
-    monkeypatch.setattr(reproduce, "risk_tables", real_risk)
+    monkeypatch.setattr(app_run, "risk_tables", real_risk)
     # a full disk while writing the report
     def full(*a, **k):
         raise DiskFull(28, "No space left on device: the disk is full", str(out / "report.md"))
 
-    monkeypatch.setattr(reproduce, "write_report", full)
+    monkeypatch.setattr(app_write, "write_report", full)
     with pytest.raises(DiskFull):
         reproduce.main([*tiny, "--seed", "2"])
     unchanged()

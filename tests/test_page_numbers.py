@@ -64,25 +64,3 @@ def test_a_sigma_chosen_at_the_edge_of_the_grid_is_warned_about():
     (warning,) = sigma_edge_warnings(edge)
     assert "upper edge of the grid (0.05 to 0.1 d)" in warning and "--sigmas" in warning
     assert sigma_edge_warnings(inside) == [] and sigma_edge_warnings(None) == []
-
-
-def test_the_page_reads_only_the_runs_own_tables_and_never_waits_on_a_pipe(tmp_path):
-    """A FIFO notes.csv (not the run's) and a FIFO under one of the run's names are
-    not opened: a blocking open would hang the page. A run's table that cannot be
-    read is an error naming it, not skipped in silence."""
-    import os
-
-    from bench.common import deadline
-    from lgp.app.page import _extra_tables
-    from lgp.errors import InputError
-
-    os.mkfifo(tmp_path / "notes.csv")
-    os.mkfifo(tmp_path / "build_risk.csv")
-    pd.DataFrame({"trial": ["7H"], "x": [1]}).to_csv(tmp_path / "risk_sensitivity.csv", index=False)
-    pd.DataFrame({"trial": ["7H"], "x": [2]}).to_csv(tmp_path / "mine.csv", index=False)  # not a name of the run
-    with deadline(5):
-        tables = _extra_tables(tmp_path, {"risk.csv"})
-    assert list(tables) == ["risk_sensitivity"]
-    (tmp_path / "effort_sensitivity.csv").write_bytes(b'trial,x\n"7H,1\n')  # an unclosed quote
-    with deadline(5), pytest.raises(InputError, match="effort_sensitivity.csv"):
-        _extra_tables(tmp_path, {"risk.csv"})

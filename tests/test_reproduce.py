@@ -13,6 +13,7 @@ from lgp.app.cache import read_entry
 import models.effort
 import models.risk
 from lgp import reproduce
+from lgp.app import run as app_run
 
 ARGS = ["--trials", "9E", "10E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.05", "0.1", "--jobs", "1", "--seed", "3",
         "--verbose"]  # --verbose: the per-trial lines and the cache summary line these tests read
@@ -147,9 +148,9 @@ def _fake_physics(monkeypatch):
                                           for r in table.itertuples() for k in range(n_sims)]))
         return table
 
-    monkeypatch.setattr(reproduce, "effort_tables", effort)
-    monkeypatch.setattr(reproduce, "risk_tables", risk)
-    monkeypatch.setattr(reproduce, "write_replays", lambda *a, **k: None)  # nor 3-D replays (they plan)
+    monkeypatch.setattr(app_run, "effort_tables", effort)
+    monkeypatch.setattr(app_run, "risk_tables", risk)
+    monkeypatch.setattr(app_run, "write_replays", lambda *a, **k: None)  # nor 3-D replays (they plan)
 
 
 @pytest.mark.slow
@@ -284,7 +285,7 @@ def test_problems_are_found_before_the_effort_stage(tmp_path, monkeypatch, capsy
     def no_effort(*a, **k):
         raise AssertionError("the effort stage started")
 
-    monkeypatch.setattr(reproduce, "effort_tables", no_effort)
+    monkeypatch.setattr(app_run, "effort_tables", no_effort)
     args = ["--trials", "13E", "--samples", "1", "--n-sims", "2", "--jobs", "1", "--out", str(tmp_path / "r")]
     _fails_naming(capsys, lambda: reproduce.main(args), UnstableSceneError, "13E-B: unstable before any noise")
 

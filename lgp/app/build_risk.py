@@ -1,20 +1,19 @@
 """The build-risk stage of `python -m lgp.reproduce --build-risk`: risk
 through the build (models/risk/build.py) of every trial, cached per trial, its
-aggregates, the pair table of aggregates, the small-multiples figure of risk by
-stage and a report section.
+aggregates and the pair table of aggregates, as data (`BuildRisk`). Its renderer,
+lgp/app/build_risk_view.py, writes the tables, the figure and the report section.
+This file and that one are the whole feature (with its settings in RunConfig).
 """
 from __future__ import annotations
 
 import time
-from pathlib import Path
+from dataclasses import dataclass
 
-import numpy as np
 import pandas as pd
 
 from lgp.app.cache import Cache, input_key
-from lgp.app.files import atomic_path, write_csv_atomic
 from lgp.app.progress import log as _log
-from lgp.paper import PAIRS, PAPER_SIGMA
+from lgp.paper import PAIRS, PAPER_SIGMA, TRIAL_IDS
 
 #: The noise levels the build-risk report uses: the paper's sigma, 0.065 d, and 0.10 d.
 BUILD_SIGMAS: tuple[float, ...] = (PAPER_SIGMA, 0.1)
@@ -22,7 +21,6 @@ BUILD_SIGMAS: tuple[float, ...] = (PAPER_SIGMA, 0.1)
 #: sample 0 (a tower's plan is the same for every layout; a sequential build of
 #: 30 layouts of a floor is 30 builds of 15 stages per run).
 SEQUENTIAL_SAMPLES = 1
-EASY, HARD = "tab:red", "tab:blue"
 
 
 def build_key_inputs(model) -> dict:
@@ -104,93 +102,54 @@ def aggregate_pairs(aggregates: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["sigma", "pair", "measure", "E", "H", "E_lt_H"])
 
 
-def pair_markdown(pairs: pd.DataFrame, sigma: float) -> str:
-    """One row per pair, one column per measure, cells 'E / H' (a * where E < H)."""
-    from models.risk.build import MEASURES
-
-    g = pairs[np.isclose(pairs["sigma"], sigma)]
-    lines = ["| pair | " + " | ".join(f"{m} E / H" for m in MEASURES) + " |", "|---|" + "---|" * len(MEASURES)]
-    for pair, p in g.groupby("pair", sort=True):
-        p = p.set_index("measure")
-        cells = [f"{p.at[m, 'E']:.3f} / {p.at[m, 'H']:.3f}{' *' if p.at[m, 'E_lt_H'] else ''}" for m in MEASURES]
-        lines.append(f"| {pair} | " + " | ".join(cells) + " |")
-    counts = g.groupby("measure", sort=False)["E_lt_H"].sum()
-    lines.append("| pairs E < H | " + " | ".join(f"{int(counts[m])} of {g['pair'].nunique()}" for m in MEASURES) + " |")
-    return "\n".join(lines)
 
 
-def plot_stage_curves(stages: pd.DataFrame, out_dir: str | Path, stem: str = "build_risk_stages") -> list[Path]:
-    """Risk by stage, mean over layouts: one panel per pair, E (red) and H (blue),
-    solid at the first sigma, dashed at the others. PNG and PDF paths."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.ticker import MaxNLocator
+@dataclass(frozen=True)
+class BuildRisk:
+    """Risk through the build: the stage table (models.risk.build.build_risk of every
+    trial), its aggregates per (trial, sigma), the pair table of the aggregates (None
+    on a subset of the paper's trials) and the command that made them."""
 
-    from models.risk.build import stage_curve
+    stages: pd.DataFrame
+    aggregates: pd.DataFrame
+    pairs: pd.DataFrame | None
+    command: str
 
-    curve = stage_curve(stages)
-    sigmas = sorted(curve["sigma"].unique())
-    fig = Figure(figsize=(12, 8.2))
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(3, 4, sharey=True).ravel()
-    for ax, pair in zip(axes, PAIRS):
-        for level, colour in (("E", EASY), ("H", HARD)):
-            for k, sigma in enumerate(sigmas):
-                c = curve[(curve["trial"] == f"{pair}{level}") & np.isclose(curve["sigma"], sigma)]
-                if len(c):
-                    ax.plot(c["stage"], c["risk"], "o-" if k == 0 else "s--", ms=3, color=colour, lw=1.2,
-                            label=f"{pair}{level}, sigma {sigma:g} d")
-        ax.set_title(f"pair {pair}", fontsize=9)
-        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.set_xlabel("stage (after the k-th Place)", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.legend(fontsize=6, frameon=False, loc="upper left")
-    for ax in axes[::4]:
-        ax.set_ylabel("risk (mean over layouts)", fontsize=8)
-    fig.suptitle("Risk through the build: each stage's fraction of noisy runs that fall", fontsize=11)
-    fig.tight_layout()
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    paths = [out_dir / f"{stem}.png", out_dir / f"{stem}.pdf"]
-    for p in paths:
-        with atomic_path(p) as tmp:
-            fig.savefig(tmp, dpi=130)
-    return paths
+    @classmethod
+    def of(cls, stages: pd.DataFrame, command: str) -> "BuildRisk":
+        from models.risk.build import build_risk_aggregates
+
+        aggregates = build_risk_aggregates(stages)
+        complete = set(aggregates["trial"]) >= set(TRIAL_IDS)
+        return cls(stages, aggregates, aggregate_pairs(aggregates) if complete else None, command)
+
+    def measures_of(self, trials) -> pd.DataFrame:
+        """The long measure table (trial, sigma, measure, risk) of `trials`, what the analysis fits."""
+        from models.risk.build import measure_table
+
+        long = measure_table(self.aggregates)
+        return long[long["trial"].isin(trials)]
 
 
-def build_risk_outputs(stages: pd.DataFrame, out: Path, command: str) -> tuple[list[Path], str, pd.DataFrame]:
-    """Write the stage table, aggregates, pair table and figure; return the paths,
-    the report section (markdown) and the long measure table for the analysis."""
-    from models.risk.build import build_risk_aggregates, measure_table
+def add_arguments(parser, cli) -> None:
+    """The stage's command-line options."""
+    parser.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/app/build_risk.py)")
+    parser.add_argument("--build-sigmas", type=cli.sigma, nargs="+",
+                        help=f"noise levels of --build-risk in (0, 1] (default {' '.join(f'{s:g}' for s in BUILD_SIGMAS)})")
 
-    aggregates = build_risk_aggregates(stages)
-    written = [write_csv_atomic(stages, out / "build_risk_stages.csv"),
-               write_csv_atomic(aggregates, out / "build_risk.csv")]
-    lines = ["## Risk through the build (beyond the paper)", "",
-             f"Command: `{command}`. Stages are the states after each Place of the plan of every layout "
-             "(models/risk/build.py); aggregates per plan, averaged over layouts: final = r_K, max = max r_k, "
-             "expected = sum r_k, any = 1 - prod(1 - r_k) (as if the stages were independent, which they are not: "
-             "they share their random numbers), care = sum w_k r_k (w_k: share of the plan's effort "
-             "already spent on the structure, a squared-carry-distance proxy checked against KOMO); "
-             "sequential = the fraction of runs of one noisy build, carried stage to stage from settled poses, that "
-             f"collapse at some stage (mode=\"sequential\", on the plan of the first {SEQUENTIAL_SAMPLES} layout(s)), "
-             "last_stage = the fraction of the runs reaching the last stage that collapse there (next to final, "
-             "the paper's R).", ""]
-    from models.risk.build import MEASURES
 
-    shown = [*MEASURES, "last_stage"]
-    lines += ["| trial | sigma | " + " | ".join(shown) + " | stages |", "|---|---|" + "---|" * (len(shown) + 1)]
-    for _, r in aggregates.iterrows():
-        lines.append(f"| {r['trial']} | {r['sigma']:g} | " + " | ".join(f"{r[m]:.3f}" for m in shown)
-                     + f" | {r['stages']:g} |")
-    lines.append("")
-    complete = set(aggregates["trial"]) >= {f"{p}{lv}" for p in PAIRS for lv in "EH"}
-    if complete:
-        pairs = aggregate_pairs(aggregates)
-        written.append(write_csv_atomic(pairs, out / "build_risk_pairs.csv"))
-        for sigma in sorted(aggregates["sigma"].unique()):
-            lines += [f"### sigma = {sigma:g} d (cells E / H; * where E < H)", "", pair_markdown(pairs, sigma), ""]
-        written += plot_stage_curves(stages, out / "figures")
-    else:
-        lines += ["A subset of trials: no pair table or figure (they need all 24).", ""]
-    return written, "\n".join(lines), measure_table(aggregates)
+class _Stage:
+    name, phase = "build_risk", "compute"
+
+    def enabled(self, config) -> bool:
+        return config.build_risk
+
+    def run(self, ctx) -> BuildRisk:
+        c = ctx.config
+        stages = build_risk_tables(ctx.trials, c.build_sigmas or BUILD_SIGMAS, c.n_sims, c.samples, c.seed, c.risk_model,
+                                   ctx.executor, ctx.cache, approach_height=c.approach_height, verbose=c.verbose)
+        return BuildRisk.of(stages, c.command)
+
+
+STAGE = _Stage()
+

@@ -193,6 +193,37 @@ class OutputLock:
         return False
 
 
+#: Settings of a run that say where and how it ran, not what it computed: left out of its input hash.
+PLACEMENT = ("out", "jobs", "scheduler", "verbose", "into_existing", "risk_chunk", "no_replays", "max_participants")
+
+
+def _json_value(v):
+    """A setting as the manifest holds it: tuples as lists, a value without a JSON form (a Budget) as its repr."""
+    if isinstance(v, tuple):
+        return [_json_value(x) for x in v]
+    return v if v is None or isinstance(v, (bool, int, float, str)) else repr(v)
+
+
+def manifest_record(result, run_time_s: float) -> dict:
+    """What manifest.json says of a RunResult besides its files: the parameters
+    (RunConfig.parameters, with the trials the run resolved and the pair table's
+    sigma), the inputs, their hash, the engine, the software and the times."""
+    from dataclasses import replace
+
+    from lgp.app.report import engine_description
+
+    config, record = result.config, result.record
+    parameters = {k: _json_value(v) for k, v in replace(config, trials=tuple(t.id for t in result.trials)).parameters().items()}
+    parameters["sigma_of_pairs"] = result.sigma if result.pairs is not None else None
+    inputs = {"trial_files": {t.id: t.digest for t in result.trials},
+              "human_data_sha256": file_sha256(config.human_data) if config.human_data else None}
+    return dict(parameters=parameters, inputs=inputs,
+                input_hash=input_hash(**{k: v for k, v in parameters.items() if k not in PLACEMENT}, **inputs),
+                engine=engine_description(config.engine, record.software["engine"]), software=record.software,
+                run_time_s=run_time_s, compute_time_s=round(record.compute[0], 1),
+                compute_time_unknown_results=record.compute[1])
+
+
 def write_manifest(out: Path, files: list[Path], **record) -> Path:
     """Write ``<out>/manifest.json`` listing `files` (paths inside `out`) and `record`."""
     out = Path(out)

@@ -13,7 +13,6 @@ and, with human data, the fits, sigma profile, bootstrap and participants.
 """
 from __future__ import annotations
 
-import datetime
 import html
 from collections import Counter
 import os
@@ -24,12 +23,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lgp.app.cache import RECORDED_LIBRARIES, Cache, library_versions
 from lgp.app.files import write_text_atomic
 from lgp.app.report import ratio_text, sigma_edge_warnings
 from lgp.app.config import QUICK
 from lgp.app.charts import histogram_svg, num, risk_svg
-from lgp.app.pictures import rendered_trial_pictures
 from lgp.cli import duration_text
 from lgp.errors import InputError
 
@@ -138,7 +135,7 @@ def _run_section(run: dict) -> str:
     key = run.get("key", {})
     rows = "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in key.items())
     chips = " ".join(f"<code>{_e(k)}={_e(v)}</code>" for k, v in run.get("parameters", {}).items())
-    versions = pd.DataFrame(list(library_versions(RECORDED_LIBRARIES).items()), columns=["library", "version"])
+    versions = pd.DataFrame(list(run.get("libraries", {}).items()), columns=["library", "version"])
     stages = pd.DataFrame([(k, num(v, 3)) for k, v in run.get("stages", {}).items()], columns=["stage", "wall time (s)"])
     settings = pd.DataFrame(list(run.get("engine_settings", {}).items()), columns=["setting", "value"])
     cache = run.get("cache", {})
@@ -174,16 +171,12 @@ def _quick_banner(run: dict) -> str:
             "numbers are noisier than the paper's; run without <code>--quick</code> for the full reproduction.</p>")
 
 
-def carry_doc(name: str, out: Path) -> Path | None:
-    """docs/<name> of this checkout written as ``<out>/page/<stem>.html`` (the text,
-    escaped, in a readable page), so the output folder holds what the page links;
-    None when the checkout's docs are not here (an installed copy)."""
-    from lgp.app.cache import ROOT
-
-    source = ROOT / "docs" / name
-    if not source.is_file():
+def carry_doc(name: str, text: str | None, out: Path) -> Path | None:
+    """docs/<name> (its `text`, read by the run) written as ``<out>/page/<stem>.html``
+    (escaped, in a readable page), so the output folder holds what the page links;
+    None when the run had no such doc (an installed copy)."""
+    if text is None:
         return None
-    text = source.read_text(encoding="utf-8")
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
 <title>{_e(name)}</title><style>body{{font:15px/1.5 system-ui,sans-serif;margin:0 auto;max-width:50em;padding:10px 16px;color:#1d1d1f}}
@@ -194,16 +187,16 @@ as it read then (Markdown)</p><pre>{_e(text)}</pre></body></html>
     return write_text_atomic(page, Path(out) / "page" / f"{Path(name).stem}.html")
 
 
-def _docs_link(name: str, out: Path, text: str) -> str:
+def _docs_link(name: str, docs: dict, out: Path, text: str) -> str:
     """A link to docs/<name>, carried into the output folder (`carry_doc`) so that
     the link holds when the folder is copied; text only when the docs are not here."""
-    carried = carry_doc(name, out)
+    carried = carry_doc(name, docs.get(name), out)
     if carried is None:
         return f"{_e(text)} (docs/{_e(name)} of the source)"
     return f'<a href="{_e(os.path.relpath(carried, out))}">{_e(text)}</a>'
 
 
-def risk_explanation(risk: pd.DataFrame, sigma: float, trials, out: Path) -> str:
+def risk_explanation(risk: pd.DataFrame, sigma: float, trials, out: Path, docs: dict | None = None) -> str:
     """One sentence on what a reader sees in the risk numbers: how many trials never
     fall at the pairs' sigma, and which trials have the very same curve (equal
     structures perturbed with the same random numbers), with the link to docs/risk.md."""
@@ -224,7 +217,7 @@ def risk_explanation(risk: pd.DataFrame, sigma: float, trials, out: Path) -> str
                    "structures get equal risks, and a difference between trials is not blurred by independent noise). ")
     else:
         text += "Every trial is perturbed with the same random numbers (common random numbers): equal structures get equal curves. "
-    return _e(text) + "Why: " + _docs_link("risk.md", out, "docs/risk.md") + "."
+    return _e(text) + "Why: " + _docs_link("risk.md", docs or {}, out, "docs/risk.md") + "."
 
 
 def key_settings(args, trials) -> dict:
@@ -345,55 +338,13 @@ def _figures_section(figures: list[Path], out: Path, sigma: float | None = None,
     return f'<section id="figures"><h2>Figures</h2>{"".join(items)}</section>'
 
 
-#: The largest per-trial table the page reads (bytes) and the rows it reads of it.
-EXTRA_TABLE_BYTES = 64 * 1024 * 1024
+#: The most rows of a per-trial table a trial card shows from.
 EXTRA_TABLE_ROWS = 20000
 
 
-def _extra_tables(out: Path, known: set[str]) -> dict[str, pd.DataFrame]:
-    """The run's other per-trial tables (build-stage risks, sensitivity rows): only
-    the pipeline's own names (lgp.app.manifest.OUTPUT_NAMES), only regular files
-    (a pipe or a link by such a name is not read), at most EXTRA_TABLE_ROWS rows of
-    a file of at most EXTRA_TABLE_BYTES. A table of the run that cannot be read is
-    an error naming it."""
-    import stat
-
-    from lgp.app.manifest import OUTPUT_NAMES
-
-    tables = {}
-    for name in sorted(n for n in OUTPUT_NAMES if n.endswith(".csv") and n not in known):
-        path = out / name
-        try:
-            st = path.lstat()
-        except FileNotFoundError:
-            continue
-        if not stat.S_ISREG(st.st_mode) or st.st_size > EXTRA_TABLE_BYTES:
-            print(f"lgp.reproduce: results page: {path} is not a regular file of at most {EXTRA_TABLE_BYTES >> 20} MB: "
-                  "not shown on the cards", file=sys.stderr, flush=True)
-            continue
-        try:
-            df = pd.read_csv(path, dtype={"trial": str}, nrows=EXTRA_TABLE_ROWS)
-        except (OSError, UnicodeDecodeError, pd.errors.ParserError, pd.errors.EmptyDataError) as e:
-            raise InputError(f"results page: cannot read the run's table {path}: {e}") from e
-        if "trial" in df.columns:
-            tables[path.stem] = df
-    return tables
-
-
-def _png_size(path: Path) -> tuple[int, int] | None:
-    """(width, height) of a PNG from its header (24 bytes), None if it is not one."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(24)
-    except OSError:
-        return None
-    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n":
-        return None
-    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
-
-
 def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, picture: Path | None,
-                replay: Path | None, extras: dict[str, pd.DataFrame], out: Path, precision: pd.DataFrame | None = None) -> str:
+                replay: Path | None, extras: dict[str, pd.DataFrame], out: Path, precision: pd.DataFrame | None = None,
+                size: tuple[int, int] | None = None) -> str:
     e = samples["effort"].to_numpy(dtype=float)
     sd = float(np.std(e, ddof=1)) if len(e) > 1 else 0.0
     curve = risk.sort_values("sigma")
@@ -412,7 +363,6 @@ def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, 
                     else f"{int(n_actions.min())} to {int(n_actions.max())} actions (sample 0: {int(n_actions[0])})")
     pic = ""
     if picture is not None:
-        size = _png_size(picture)
         wh = f' width="{size[0]}" height="{size[1]}"' if size else ""
         rel = _e(os.path.relpath(picture, out))
         pic = (f'<a class="pic" href="{rel}" title="{_e(trial.id)}: the picture at full size">'
@@ -461,7 +411,7 @@ def _risk_at(curve: pd.DataFrame, sigma: float) -> str:
     return f"{float(r['risk']):.2f}"
 
 
-def _human_section(analysis: dict | None, out: Path) -> str:
+def _human_section(analysis: dict | None) -> str:
     if analysis is None:
         return ('<section id="human"><h2>Human data</h2><p>No human data given (<code>--human-data FILE.csv</code>, '
                 'format in docs/human-data.md): the fits of Eq. 1, the sigma profile and the bootstrap need the responses, '
@@ -493,7 +443,7 @@ def _human_section(analysis: dict | None, out: Path) -> str:
     return "".join(parts)
 
 
-def _comparison_section(analysis: dict | None, out: Path) -> str:
+def _comparison_section(analysis: dict | None, recovery: pd.DataFrame | None = None) -> str:
     """Model comparison: in-sample and out-of-sample side by side, the tests, the
     permutation tests (with human data), and the recovery table of SIMULATED
     studies when recovery/ holds one (--recovery)."""
@@ -509,9 +459,8 @@ def _comparison_section(analysis: dict | None, out: Path) -> str:
         if "permutation_test" in analysis:
             parts.append(f"<h3>Permutation tests of the risk term</h3>"
                          f"{table_html(cr.permutation_table(analysis['permutation_test']), 'plain')}")
-    summary_path = out / "recovery" / "simulated_recovery_summary.csv"
-    if summary_path.is_file():
-        summary = pd.read_csv(summary_path)
+    if recovery is not None:
+        summary = recovery
         parts.append('<h3>Model recovery on SIMULATED studies (not human data)</h3>'
                      '<p class="warn">SIMULATED participants, not human data: could a study of this design tell the '
                      'models apart on these effort and risk tables?</p>')
@@ -548,18 +497,19 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
                pairs: pd.DataFrame | None = None, analysis: dict | None = None, figures=(),
                pictures: dict | None = None, replays: dict | None = None,
                figure_sigma: tuple[float, str] | None = None, over_sigma_html: str | None = None,
-               precision: pd.DataFrame | None = None) -> Path:
+               precision: pd.DataFrame | None = None, extras: dict | None = None, sections_html=(),
+               picture_sizes: dict | None = None, recovery: pd.DataFrame | None = None, docs: dict | None = None) -> Path:
     """Write ``<out>/index.html`` (atomically) and return its path.
 
     `run`: command, parameters, engine, engine_settings, stages (name -> s),
     cache (hits, misses, root), finished, load. `pictures` and `replays` map trial
-    ids to files under `out`; `figures` are PNG files under `out`.
+    ids to files under `out`; `figures` are PNG files under `out`; `extras`: the
+    run's per-trial tables by name (shown on the cards); `sections_html`: the
+    feature sections' page parts (after the pair tables).
     """
     out = Path(out)
-    pictures = pictures or {}
-    replays = replays or {}
-    known = {"effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv", "risk_precision.csv", "pairs_over_sigma.csv"}
-    extras = _extra_tables(out, known)
+    pictures, replays, sizes = pictures or {}, replays or {}, picture_sizes or {}
+    extras = {name: df.head(EXTRA_TABLE_ROWS) for name, df in sorted((extras or {}).items()) if "trial" in df.columns}
     cards = []
     for trial in trials:
         s = effort_samples[effort_samples["trial"] == trial.id]
@@ -567,9 +517,10 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
         if not len(s) or not len(r):
             raise InputError(f"results page: trial {trial.id} has no effort or no risk rows")
         prec = None if precision is None else precision[precision["trial"] == trial.id]
-        cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out, prec))
+        cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out, prec,
+                                 sizes.get(trial.id)))
     nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
-    comparison = _comparison_section(analysis, out)  # "" when there is nothing to compare: no link to it
+    comparison = _comparison_section(analysis, recovery)  # "" when there is nothing to compare: no link to it
     title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"
     body = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
@@ -583,16 +534,16 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
 {_quick_banner(run)}
 {_run_section(run)}
 {_pairs_section(pairs, analysis, figure_sigma)}
-{over_sigma_html or ""}
+{over_sigma_html or ""}{"".join(sections_html)}
 {_figures_section([Path(f) for f in figures], out, *(figure_sigma or (None, None)))}
 <section id="trials"><h2>Trials</h2><p class="trialnav">{nav}</p>
 <p>A is the layout of sample 0 (the one the replay plays); effort is over all {effort_samples.groupby("trial").size().max()} layouts.
 Histogram: effort per layout. Risk: fraction of noisy runs of B that fall, over the run's sigma grid, every
 mini-plot on the same axis from 0 to 1 (a risk of 0.05, one fall in 20, stays near the floor), with the 95% Wilson
 interval of each point shaded where the table has it. Click a picture for its full size.</p>
-<p class="explain">{risk_explanation(risk, sigma, trials, out)}</p>
+<p class="explain">{risk_explanation(risk, sigma, trials, out, docs)}</p>
 <div class="cards">{"".join(cards)}</div></section>
-{_human_section(analysis, out)}
+{_human_section(analysis)}
 {comparison}
 </main>
 <footer>Written by <code>python -m lgp.reproduce</code>; every file it links is beside this page.</footer>
@@ -602,7 +553,6 @@ interval of each point shaded where the table has it. Click a picture for its fu
     return write_text_atomic(body, out / "index.html")
 
 
-
 def _parameter(v) -> str:
     """A setting of the run as the page's chips show it."""
     if isinstance(v, tuple):
@@ -610,53 +560,55 @@ def _parameter(v) -> str:
     return "(default)" if v is None else str(v)
 
 
-def write_index(out, args, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
-                pairs: pd.DataFrame | None, analysis: dict | None, cache: Cache, clock,
-                replays: dict | None = None, over_sigma_html: str | None = None,
-                precision: pd.DataFrame | None = None, pictures: dict | None = None) -> Path:
-    """The page of a `lgp.reproduce` run (its lgp.app.config.RunConfig `args`):
-    pictures (`pictures`, as lgp.app.pictures.rendered_trial_pictures returns them,
-    or rendered here), run record, index.html."""
-    from models.risk import DEFAULT_ENGINE, get_engine
+def run_record(result) -> dict:
+    """The page's run section of a RunResult: its settings and its RunRecord, in words."""
+    from models.risk import DEFAULT_ENGINE
 
-    out = Path(args.out) if out is None else Path(out)
-    if pictures is None:
-        pictures = rendered_trial_pictures(trials, args.seed, out / "page", cache, jobs=args.jobs)
-        clock.lap("trial pictures")
-    figures = []
-    if analysis is not None and "files" in analysis:
-        figures = [Path(p) for k, p in analysis["files"][["kind", "path"]].itertuples(index=False) if k == "figure" and str(p).endswith(".png")]
-    engine = args.engine or DEFAULT_ENGINE
-    try:
-        settings = get_engine(engine).settings()
-    except Exception as e:  # an engine that cannot load here still ran elsewhere: say so
-        settings = {"error": str(e)}
+    config, record = result.config, result.record
     counts = Counter()
-    for (kind, outcome), n in getattr(cache, "counts", {}).items():
+    for (kind, outcome), n in record.cache_counts.items():
         counts[kind, "hit" if outcome == "hit" else "miss"] += n
-    counts.update(cache.files)
-    compute = cache.compute_time()[0] if hasattr(cache, "compute_time") else None
-    run = {
-        "command": args.command or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below",
-        "key": key_settings(args, trials),
-        "quick": bool(getattr(args, "quick", False)),
-        "compute_s": compute,
-        "parameters": {k: _parameter(v) for k, v in args.parameters().items()},
-        "engine": engine,
-        "engine_settings": settings,
-        "stages": dict(clock.laps),
-        "cache": {"hits": cache.hits + sum(n for (_, o), n in cache.files.items() if o == "hit"),
-                  "misses": cache.misses + cache.recomputed + sum(n for (_, o), n in cache.files.items() if o == "miss"),
-                  "root": str(cache.root), "words": cache_words(counts)},
-        "finished": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-        "machine": f"{platform.node()}, {os.cpu_count()} cores",
-        "load": "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),
+    counts.update(record.cache_files)
+    files = record.cache_files
+    return {
+        "command": config.command or f"lgp.reproduce.main(...) from {Path(sys.argv[0]).name}: parameters below",
+        "key": key_settings(config, result.trials),
+        "quick": bool(config.quick),
+        "compute_s": record.compute[0],
+        "parameters": {k: _parameter(v) for k, v in config.parameters().items()},
+        "engine": config.engine or DEFAULT_ENGINE,
+        "engine_settings": record.software["engine"],
+        "libraries": record.recorded_libraries,
+        "stages": dict(record.stages),
+        "cache": {"hits": sum(n for (_, o), n in record.cache_counts.items() if o == "hit")
+                          + sum(n for (_, o), n in files.items() if o == "hit"),
+                  "misses": sum(n for (_, o), n in record.cache_counts.items() if o != "hit")
+                            + sum(n for (_, o), n in files.items() if o == "miss"),
+                  "root": record.cache_root, "words": cache_words(counts)},
+        "finished": record.finished,
+        "machine": record.machine,
+        "load": record.load,
     }
+
+
+def write_index(result, out, *, figures=(), card_tables: dict | None = None, section_pages=(),
+                over_figure: Path | None = None) -> Path:
+    """The page of a RunResult (lgp.app.result) in `out`: `figures` (PNG files written
+    there), the feature sections' card tables and page parts, and the figure of
+    "Pairs over sigma"."""
+    from lgp.app import over_sigma
+
+    out = Path(out)
     figure_sigma = None
-    settings_table = analysis.get("settings") if isinstance(analysis, dict) else None
+    settings_table = result.analysis.get("settings") if result.analysis is not None else None
     if isinstance(settings_table, pd.DataFrame) and len(settings_table) and "sigma" in settings_table:
         figure_sigma = (float(settings_table["sigma"].iloc[0]), str(settings_table.get("sigma_rule", pd.Series([""])).iloc[0]))
-    return write_page(out, run=run, trials=trials, effort_samples=effort_samples, risk=risk, sigma=sigma, pairs=pairs,
-                      figure_sigma=figure_sigma,
-                      analysis=analysis if args.human_data else None, figures=figures,
-                      pictures=pictures, replays=replays, over_sigma_html=over_sigma_html, precision=precision)
+    over_html = over_sigma.page_section(result.over_sigma, over_figure, out) if result.over_sigma is not None else None
+    recovery = result.section("recovery")
+    return write_page(out, run=run_record(result), trials=result.trials, effort_samples=result.effort_samples,
+                      risk=result.risk, sigma=result.sigma, pairs=result.pairs, figure_sigma=figure_sigma,
+                      analysis=result.analysis if result.human else None, figures=figures,
+                      pictures=result.pictures, replays=result.replays, over_sigma_html=over_html,
+                      precision=result.precision, extras=card_tables, sections_html=section_pages,
+                      picture_sizes=result.picture_sizes, recovery=None if recovery is None else recovery.data.summary,
+                      docs=result.docs)

@@ -113,3 +113,15 @@ def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | Non
             card.save(tmp, format="PNG")
         paths[trial.id] = path
     return paths
+
+
+def png_size(path: Path) -> tuple[int, int] | None:
+    """(width, height) of a PNG from its header (24 bytes), None if it is not one."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(24)
+    except OSError:
+        return None
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n":
+        return None
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")

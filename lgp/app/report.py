@@ -1,8 +1,8 @@
 """report.md of a reproduce run, and the text of its pair tables.
 
 `write_report` writes the settings, the engine with its settings, both times, the
-effort and risk tables and the pair orderings; `append_report` adds the sections
-of --build-risk, --per-participant-sigma and --sensitivity. The pair tables come
+effort and risk tables and the pair orderings; its last sections are
+those of the run's feature stages (lgp.app.result.Rendered.report). The pair tables come
 from analysis.pairs as numbers (RatioRange); `ratio_text` and `pairs_csv_table`
 write them in words, for report.md and pairs.csv alike.
 """
@@ -105,9 +105,11 @@ def _design_text(approach_height: float | None, slices: int | None) -> str:
 
 
 def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None,
-                 elapsed: float, software: dict | None = None, compute: tuple[float, int] = (float("nan"), 0)) -> Path:
-    """report.md: settings, the engine with its settings, both times, the tables, and
-    the pair orderings under the one tie rule (analysis.pairs.TIE_REL)."""
+                 elapsed: float, software: dict | None = None, compute: tuple[float, int] = (float("nan"), 0),
+                 sections=()) -> Path:
+    """report.md: settings, the engine with its settings, both times, the tables, the
+    pair orderings under the one tie rule (analysis.pairs.TIE_REL), then `sections`
+    (markdown: pairs over sigma, the feature sections)."""
     from analysis.pairs import TIE_REL
 
     engine = engine_description(args.engine, (software or {}).get("engine"))
@@ -180,11 +182,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
     if software:  # what the cache keys hold besides code and inputs: a reader can tell which library made the numbers
         lines += ["## Software", "", "Libraries: " + ", ".join(f"{k} {v}" for k, v in software["libraries"].items()) + ".",
                   "", f"Risk engine settings: `{json.dumps(software['engine'], sort_keys=True, default=str)}`.", ""]
-    return write_text_atomic("\n".join(lines), out / "report.md")
-
-
-def append_report(report: Path, sections: list[str]) -> Path:
-    """Add sections to report.md (written atomically by the caller first)."""
+    text = "\n".join(lines)
     if sections:
-        write_text_atomic(report.read_text() + "\n" + "\n".join(sections), report)
-    return report
+        text += "\n" + "\n".join(sections)
+    return write_text_atomic(text, out / "report.md")

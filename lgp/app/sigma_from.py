@@ -72,3 +72,36 @@ def report_lines(link: SigmaFrom, run_sigma: float, fitted: float | None, pairs_
     else:
         lines += [f"Pairs at sigma = {link.sigma:g} d:", "", pairs_text, ""]
     return lines
+
+
+@dataclass(frozen=True)
+class SigmaBeside:
+    """The linked sigma beside the run's: the pair table's sigma, the sigma fitted to
+    the human data (None without them) and the pair table at the linked sigma (None
+    when it is zero)."""
+
+    link: SigmaFrom
+    run_sigma: float
+    fitted: float | None
+    pairs: object | None
+
+
+class _Stage:
+    name, phase = "sigma_from", "analysis"
+
+    def enabled(self, config) -> bool:
+        return bool(config.sigma_from)
+
+    def run(self, ctx):
+        from analysis.pairs import pair_orderings
+        core = ctx.core
+        if not core["paper"]:
+            return None
+        link = read_sigma_from(ctx.config.sigma_from)
+        at = pair_orderings(core["paper_effort"], core["paper_risk"], link.sigma, core["pair_names"]) if link.sigma > 0 else None
+        choice = core["analysis"].get("sigma_choice")
+        fitted = float(choice["sigma"].iloc[0]) if hasattr(choice, "columns") and len(choice) and "sigma" in choice else None
+        return SigmaBeside(link, core["sigma"], fitted, at)
+
+
+STAGE = _Stage()

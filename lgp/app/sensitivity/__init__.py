@@ -47,6 +47,32 @@ def run_sections(ctx: Context) -> list[Section]:
 #: The report's sensitivity sections, in order (append new ones here).
 SECTIONS: list[Callable[[Context], Section]] = [risk_section, effort_section]
 
+
+def render(sections: list[Section], view):
+    """The report sections of --sensitivity (its files are written as it runs) and its tables for the trial cards."""
+    from lgp.app.result import Rendered
+
+    return Rendered([f for s in sections for f in s.files], "\n".join("\n".join(s.lines) for s in sections),
+                    card_tables={name: df for s in sections for name, df in s.tables.items()})
+
+
+class _Stage:
+    """--sensitivity as a stage of lgp.app.run: its sections write their files into the staging folder as they run."""
+
+    name, phase = "sensitivity", "compute"
+
+    def enabled(self, config) -> bool:
+        return config.sensitivity
+
+    def run(self, ctx):
+        from lgp.app.stages import effort_tables, risk_key_inputs
+
+        return run_sections(Context(ctx.config, ctx.trials, ctx.executor, ctx.cache, ctx.workdir, risk_key_inputs,
+                                    ctx.log, effort_tables=effort_tables))
+
+
+STAGE = _Stage()
+
 __all__ = ["SECTIONS", "Context", "Section", "add_arguments", "check_arguments", "run_sections", "risk_section",
            "effort_section", "effort_designs", "effort_sensitivity_tables", "EFFORT_HEIGHTS",
            "risk_sensitivity_table", "risk_sensitivity_summary", "RISK_RULES", "RISK_SIGMAS", "NOISE_RULES"]

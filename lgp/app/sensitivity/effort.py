@@ -141,4 +141,4 @@ def effort_section(ctx: Context) -> Section:
         lines += [f"Failed: {note}", ""]
     lines += ["Tables: `effort_sensitivity.csv` (one row per design and trial), `effort_sensitivity_pairs.csv` "
               "(one row per design and pair).", ""]
-    return Section("effort", lines, files)
+    return Section("effort", lines, files, {"effort_sensitivity": table, "effort_sensitivity_pairs": pairs})

@@ -222,4 +222,4 @@ def risk_section(ctx: Context) -> Section:
                   + ", ".join(f"{e} {t}" for e, t in bad.itertuples(index=False)) + ".", ""]
     for note in notes:
         lines += [f"Left out: {note}.", ""]
-    return Section("risk", lines, files)
+    return Section("risk", lines, files, {"risk_sensitivity": table, "risk_sensitivity_summary": summary})

@@ -37,6 +37,8 @@ class Section:
     title: str
     lines: list[str]
     files: list[Path]
+    #: the tables written, by file stem (the page's trial cards show those with a trial column)
+    tables: dict[str, pd.DataFrame] = field(default_factory=dict)
 
 
 def markdown(df: pd.DataFrame) -> list[str]:
