@@ -35,7 +35,24 @@ class AnalysisResult(dict):
     written as ``<prefix><name>.csv`` by `write_analysis`), the figures to draw
     (plot function and its keyword arguments but the folder), the file prefix
     ("simulated_" for SIMULATED participants) and the trial set it ran on (None:
-    the paper's 24)."""
+    the paper's 24).
+
+    The tables:
+    settings (one row: seed, n_boot, sigma used and why, z-score SD ...),
+    orderings (dataset, source, pair, cost_E, cost_H, order, E_lt_H; source is
+    effort, risk, human or a model name; dataset "all" for effort and risk, which
+    do not depend on it; order under the tie rule of analysis.pairs.TIE_REL) and, with human data, excluded_participants,
+    zscored, trial_means (mean_z with 95% CI), sigma_profile, sigma_choice,
+    fits, predictions, bootstrap_correlations, bootstrap_summary,
+    bootstrap_tests (these in-sample, column scheme "in-sample"); with
+    `compare`, model_comparison (in-sample and out-of-sample scores of every
+    model side by side, with bootstrap intervals), model_comparison_gain (RMSE
+    below effort-only's, with intervals; the paper's percentile intervals and,
+    beside them, the same resamples centred on the point: *_centred),
+    model_comparison_tests (direct bootstrap, the paper's method, labelled
+    biased), model_comparison_held_out_tests (sign-flip over folds, calibrated),
+    cv_predictions, cv_bootstrap, permutation_test and permutation_null.
+    """
 
     def __init__(self, tables: dict, prefix: str = "", figures=(), trials=None):
         super().__init__(tables)
@@ -102,31 +119,14 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
         table's n_sims or n column); "none": risk fixed at the table. The
         comparison's intervals are reported both ways.
 
-    Returns
-    -------
-    dict of DataFrames, each also written as ``<key>.csv``:
-    settings (one row: seed, n_boot, sigma used and why, z-score SD ...),
-    orderings (dataset, source, pair, cost_E, cost_H, order, E_lt_H; source is
-    effort, risk, human or a model name; dataset "all" for effort and risk, which
-    do not depend on it; order under the tie rule of analysis.pairs.TIE_REL) and, with human data, excluded_participants,
-    zscored, trial_means (mean_z with 95% CI), sigma_profile, sigma_choice,
-    fits, predictions, bootstrap_correlations, bootstrap_summary,
-    bootstrap_tests (these in-sample, column scheme "in-sample"); with
-    `compare`, model_comparison (in-sample and out-of-sample scores of every
-    model side by side, with bootstrap intervals), model_comparison_gain (RMSE
-    below effort-only's, with intervals; the paper's percentile intervals and,
-    beside them, the same resamples centred on the point: *_centred),
-    model_comparison_tests (direct bootstrap, the paper's method, labelled
-    biased), model_comparison_held_out_tests (sign-flip over folds, calibrated),
-    cv_predictions, cv_bootstrap, permutation_test and permutation_null; plus
-    files (kind, path) listing everything written.
-
     trials : the trial ids of the run (default the paper's 24; analysis.data.trialset).
         The human data must name exactly these. Pair tables (orderings), the
         within-pair permutation null, leave-one-pair-out folds and the pair
         figures need easy/hard pairs (nE and nH both; MIN_PAIRS for the folds):
         on a set without them they are left out and the table ``skipped`` (what,
         reason) says why; the paper's set never has this table.
+    Returns the tables of the AnalysisResult (see there), each also written as
+    ``<key>.csv``, plus files (kind, path) listing everything written.
     """
     options = {k: v for k, v in locals().items() if k != "out_dir"}
     return write_analysis(compute_analysis(**options), out_dir)

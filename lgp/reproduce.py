@@ -39,7 +39,8 @@ from lgp.app.result import RunResult
 from lgp.app.run import check_inputs
 from lgp.app.run import run as run_stages
 from lgp.app.write import write_all
-from lgp.app import sensitivity
+from lgp.app import build_risk, sensitivity
+from lgp.app.config import QUICK
 from lgp.errors import InputError
 
 PROG = "python -m lgp.reproduce"
@@ -57,12 +58,34 @@ def _took(command: str) -> str:
 def parse_args(argv=None) -> RunConfig:
     """The command line, checked: every count, sigma, trial id and path is refused
     here, in one line, before any work (lgp.cli); the run's RunConfig."""
-    from lgp.app.build_risk import BUILD_SIGMAS
-    from lgp.app.config import QUICK
+    p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    _input_arguments(p)
+    _effort_and_work_arguments(p)
+    _precision_arguments(p)
+    build_risk.add_arguments(p, cli)
+    _analysis_arguments(p)
+    sensitivity.add_arguments(p)
+    args = p.parse_args(argv)
+    _check_arguments(args, p)
+    args.command = "python -m lgp.reproduce " + shlex.join(str(a) for a in (argv if argv is not None else sys.argv[1:]))
+    config = RunConfig.from_args(args)  # every default filled in, once
+    if config.sigma_from:  # another lab's sigma joins the grid (lgp/app/sigma_from.py)
+        from dataclasses import replace
+
+        from lgp.app.sigma_from import grid_with, read_sigma_from
+
+        try:
+            config = replace(config, sigmas=grid_with(config.sigmas, read_sigma_from(config.sigma_from)))
+        except InputError as e:
+            p.exit(2, f"{p.prog}: error: {e}\n")
+    return config
+
+
+def _input_arguments(p) -> None:
+    """Where the run writes, its trials, M, N, the sigma grid and the risk model."""
     from models.risk.model import FALL_RULES, NOISE_RULES
 
     D = RunConfig.default
-    p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default=D("out"), type=cli.output_dir,
                    help="output directory (default: results/); at the end this run's files replace those of the earlier "
                         "run listed in its manifest.json (its cache is kept); nothing else there is deleted")
@@ -88,6 +111,11 @@ def parse_args(argv=None) -> RunConfig:
     p.add_argument("--fall-rule", default=D("fall_rule"), type=cli.one_of(FALL_RULES, "fall rule"),
                    help="a run falls by horizontal or 3d displacement, case-insensitive (default %(default)s)")
     p.add_argument("--fall-threshold", type=float, default=D("fall_threshold"), help="fall threshold in units of d (default %(default)s)")
+
+
+def _effort_and_work_arguments(p) -> None:
+    """The effort's motion design and planner, the processes, --sigma-from and the seed."""
+    D = RunConfig.default
     p.add_argument("--approach-height", type=cli.checked(check_approach_height, "approach height"), default=None,
                    help="effort: vertical approach/retreat leg (m) at every grasp and place; 0 = a clearance constraint "
                         f"instead (default {D('approach_height'):g}; docs/effort.md)")
@@ -108,6 +136,11 @@ def parse_args(argv=None) -> RunConfig:
                    help="summary.json of python -m analysis.mental_jenga: that sigma (the paper's unit) is simulated too "
                         "and reported beside this run's, with the pair table at it (docs/mental-jenga.md)")
     p.add_argument("--seed", type=cli.seed, default=D("seed"))
+
+
+def _precision_arguments(p) -> None:
+    """Bootstrap, human data, --quick, the cache, replays and risk chunks."""
+    D = RunConfig.default
     p.add_argument("--n-boot", type=cli.bounded_count("MAX_N_BOOT"), help=f"bootstrap resamples (default {D('n_boot')}; --quick {QUICK['n_boot']})")
     p.add_argument("--human-data", type=cli.input_file, help="CSV of human responses (docs/human-data.md) naming exactly the run's trials (the paper's 24, "
                         "or every trial of --stimuli DIR)")
@@ -120,9 +153,11 @@ def parse_args(argv=None) -> RunConfig:
     p.add_argument("--no-cache", action="store_true", help="recompute everything")
     p.add_argument("--no-replays", action="store_true", help="skip the 3-D replays of the results page (replays/<trial>.html)")
     p.add_argument("--risk-chunk", type=cli.positive_int, default=D("risk_chunk"), help="trials simulated per process-pool batch (an interruption loses at most one)")
-    p.add_argument("--build-risk", action="store_true", help="also risk through the build, at --build-sigmas (lgp/app/build_risk.py)")
-    p.add_argument("--build-sigmas", type=cli.sigma, nargs="+",
-                   help=f"noise levels of --build-risk in (0, 1] (default {' '.join(f'{s:g}' for s in BUILD_SIGMAS)})")
+
+
+def _analysis_arguments(p) -> None:
+    """The options of the analysis and its beyond-the-paper parts."""
+    D = RunConfig.default
     p.add_argument("--risk-measure", choices=["final", "max", "expected", "any", "care", "sequential"],
                    help="with --build-risk and --human-data: this build-risk aggregate replaces R in Eq. 1")
     p.add_argument("--per-participant-sigma", action="store_true", help="with --human-data: each participant's sigma")
@@ -141,8 +176,11 @@ def parse_args(argv=None) -> RunConfig:
                    help="betas of --per-participant-sigma (default: b2/b1 shared per dataset)")
     p.add_argument("--verbose", action="store_true",
                    help="print a line per trial and stage as it finishes, and every file written at the end")
-    sensitivity.add_arguments(p)
-    args = p.parse_args(argv)
+
+
+def _check_arguments(args, p) -> None:
+    """Refuse, in one line, what argparse cannot: engine and rules, planner budgets,
+    options that need another, --trials all with others; cap --jobs at the cores."""
     try:  # bad engine, profile, rule or threshold: one line, before any work
         from models.risk import RiskModel
 
@@ -168,18 +206,6 @@ def parse_args(argv=None) -> RunConfig:
         p.error("--trials all runs every trial file; give it alone")
     if not (args.scheduler or "").lower().startswith(("tcp://", "tls://", "ws://", "wss://")):  # a cluster has its own cores
         args.jobs = cli.capped_jobs(args.jobs, p.prog, args.oversubscribe)
-    args.command = "python -m lgp.reproduce " + shlex.join(str(a) for a in (argv if argv is not None else sys.argv[1:]))
-    config = RunConfig.from_args(args)  # every default filled in, once
-    if config.sigma_from:  # another lab's sigma joins the grid (lgp/app/sigma_from.py)
-        from dataclasses import replace
-
-        from lgp.app.sigma_from import grid_with, read_sigma_from
-
-        try:
-            config = replace(config, sigmas=grid_with(config.sigmas, read_sigma_from(config.sigma_from)))
-        except InputError as e:
-            p.exit(2, f"{p.prog}: error: {e}\n")
-    return config
 
 
 def main(argv=None) -> int:

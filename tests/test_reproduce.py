@@ -16,15 +16,20 @@ from lgp import reproduce
 from lgp.app import run as app_run
 
 ARGS = ["--trials", "9E", "10E", "6H", "--samples", "1", "--n-sims", "4", "--sigmas", "0.05", "0.1", "--jobs", "1", "--seed", "3",
-        "--verbose"]  # --verbose: the per-trial lines and the cache summary line these tests read
+        "--verbose"]  # --verbose: the per-trial lines these tests read
 
 
-def _cache_counts(err: str, kinds=("effort", "riskruns")) -> dict:
-    """The counts of the run's `cache: ...` summary line on stderr, {(kind, outcome): n},
-    for entries of `kinds` (default: the result tables, not the B-stands checks)."""
-    (line,) = [l for l in err.splitlines() if l.startswith("cache: ")]
-    return {(kind, outcome): int(n) for kind, body in re.findall(r"(\w+) ((?:\d+ \w+(?:, )?)+)", line[7:])
-            for n, outcome in re.findall(r"(\d+) (\w+)", body) if kind in kinds}
+def _run(args):
+    """The run of the command line `args` (written into its --out), its lgp.app.result.RunResult."""
+    return reproduce.reproduce(reproduce.parse_args(args), args)
+
+
+def _cache_counts(result, kinds=("effort", "riskruns")) -> dict:
+    """The run's cache lookups {(kind, outcome): n} (its RunRecord) for entries of
+    `kinds` that were looked up (default: the result tables, not the B-stands checks)."""
+    counts = result.record.cache_counts
+    looked = {kind for kind, _ in counts}
+    return {(kind, o): counts.get((kind, o), 0) for kind in kinds if kind in looked for o in ("hit", "miss", "recomputed")}
 
 
 def _tables(out):
@@ -36,11 +41,10 @@ def _tables(out):
 @pytest.mark.slow
 def test_reproduce_writes_tables_and_report_then_reuses_the_cache(tmp_path, capsys):
     out = tmp_path / "r"
-    assert reproduce.main([*ARGS, "--out", str(out)]) == 0
-    err = capsys.readouterr().err
-    assert _cache_counts(err) == {("effort", "hit"): 0, ("effort", "miss"): 3, ("effort", "recomputed"): 0,
-                                  ("riskruns", "hit"): 0, ("riskruns", "miss"): 3, ("riskruns", "recomputed"): 0}
-    assert _cache_counts(err, ["stable"])["stable", "miss"] == 3  # B checked once per trial, before effort
+    result = _run([*ARGS, "--out", str(out)])
+    assert _cache_counts(result) == {("effort", "hit"): 0, ("effort", "miss"): 3, ("effort", "recomputed"): 0,
+                                     ("riskruns", "hit"): 0, ("riskruns", "miss"): 3, ("riskruns", "recomputed"): 0}
+    assert _cache_counts(result, ["stable"])["stable", "miss"] == 3  # B checked once per trial, before effort
     first = _tables(out)
     assert set(first["risk"]["trial"]) == {"9E", "10E", "6H"} and len(first["risk"]) == 6
     assert (first["effort"]["effort"] > 0).all()
@@ -51,11 +55,10 @@ def test_reproduce_writes_tables_and_report_then_reuses_the_cache(tmp_path, caps
     assert f"mujoco {version('mujoco')}" in report and '"timestep": 0.002' in report  # libraries and engine settings
 
     # A second run plans and simulates nothing: every lookup is a hit.
-    assert reproduce.main([*ARGS, "--out", str(out)]) == 0
-    err = capsys.readouterr().err
-    assert _cache_counts(err) == {("effort", "hit"): 3, ("effort", "miss"): 0, ("effort", "recomputed"): 0,
-                                  ("riskruns", "hit"): 3, ("riskruns", "miss"): 0, ("riskruns", "recomputed"): 0}
-    assert _cache_counts(err, ["stable"])["stable", "hit"] == 3
+    result = _run([*ARGS, "--out", str(out)])
+    assert _cache_counts(result) == {("effort", "hit"): 3, ("effort", "miss"): 0, ("effort", "recomputed"): 0,
+                                     ("riskruns", "hit"): 3, ("riskruns", "miss"): 0, ("riskruns", "recomputed"): 0}
+    assert _cache_counts(result, ["stable"])["stable", "hit"] == 3
     for name, df in _tables(out).items():
         pd.testing.assert_frame_equal(df, first[name])
 
@@ -81,9 +84,7 @@ def test_interrupted_run_resumes_to_the_same_results(tmp_path, monkeypatch, caps
     assert "interrupted" in capsys.readouterr().err
     monkeypatch.setattr(models.risk, "risk_table", real)
     assert len(list((cut / "cache").glob("riskruns-*.csv"))) == 2  # the first chunk survived whole
-    capsys.readouterr()
-    reproduce.main([*ARGS, "--out", str(cut), "--risk-chunk", "2"])
-    counts = _cache_counts(capsys.readouterr().err)
+    counts = _cache_counts(_run([*ARGS, "--out", str(cut), "--risk-chunk", "2"]))
     assert (counts["effort", "hit"], counts["riskruns", "hit"], counts["riskruns", "miss"]) == (3, 2, 1)
     for name, df in _tables(cut).items():
         pd.testing.assert_frame_equal(df, _tables(whole)[name])
@@ -228,11 +229,11 @@ def test_damaged_cache_entries_are_recomputed_exactly_and_the_run_ends_the_same(
         path.write_bytes(damage(path.read_bytes()))
     capsys.readouterr()
 
-    assert reproduce.main([*ARGS, "--out", str(out)]) == 0
+    result = _run([*ARGS, "--out", str(out)])
     err = capsys.readouterr().err
     reported = [l for l in err.splitlines() if "damaged entry" in l]
     assert len(reported) == 2 and {p for p in damaged if any(str(p) in l for l in reported)} == damaged
-    assert _cache_counts(err) == {("effort", "hit"): 2, ("effort", "miss"): 0, ("effort", "recomputed"): 1,
+    assert _cache_counts(result) == {("effort", "hit"): 2, ("effort", "miss"): 0, ("effort", "recomputed"): 1,
                                   ("riskruns", "hit"): 2, ("riskruns", "miss"): 0, ("riskruns", "recomputed"): 1}
 
     # Every result file and every cache entry is byte-identical to the undisturbed
@@ -247,8 +248,7 @@ def test_damaged_cache_entries_are_recomputed_exactly_and_the_run_ends_the_same(
         else:
             assert path.read_bytes() == reference.read_bytes(), path.name
     # the repaired entries are used by the next run
-    assert reproduce.main([*ARGS, "--out", str(out)]) == 0
-    assert _cache_counts(capsys.readouterr().err)["effort", "hit"] == 3
+    assert _cache_counts(_run([*ARGS, "--out", str(out)]))["effort", "hit"] == 3
 
 
 def _fails_naming(capsys, call, error, text):

@@ -13,7 +13,6 @@ and, with human data, the fits, sigma profile, bootstrap and participants.
 """
 from __future__ import annotations
 
-import html
 from collections import Counter
 import os
 import platform
@@ -26,13 +25,13 @@ import pandas as pd
 from lgp.app.files import write_text_atomic
 from lgp.app.report import ratio_text, sigma_edge_warnings
 from lgp.app.config import QUICK
-from lgp.app.charts import histogram_svg, num, risk_svg
+from lgp.app.charts import num
 from lgp.cli import duration_text
+from lgp.app.page_cards import EXTRA_TABLE_ROWS, trial_card
+from lgp.app.page_human import comparison_section, human_section, participant_table  # noqa: F401
+from lgp.app.page_parts import PLAN_NOISE, fmt, p_value, plus_minus, table_html  # noqa: F401
+from lgp.app.page_parts import esc as _e
 from lgp.errors import InputError
-
-#: A spread of effort over layouts below this fraction of the mean is round-off of
-#: one and the same plan (a fixed layout of A: 10E's 4.2e-17 on 0.1159 J s), not variation.
-PLAN_NOISE = 1e-9
 
 CAPTIONS = {
     "effort_risk_pairs": "Physical effort (J s, mean over layouts) and physical risk (fraction of noisy runs "
@@ -58,59 +57,6 @@ CAPTIONS = {
 def _asset(name: str) -> str:
     """The page's style (page.css) or script (page.js), inlined so the page needs no other file."""
     return (Path(__file__).parent / name).read_text()
-
-
-def _e(x) -> str:
-    return html.escape(str(x))
-
-
-def _fmt(v) -> str:
-    if isinstance(v, (bool, np.bool_)):
-        return "yes" if v else "no"
-    if isinstance(v, (float, np.floating)):
-        return num(v)
-    if v is None or (isinstance(v, str) and v.strip().lower() == "nan"):
-        return "n/a"
-    return str(v)
-
-
-def plus_minus(mean: float, sd: float, unit: str, n: int) -> str:
-    """"0.1159 &plusmn; 0.0021 J s", the sd rounded to 2 digits and the mean to the
-    sd's last digit; a spread below the plan noise (all layouts give the same plan up
-    to round-off, e.g. 4.2e-17) reads "fixed layout" or "same for every layout"."""
-    if n <= 1 or not np.isfinite(sd) or sd <= PLAN_NOISE * max(abs(mean), 1e-12):
-        return f"{num(mean)} {unit} <small>(same for every layout)</small>" if n > 1 else f"{num(mean)} {unit}"
-    decimals = max(0, 1 - int(np.floor(np.log10(sd))))
-    return f"{num(round(mean, decimals))} &plusmn; {num(float(f'{sd:.2g}'))} {unit}"
-
-
-def p_value(p, n_resamples: int | None) -> str:
-    """A bootstrap p value: "< 1/200" when no resample of 200 crossed, else at most 2 digits."""
-    try:
-        p = float(p)
-    except (TypeError, ValueError):
-        return "n/a"
-    if not np.isfinite(p):
-        return "n/a"
-    if p == 0 and n_resamples:
-        return f"< 1/{int(n_resamples)}"
-    return num(p, 2)
-
-
-def table_html(df: pd.DataFrame, cls: str = "sortable", row_attrs=None, max_rows: int | None = None) -> str:
-    """A DataFrame as an HTML table whose header cells sort it (see page.js)."""
-    if max_rows is not None and len(df) > max_rows:
-        df = df.head(max_rows)
-    head = "".join(f"<th>{_e(c)}</th>" for c in df.columns)
-    rows = []
-    for i, (_, row) in enumerate(df.iterrows()):
-        attrs = row_attrs(i, row) if row_attrs else ""
-        cells = "".join(f'<td data-v="{_e(v)}">{_e(_fmt(v))}</td>' for v in row)
-        rows.append(f"<tr{attrs}>{cells}</tr>")
-    return f'<table class="{cls}"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
-
-
-# ----------------------------------------------------------------------------- sections
 
 
 #: What a cache entry of each kind is, in words (the page's run section).
@@ -338,161 +284,6 @@ def _figures_section(figures: list[Path], out: Path, sigma: float | None = None,
     return f'<section id="figures"><h2>Figures</h2>{"".join(items)}</section>'
 
 
-#: The most rows of a per-trial table a trial card shows from.
-EXTRA_TABLE_ROWS = 20000
-
-
-def _trial_card(trial, samples: pd.DataFrame, risk: pd.DataFrame, sigma: float, picture: Path | None,
-                replay: Path | None, extras: dict[str, pd.DataFrame], out: Path, precision: pd.DataFrame | None = None,
-                size: tuple[int, int] | None = None) -> str:
-    e = samples["effort"].to_numpy(dtype=float)
-    sd = float(np.std(e, ddof=1)) if len(e) > 1 else 0.0
-    curve = risk.sort_values("sigma")
-    at = curve.loc[np.isclose(curve["sigma"], sigma), "risk"]
-    if not trial.initial.is_random:
-        effort_text = f"{num(e.mean())} J s"
-        effort_note = "fixed layout: A has no random blocks, so it is planned once"
-    else:
-        effort_text = plus_minus(e.mean(), sd, "J s", len(e))
-        effort_note = f"mean &plusmn; sd over {len(e)} layouts"
-    if "n_actions" not in samples:
-        plan_len = "length not recorded"
-    else:
-        n_actions = samples.sort_values("sample")["n_actions"].to_numpy()
-        plan_len = (f"{int(n_actions[0])} actions" if len(set(n_actions)) == 1
-                    else f"{int(n_actions.min())} to {int(n_actions.max())} actions (sample 0: {int(n_actions[0])})")
-    pic = ""
-    if picture is not None:
-        wh = f' width="{size[0]}" height="{size[1]}"' if size else ""
-        rel = _e(os.path.relpath(picture, out))
-        pic = (f'<a class="pic" href="{rel}" title="{_e(trial.id)}: the picture at full size">'
-               f'<img src="{rel}" alt="{_e(trial.id)}: Start (A) and Finish (B)"{wh}></a>')
-    has_band = {"risk_low", "risk_high"} <= set(curve.columns)
-    band = (curve["risk_low"], curve["risk_high"]) if has_band else ()
-    band_note = "; shaded: 95% Wilson interval" if has_band else ""
-    link = (f'<a class="replay" href="{_e(os.path.relpath(replay, out))}">3-D replay of sample 0 &#9654;</a>'
-            if replay is not None else '<span class="replay none">no replay (--no-replays)</span>')
-    more = ""
-    if precision is not None and len(precision):
-        from models.risk.precision import precision_text
-
-        more += ('<p class="precision"><b>required precision</b> ' + " &middot; ".join(
-            f"risk {r['level']:g} at sigma* {_e(precision_text(r))}" for _, r in precision.iterrows()) + "<br>"
-            "<small>sigma*: the least noise (sd of each block's displacement, in block widths d) at which B falls in "
-            "that fraction of the noisy runs, read off the risk curve, with a 95% bootstrap interval; "
-            "&gt; the grid's top: it never did on this run's grid; a smaller sigma* means more precision is needed.</small></p>")
-    for title, df in extras.items():
-        rows = df[df["trial"] == trial.id]
-        if len(rows):
-            shown = f"{len(rows)} rows" if len(rows) <= 40 else f"first 40 of {len(rows)} rows, all in {title}.csv"
-            more += f'<details><summary>{_e(title.replace("_", " "))} ({_e(shown)})</summary>{table_html(rows.drop(columns=["trial"]), max_rows=40)}</details>'
-    return f"""
-<article class="card" id="trial-{_e(trial.id)}">
-<h3><a href="#trial-{_e(trial.id)}">{_e(trial.id)}</a> <span class="dim">{_e(trial.dimension)}</span></h3>
-<p class="desc">{_e(trial.description)}</p>
-{pic}
-<div class="stats">
-<div><b>effort</b> {effort_text}<br><small>{effort_note}</small><br>{histogram_svg(e)}</div>
-<div><b>risk</b> {_risk_at(curve, sigma)} at sigma {num(sigma)} d<br><small>over sigma, 0 to 1{band_note} (dashed: {num(sigma)} d)</small><br>{risk_svg(curve["sigma"], curve["risk"], sigma, *band)}</div>
-</div>
-<p><b>plan</b> {plan_len} &middot; {link}</p>
-{more}
-</article>"""
-
-
-def _risk_at(curve: pd.DataFrame, sigma: float) -> str:
-    """'0.17 [0.11, 0.26]': the risk at `sigma` with its 95% Wilson interval when the table has one."""
-    at = curve[np.isclose(curve["sigma"], sigma)]
-    if not len(at):
-        return "n/a"
-    r = at.iloc[0]
-    if "risk_low" in at:
-        return f"{float(r['risk']):.2f} <small>[{float(r['risk_low']):.2f}, {float(r['risk_high']):.2f}]</small>"
-    return f"{float(r['risk']):.2f}"
-
-
-def _human_section(analysis: dict | None) -> str:
-    if analysis is None:
-        return ('<section id="human"><h2>Human data</h2><p>No human data given (<code>--human-data FILE.csv</code>, '
-                'format in docs/human-data.md): the fits of Eq. 1, the sigma profile and the bootstrap need the responses, '
-                'which are not public.</p></section>')
-    settings = analysis.get("settings")
-    simulated = bool(settings["simulated"].iloc[0]) if settings is not None and "simulated" in settings else False
-    parts = ['<section id="human"><h2>Human data: fits, sigma profile, bootstrap</h2>']
-    if simulated:
-        parts.append('<p class="warn">SIMULATED participants, not human data.</p>')
-    parts += [f'<p class="warn">Warning: {_e(w)}.</p>' for w in sigma_edge_warnings(analysis)]
-    if settings is not None:
-        parts.append(table_html(settings.T.reset_index().set_axis(["setting", "value"], axis=1), "plain"))
-    for key, title in (("fits", "Fits of Eq. 1 and its lesions (in-sample)"), ("sigma_choice", "Sigma chosen by RMSE"),
-                       ("sigma_profile", "RMSE profile over sigma"),
-                       ("bootstrap_summary", "Bootstrap over participants (in-sample)"),
-                       ("bootstrap_tests", "Direct bootstrap tests (in-sample; full vs effort cannot fail there)"),
-                       ("excluded_participants", "Excluded participants")):
-        df = analysis.get(key)
-        if isinstance(df, pd.DataFrame) and len(df) and "p_value" in df:
-            n = df["n_boot"] if "n_boot" in df else pd.Series([None] * len(df), index=df.index)
-            df = df.assign(p_value=[p_value(p, k) for p, k in zip(df["p_value"], n)])
-        if isinstance(df, pd.DataFrame) and len(df):
-            parts.append(f"<h3>{_e(title)}</h3>{table_html(df, max_rows=400)}")
-    z = analysis.get("zscored")
-    pred = analysis.get("predictions")
-    if isinstance(z, pd.DataFrame) and len(z):
-        parts.append(f"<h3>Participants</h3>{table_html(participant_table(z, pred), max_rows=2000)}")
-    parts.append("</section>")
-    return "".join(parts)
-
-
-def _comparison_section(analysis: dict | None, recovery: pd.DataFrame | None = None) -> str:
-    """Model comparison: in-sample and out-of-sample side by side, the tests, the
-    permutation tests (with human data), and the recovery table of SIMULATED
-    studies when recovery/ holds one (--recovery)."""
-    from analysis import compare_report as cr
-
-    parts = []
-    if analysis is not None and "model_comparison" in analysis:
-        parts += [f"<p>{_e(cr.CANNOT_FAIL)}</p>",
-                  f"<h3>Scores in sample and out of sample</h3>{table_html(cr.side_by_side(analysis['model_comparison']), 'plain')}",
-                  f"<h3>Eq. 1 against effort-only: direct bootstrap tests</h3>"
-                  f"{table_html(cr.tests_table(analysis['model_comparison_tests']), 'plain')}",
-                  f"<p>{_e(cr.widening_text(analysis['model_comparison']))}</p>"]
-        if "permutation_test" in analysis:
-            parts.append(f"<h3>Permutation tests of the risk term</h3>"
-                         f"{table_html(cr.permutation_table(analysis['permutation_test']), 'plain')}")
-    if recovery is not None:
-        summary = recovery
-        parts.append('<h3>Model recovery on SIMULATED studies (not human data)</h3>'
-                     '<p class="warn">SIMULATED participants, not human data: could a study of this design tell the '
-                     'models apart on these effort and risk tables?</p>')
-        for source in summary["source"].unique():
-            parts.append(f"<p>Parameters {_e(source)}:</p>{table_html(cr.recovery_table(summary, source=source), 'plain')}")
-    if not parts:
-        return ""
-    return '<section id="comparison"><h2>Model comparison: in-sample and out of sample</h2>' + "".join(parts) + "</section>"
-
-
-def participant_table(zscored: pd.DataFrame, predictions: pd.DataFrame | None) -> pd.DataFrame:
-    """Per participant: responses, and the correlation of their z-scores with the fitted full model."""
-    value = "z" if "z" in zscored.columns else [c for c in zscored.columns if c not in ("dataset", "participant", "trial")][-1]
-    rows = []
-    full = None
-    if isinstance(predictions, pd.DataFrame) and len(predictions):
-        full = predictions[predictions["model"] == "full"].set_index(["dataset", "trial"])["predicted"]
-    for (d, p), g in zscored.groupby(["dataset", "participant"], sort=True):
-        row = {"dataset": d, "participant": p, "responses": len(g)}
-        if "response" in g:
-            row["mean response"] = float(g["response"].mean())
-        if full is not None:
-            m = full.reindex(list(zip([d] * len(g), g["trial"]))).to_numpy()
-            ok = np.isfinite(m)
-            row["r with full model"] = float(np.corrcoef(g[value].to_numpy()[ok], m[ok])[0, 1]) if ok.sum() > 2 else float("nan")
-        rows.append(row)
-    return pd.DataFrame(rows)
-
-
-# ----------------------------------------------------------------------------- the page
-
-
 def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd.DataFrame, sigma: float,
                pairs: pd.DataFrame | None = None, analysis: dict | None = None, figures=(),
                pictures: dict | None = None, replays: dict | None = None,
@@ -517,10 +308,10 @@ def write_page(out, *, run: dict, trials, effort_samples: pd.DataFrame, risk: pd
         if not len(s) or not len(r):
             raise InputError(f"results page: trial {trial.id} has no effort or no risk rows")
         prec = None if precision is None else precision[precision["trial"] == trial.id]
-        cards.append(_trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out, prec,
+        cards.append(trial_card(trial, s, r, sigma, pictures.get(trial.id), replays.get(trial.id), extras, out, prec,
                                  sizes.get(trial.id)))
     nav = " ".join(f'<a href="#trial-{_e(t.id)}">{_e(t.id)}</a>' for t in trials)
-    comparison = _comparison_section(analysis, recovery)  # "" when there is nothing to compare: no link to it
+    comparison = comparison_section(analysis, recovery)  # "" when there is nothing to compare: no link to it
     title = "Effort and risk: reproduction of Yildirim, Saeed et al. (CogSci 2019)"
     body = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
@@ -543,7 +334,7 @@ mini-plot on the same axis from 0 to 1 (a risk of 0.05, one fall in 20, stays ne
 interval of each point shaded where the table has it. Click a picture for its full size.</p>
 <p class="explain">{risk_explanation(risk, sigma, trials, out, docs)}</p>
 <div class="cards">{"".join(cards)}</div></section>
-{_human_section(analysis)}
+{human_section(analysis)}
 {comparison}
 </main>
 <footer>Written by <code>python -m lgp.reproduce</code>; every file it links is beside this page.</footer>

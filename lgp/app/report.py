@@ -104,13 +104,38 @@ def _design_text(approach_height: float | None, slices: int | None) -> str:
     return f"{legs}, {SLICES_PER_PHASE if slices is None else slices} slices per phase"
 
 
+def _pair_lines(pairs: pd.DataFrame, fitted: bool) -> list[str]:
+    """The report's pair table, its tie rule and orderings (`fitted`: with human data)."""
+    from analysis.pairs import TIE_REL
+
+    lines = [
+        f"## Easy/hard pairs (risk at sigma = {pairs['sigma'].iloc[0]:g} d)",
+        "",
+        markdown_table(pairs_csv_table(pairs).drop(columns=["sigma"])),
+        "",
+        f"Tie rule (one rule for this table, pairs.csv, the figures and docs/results.md): E and H are tied when "
+        f"|H - E| <= {TIE_REL:g} x max(E, H), the plan-to-plan noise of effort (analysis.pairs.TIE_REL); "
+        "a tie counts as not ordered. effort_rel_diff = (H - E) / E.",
+        "",
+        f"Effort: {_orders(pairs, 'effort')}. Risk: {_orders(pairs, 'risk')}. "
+        "The paper's fitted full model ordered 11 of 12 (pair 11 the exception).",
+        "",
+    ]
+    if not fitted:
+        lines += ["Without human data there are no fitted betas, so the last column says for which ratios b2/b1 "
+                  "(b1 > 0) Eq. 1 would order each pair E < H.", ""]
+    else:
+        lines += ["The last column says for which ratios b2/b1 (b1 > 0) Eq. 1 would order each pair E < H; the "
+                  "fitted betas and the orderings they give are below.", ""]
+    return lines
+
+
 def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pairs: pd.DataFrame, analysis: dict | None,
                  elapsed: float, software: dict | None = None, compute: tuple[float, int] = (float("nan"), 0),
                  sections=()) -> Path:
     """report.md: settings, the engine with its settings, both times, the tables, the
     pair orderings under the one tie rule (analysis.pairs.TIE_REL), then `sections`
     (markdown: pairs over sigma, the feature sections)."""
-    from analysis.pairs import TIE_REL
 
     engine = engine_description(args.engine, (software or {}).get("engine"))
     wide = risk.pivot_table(index="trial", columns="sigma", values="risk").reindex(effort["trial"])
@@ -141,25 +166,7 @@ def write_report(out: Path, args, effort: pd.DataFrame, risk: pd.DataFrame, pair
         "",
     ]
     if pairs is not None:
-        lines += [
-            f"## Easy/hard pairs (risk at sigma = {pairs['sigma'].iloc[0]:g} d)",
-            "",
-            markdown_table(pairs_csv_table(pairs).drop(columns=["sigma"])),
-            "",
-            f"Tie rule (one rule for this table, pairs.csv, the figures and docs/results.md): E and H are tied when "
-            f"|H - E| <= {TIE_REL:g} x max(E, H), the plan-to-plan noise of effort (analysis.pairs.TIE_REL); "
-            "a tie counts as not ordered. effort_rel_diff = (H - E) / E.",
-            "",
-            f"Effort: {_orders(pairs, 'effort')}. Risk: {_orders(pairs, 'risk')}. "
-            "The paper's fitted full model ordered 11 of 12 (pair 11 the exception).",
-            "",
-        ]
-        if analysis is None:
-            lines += ["Without human data there are no fitted betas, so the last column says for which ratios b2/b1 "
-                      "(b1 > 0) Eq. 1 would order each pair E < H.", ""]
-        else:
-            lines += ["The last column says for which ratios b2/b1 (b1 > 0) Eq. 1 would order each pair E < H; the "
-                      "fitted betas and the orderings they give are below.", ""]
+        lines += _pair_lines(pairs, analysis is not None)
     if analysis is None:
         lines += ["No human data given (`--human-data FILE`, format in docs/human-data.md): the fits of Eq. 1, "
                   "the sigma profile and the bootstrap need the responses, which are not public.", ""]

@@ -45,17 +45,9 @@ class RunRecord:
         """Lookups of result tables with `outcome` (hit, miss, recomputed)."""
         return sum(n for (_, o), n in self.cache_counts.items() if o == outcome)
 
-    @property
-    def hits(self) -> int:
-        return self.count("hit")
-
-    @property
-    def misses(self) -> int:
-        return self.count("miss")
-
-    @property
-    def recomputed(self) -> int:
-        return self.count("recomputed")
+    hits = property(lambda self: self.count("hit"), doc="result tables reused from the cache")
+    misses = property(lambda self: self.count("miss"), doc="result tables computed")
+    recomputed = property(lambda self: self.count("recomputed"), doc="damaged entries computed again")
 
     @property
     def files(self) -> dict[tuple[str, str], int]:

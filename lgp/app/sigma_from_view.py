@@ -11,7 +11,7 @@ from lgp.app.sigma_from import SigmaBeside, report_lines
 
 def page_html(data: SigmaBeside) -> str:
     """The page's section: the three sigmas side by side, and the pair table at the linked one."""
-    from lgp.app.page import table_html
+    from lgp.app.page_parts import table_html
     from lgp.app.report import pairs_csv_table
 
     link, e = data.link, html.escape
