@@ -33,13 +33,6 @@ from lgp.app.cache import Cache
 from lgp.app.files import write_json_atomic
 
 MANIFEST = "manifest.json"
-#: What the pipeline writes at the top of an output folder (besides the manifest and the cache).
-OUTPUT_NAMES = ("effort_samples.csv", "effort.csv", "risk.csv", "pairs.csv", "report.md", "index.html",
-                "build_risk_stages.csv", "build_risk.csv", "build_risk_pairs.csv", "participant_sigma.csv",
-                "simulated_participant_sigma.csv",
-                "risk_sensitivity.csv", "risk_sensitivity_summary.csv", "effort_sensitivity.csv",
-                "effort_sensitivity_pairs.csv",
-                "figures", "analysis", "replays", "page", "recovery")
 TIMES = "compute_times.json"
 
 

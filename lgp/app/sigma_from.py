@@ -84,6 +84,8 @@ class SigmaBeside:
     run_sigma: float
     fitted: float | None
     pairs: object | None
+    #: the dataset whose sigma `fitted` is (the first row of the analysis's sigma_choice)
+    fitted_to: str = ""
 
 
 class _Stage:
@@ -101,7 +103,7 @@ class _Stage:
         at = pair_orderings(core["paper_effort"], core["paper_risk"], link.sigma, core["pair_names"]) if link.sigma > 0 else None
         choice = core["analysis"].get("sigma_choice")
         fitted = float(choice["sigma"].iloc[0]) if hasattr(choice, "columns") and len(choice) and "sigma" in choice else None
-        return SigmaBeside(link, core["sigma"], fitted, at)
+        return SigmaBeside(link, core["sigma"], fitted, at, str(choice["dataset"].iloc[0]) if fitted is not None else "")
 
 
 STAGE = _Stage()

@@ -21,7 +21,8 @@ def page_html(data: SigmaBeside) -> str:
              f"Mental Jenga experiment {link.experiment}, {link.source}"),
             ("this run's pair table", f"{num(data.run_sigma)} d", "the paper's sigma, or the grid's middle")]
     if data.fitted is not None:
-        rows.append(("fitted to the difficulty ratings", f"{num(data.fitted)} d", "pooled: least mean RMSE of Eq. 1"))
+        rows.append(("fitted to the difficulty ratings", f"{num(data.fitted)} d",
+                     f"least RMSE of Eq. 1 on dataset {data.fitted_to} (the analysis's sigma choice)"))
     body = "".join(f"<tr><th>{e(a)}</th><td>{e(b)}</td><td>{e(c)}</td></tr>" for a, b, c in rows)
     pairs = ("<p>No pair table at this sigma: it is zero (no noise, so no risk).</p>" if data.pairs is None else
              f"<h3>Pairs at sigma = {num(link.sigma)} d</h3>{table_html(pairs_csv_table(data.pairs))}")
