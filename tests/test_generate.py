@@ -51,17 +51,22 @@ def test_the_kinds_and_sizes_the_generator_promises():
     assert pillars == [-0.75, 0.75]  # 1.5 d between pillar centres: a gap of 0.5 d
 
 
-def _reproduce(*args):
-    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    return subprocess.run([sys.executable, "-m", "lgp.reproduce", *args], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+def _reproduce(capsys, *args) -> subprocess.CompletedProcess:
+    """`python -m lgp.reproduce ARGS` in this process (its imports paid once): the exit
+    status and stderr its command line gives (lgp.cli.run_cli)."""
+    from lgp import cli, reproduce
+
+    capsys.readouterr()
+    code = cli.run_cli(reproduce.main, list(args), prog=reproduce.PROG)
+    return subprocess.CompletedProcess(args, code, "", capsys.readouterr().err)
 
 
 @pytest.mark.slow
-def test_reproduce_runs_a_generated_set_and_pairs_only_what_files_declare(tmp_path):
+def test_reproduce_runs_a_generated_set_and_pairs_only_what_files_declare(tmp_path, capsys):
     generate(tmp_path / "set", 2, seed=5)
     for tid in ("1E", "1H"):  # one declared pair beside the generated trials
         shutil.copy(stimuli.TRIAL_DIR / f"{tid}.yaml", tmp_path / "set")
-    r = _reproduce("--stimuli", str(tmp_path / "set"), "--out", str(tmp_path / "out"), "--samples", "1", "--n-sims", "2",
+    r = _reproduce(capsys, "--stimuli", str(tmp_path / "set"), "--out", str(tmp_path / "out"), "--samples", "1", "--n-sims", "2",
                    "--sigmas", "0.05", "--no-replays", "--jobs", "1")
     assert r.returncode == 0, r.stderr[-2000:]
     effort = pd.read_csv(tmp_path / "out" / "effort.csv", dtype={"trial": str})
@@ -73,9 +78,9 @@ def test_reproduce_runs_a_generated_set_and_pairs_only_what_files_declare(tmp_pa
     assert pairs["effort_E"].iloc[0] == effort.set_index("trial").loc["1E", "effort"]
 
 
-@pytest.mark.slow  # subprocess command lines
-def test_a_stimulus_directory_without_trial_files_is_one_line(tmp_path):
-    r = _reproduce("--stimuli", str(tmp_path), "--out", str(tmp_path / "out"))
+@pytest.mark.slow  # the pipeline's imports
+def test_a_stimulus_directory_without_trial_files_is_one_line(tmp_path, capsys):
+    r = _reproduce(capsys, "--stimuli", str(tmp_path), "--out", str(tmp_path / "out"))
     assert r.returncode == 1
     assert r.stderr.strip().splitlines()[-1] == f"python -m lgp.reproduce: error: --stimuli {tmp_path}: no trial files (*.yaml) there"
 
