@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import html
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +56,22 @@ def pairs_over_sigma(effort: pd.DataFrame, risk: pd.DataFrame) -> pd.DataFrame:
                          "tied": pair_order(E[e], E[h]) == "tie" and pair_order(re["risk"], rh["risk"]) == "tie"})
             rows[-1]["full_E_lt_H_for_b2_over_b1"] = ratio_text(ratio_range(E[e], re["risk"], E[h], rh["risk"], tie=rows[-1]["tied"]))
     return pd.DataFrame(rows, columns=COLUMNS)
+
+
+@dataclass(frozen=True)
+class OverSigma:
+    """"Pairs over sigma": the table (pairs_over_sigma), per sigma the most pairs one
+    ratio orders (ordered_by_one_ratio) and per pair where its contrast first holds
+    (first_holding)."""
+
+    table: pd.DataFrame
+    best: pd.DataFrame
+    first: pd.DataFrame
+
+    @classmethod
+    def of(cls, effort: pd.DataFrame, risk: pd.DataFrame) -> "OverSigma":
+        table = pairs_over_sigma(effort, risk)
+        return cls(table, ordered_by_one_ratio(table).set_index("sigma"), first_holding(table))
 
 
 def ordered_by_one_ratio(table: pd.DataFrame) -> pd.DataFrame:
@@ -168,10 +185,10 @@ def _sigma_rows(table: pd.DataFrame, sigmas=None):
             yield sigma, g.set_index("pair")
 
 
-def report_lines(table: pd.DataFrame, precision: pd.DataFrame | None, figure: str | None = None) -> list[str]:
+def report_lines(over: OverSigma, precision: pd.DataFrame | None, figure: str | None = None) -> list[str]:
     """The report sections "Pairs over sigma" and "Required precision" (markdown lines)."""
+    table, best = over.table, over.best
     pairs = sorted(table["pair"].unique())
-    best = ordered_by_one_ratio(table).set_index("sigma")
     lines = ["## Pairs over sigma", "",
              "Risk E / H of every pair at every sigma of the run (fractions of the runs that fall); `*`: H is riskier "
              "beyond Monte Carlo noise (H's 95% Wilson interval lies wholly above E's). The paper's risk pairs are "
@@ -188,7 +205,7 @@ def report_lines(table: pd.DataFrame, precision: pd.DataFrame | None, figure: st
         krange = _krange(b)
         lines.append(f"| {sigma:g} | " + " | ".join(_cell(g.loc[p]) if p in g.index else "" for p in pairs)
                      + f" | {int(b['best'])} of {int(b['of'])} | {krange} |")
-    first = first_holding(table)
+    first = over.first
     lines += ["", "Where each contrast first holds beyond Monte Carlo noise (and whether it holds at every larger sigma):", "",
               "| pair | paper's risk pair | first sigma H > E holds | holds at every larger sigma |", "|---|---|---|---|"]
     for _, r in first.iterrows():
@@ -216,11 +233,11 @@ def precision_lines(precision: pd.DataFrame | None) -> list[str]:
     return lines + [""]
 
 
-def page_section(table: pd.DataFrame, figure: Path | None, out: Path) -> str:
+def page_section(over: OverSigma, figure: Path | None, out: Path) -> str:
     """The results-page section "Pairs over sigma" (HTML)."""
     e = html.escape
+    table, best = over.table, over.best
     pairs = sorted(table["pair"].unique())
-    best = ordered_by_one_ratio(table).set_index("sigma")
     head = "".join(f'<th class="{"riskpair" if p in RISK_PAIRS else ""}">{p}</th>' for p in pairs)
     body = []
     for sigma, g in _sigma_rows(table):
@@ -256,5 +273,5 @@ most pairs one ratio b2/b1 makes Eq. 1 order E &lt; H, and the ratios that do. F
 <tbody>{"".join(body)}</tbody></table></section>"""
 
 
-__all__ = ["COLUMNS", "pairs_over_sigma", "ordered_by_one_ratio", "first_holding", "plot_risk_over_sigma",
+__all__ = ["COLUMNS", "OverSigma", "pairs_over_sigma", "ordered_by_one_ratio", "first_holding", "plot_risk_over_sigma",
            "report_lines", "precision_lines", "page_section"]

@@ -140,8 +140,8 @@ class RunResult:
     sigma: float
     #: the pair table at `sigma` (None: no pair has both trials in the run)
     pairs: pd.DataFrame | None
-    #: "Pairs over sigma" (lgp.app.over_sigma), on the paper's 24 trials only
-    over_sigma: pd.DataFrame | None
+    #: "Pairs over sigma" (lgp.app.over_sigma.OverSigma), on the paper's 24 trials only
+    over_sigma: Any
     #: the analysis (analysis.run.AnalysisResult): with human data, or the model-only figures on the paper's 24
     analysis: Any
     #: the human data were given (the analysis holds fits)

@@ -213,7 +213,7 @@ def _paper_tables(ctx: Context) -> None:
     names = {t.pair: t.dimension for t in paper}
     core.update(paper_trials=paper, paper_effort_samples=e_samples, paper_effort=e_mean, paper_risk=r, pair_names=names)
     core["pairs"] = pair_orderings(e_mean, r, core["sigma"], names)
-    core["over_sigma"] = over_sigma.pairs_over_sigma(e_mean, r)
+    core["over_sigma"] = over_sigma.OverSigma.of(e_mean, r)
     build = ctx.sections.get("build_risk")
     core["analysis"] = compute_analysis(
         human, e_samples, r, seed=config.seed, n_boot=config.n_boot, jobs=config.jobs,

@@ -30,8 +30,8 @@ def write_all(result: RunResult, out: Path) -> list[Path]:
     if result.over_sigma is not None:
         from lgp.app import over_sigma
 
-        written.append(write_csv_atomic(result.over_sigma, out / "pairs_over_sigma.csv"))
-        over_figure = over_sigma.plot_risk_over_sigma(result.over_sigma, out / "figures" / "risk_over_sigma.png",
+        written.append(write_csv_atomic(result.over_sigma.table, out / "pairs_over_sigma.csv"))
+        over_figure = over_sigma.plot_risk_over_sigma(result.over_sigma.table, out / "figures" / "risk_over_sigma.png",
                                                       result.pair_names)
         written.append(over_figure)
     rendered = [section.render(section.data, View(result, out)) for section in result.sections]
