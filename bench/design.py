@@ -125,6 +125,7 @@ def main(argv=None) -> int:
         info = json.loads((Path(args.run) / "design.json").read_text())
         t = info["timings_s"]
         lines += [f"Design run `{args.run}`: config {info['config']}; " + ", ".join(f"{k} {v:.0f} s" for k, v in t.items())
+                  + (" (CPU: all processes of the command, the pool's workers included)" if "cpu" in t else "")
                   + f"; {info['passed_screen']} of {info['screened']} candidates passed the screen.", ""]
     text = "\n".join(lines)
     print(text)
