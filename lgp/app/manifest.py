@@ -208,8 +208,7 @@ def manifest_record(result, run_time_s: float) -> dict:
     config, record = result.config, result.record
     parameters = {k: _json_value(v) for k, v in replace(config, trials=tuple(t.id for t in result.trials)).parameters().items()}
     parameters["sigma_of_pairs"] = result.sigma if result.pairs is not None else None
-    inputs = {"trial_files": {t.id: t.digest for t in result.trials},
-              "human_data_sha256": file_sha256(config.human_data) if config.human_data else None}
+    inputs = record.inputs
     return dict(parameters=parameters, inputs=inputs,
                 input_hash=input_hash(**{k: v for k, v in parameters.items() if k not in PLACEMENT}, **inputs),
                 engine=engine_description(config.engine, record.software["engine"]), software=record.software,

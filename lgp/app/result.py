@@ -40,6 +40,8 @@ class RunRecord:
     load: str
     #: seconds from the start of the run to the end of its computing
     elapsed: float
+    #: what the results depend on besides the settings: {"trial_files": {id: digest}, "human_data_sha256": ...}
+    inputs: dict = field(default_factory=dict)
 
     def count(self, outcome: str) -> int:
         """Lookups of result tables with `outcome` (hit, miss, recomputed)."""

@@ -53,6 +53,8 @@ class Inputs:
 
     trials: list
     human: pd.DataFrame | None
+    #: sha256 of the human-data file as it was read (None without one)
+    human_sha256: str | None = None
 
 
 def analysis_ids(trials) -> list[str]:
@@ -71,9 +73,10 @@ def check_inputs(config: RunConfig) -> Inputs:
     if extra:
         _log(f"the trial folder also holds {', '.join(extra)} (not among the paper's 24): "
              f"run them with --trials {' '.join(extra)} or --trials all")
-    human = None
+    human, digest = None, None
     if config.human_data:
         from analysis import load_human_data
+        from lgp.app.manifest import file_sha256
         from analysis.data import using_trials
 
         # The data must name exactly the analysis's trials: the paper's 24 when the run has them all,
@@ -82,10 +85,11 @@ def check_inputs(config: RunConfig) -> Inputs:
         with using_trials(ids):
             human = load_human_data(config.human_data, max_participants=config.max_participants,
                                     allow_simulated=config.allow_simulated)
+        digest = file_sha256(config.human_data)
         if len(ids) < MIN_ANALYSIS_TRIALS:
             raise InputError(f"--human-data: the fits of Eq. 1 (3 parameters, held-out folds) need at least "
                              f"{MIN_ANALYSIS_TRIALS} trials; this run has {len(ids)} ({', '.join(ids)})")
-    return Inputs(trials, human)
+    return Inputs(trials, human, digest)
 
 
 def run(config: RunConfig, workdir: Path, inputs: Inputs | None = None) -> RunResult:
@@ -116,7 +120,7 @@ def run(config: RunConfig, workdir: Path, inputs: Inputs | None = None) -> RunRe
                        core["sigma"], core["pairs"], core.get("over_sigma"), core.get("analysis"),
                        inputs.human is not None, [ctx.sections[s.name] for s, _ in enabled if ctx.sections.get(s.name) is not None],
                        replays, pictures, _docs(), _picture_sizes(pictures), core.get("pair_names", {}))
-    result.record = _record(cache, clock, config, time.perf_counter() - t0)
+    result.record = _record(cache, clock, config, time.perf_counter() - t0, inputs)
     if config.verbose:
         _log(f"cache: {cache.summary()}")
     return result
@@ -289,8 +293,8 @@ def _picture_sizes(pictures: dict | None) -> dict[str, tuple[int, int]]:
     return {tid: size for tid, path in (pictures or {}).items() if (size := png_size(path)) is not None}
 
 
-def _record(cache, clock: Stopwatch, config: RunConfig, elapsed: float) -> RunRecord:
-    """The run record: wall times, cache counts, compute time, software, machine."""
+def _record(cache, clock: Stopwatch, config: RunConfig, elapsed: float, inputs: Inputs) -> RunRecord:
+    """The run record: wall times, cache counts, compute time, software, machine, input digests."""
     from lgp.app.stages import risk_key_inputs
 
     return RunRecord(
@@ -301,4 +305,6 @@ def _record(cache, clock: Stopwatch, config: RunConfig, elapsed: float) -> RunRe
         finished=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         machine=f"{platform.node()}, {os.cpu_count()} cores",
         load="load average " + " ".join(f"{x:.2f}" for x in os.getloadavg()),
-        elapsed=elapsed)
+        elapsed=elapsed,
+        inputs={"trial_files": {t.id: t.digest for t in inputs.trials},
+                "human_data_sha256": inputs.human_sha256})
