@@ -43,7 +43,7 @@ from analysis.models import effort_per_trial
 from lgp.errors import InputError
 
 KINDS: tuple[str, ...] = ("freedman-lane", "within-pair", "shuffle")
-#: Whether each null is calibrated (false-positive rates measured in bench/analysis_fpr.py, docs/results.md).
+#: Whether each null is calibrated (false-positive rates measured in bench/analysis_power.py --only fpr, docs/results.md).
 CALIBRATION = {"freedman-lane": "calibrated (default)", "within-pair": "calibrated",
                "shuffle": "NOT CALIBRATED (risk moved across trials while E and the folds stay)"}
 #: Default permutations per test.
