@@ -9,8 +9,9 @@ Each trial's layout 0 (seed 0) is planned with both forms in one process,
 alternating which goes first (repeats > 1), so the ratio is comparable on a busy
 machine; absolute seconds are not. CPU seconds (time.process_time: all threads of
 this process) and the part spent inside Drake's solvers. The two forms give the
-solver the same values and gradients: the plans must be identical to the bit
-(checked: joint trajectories, effort), else the script exits 1.
+solver the same gradients and the same cost summed in another order; the script
+says whether the plans are identical to the bit (joint trajectories, effort; 3E's
+are) and exits 1 if they are not.
 """
 from __future__ import annotations
 

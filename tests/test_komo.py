@@ -373,3 +373,22 @@ def test_object_poses_follow_the_holder_slice_by_slice():
                 current, held_rows = X_WG[i] @ holder[1].GetAsMatrix4(), held_rows + 1
             assert np.array_equal(poses[name][i], current), (name, i)
         assert held_rows == SLICES_PER_PHASE + 1  # grasp at phase k to place at k + 1, both slices included
+
+
+@pytest.mark.slow  # two plans without legs (IPOPT)
+def test_the_cost_per_keyframe_is_the_single_cost_summed_another_way(monkeypatch):
+    # The reduced program writes |z|^2 as one quadratic cost per keyframe
+    # (lgp.komo.solve.SPLIT_COST), which Drake differentiates far faster than one over
+    # all residuals: the same program, so the same plan, here of the design without
+    # legs (IPOPT) on a 2-block tower, to within rounding, and the same cost.
+    import lgp.komo.solve as komo_solve
+
+    A, B = tower_task(2, "split")
+    plans = {}
+    for split in (False, True):
+        monkeypatch.setattr(komo_solve, "SPLIT_COST", split)
+        plans[split] = plan(A, B, 0, approach_height=0.0)
+    single, split = plans[False], plans[True]
+    assert single.komo.success and split.komo.success and split.komo.keyframes == single.komo.keyframes
+    np.testing.assert_allclose(split.q, single.q, rtol=0, atol=1e-12)
+    assert split.komo.cost == pytest.approx(single.komo.cost, rel=1e-12)
