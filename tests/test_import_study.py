@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import errno
 import io
+import json
 import os
 import subprocess
 import sys
@@ -21,7 +22,7 @@ from analysis import import_study, load_human_data
 from analysis.data import HumanDataError, MAX_FIELD_CHARS
 from bench.common import deadline
 from lgp.atomic import DiskFull
-from test_study import _study_csv, _write
+from test_study import STUDY, _study_csv, _write
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -204,3 +205,84 @@ def test_a_full_disk_names_the_file_and_leaves_no_partial_file(capsys, tmp_path,
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "refused"]
     with pytest.raises(DiskFull):
         import_study.write_human_data(import_study.import_files([a]), tmp_path / "refused" / "human.csv")
+
+
+# ----------------------------------------------------------------------------- a study of other trials (issue 34 item 5)
+
+DESIGNED = ("D01", "D02", "D03", "D04")  # a 4-trial set as stimuli.design names it: no easy/hard pairs
+
+
+def _designed_study(tmp_path, trials=DESIGNED) -> Path:
+    """A study folder as `stimuli.experiment --stimuli DIR` writes it, as far as the
+    importer reads it: study.json's study id and its trial entries (ids in file order)."""
+    from stimuli import experiment as ex
+
+    folder = tmp_path / "study-designed"
+    folder.mkdir()
+    entries = [{"id": t, "pair": None, "level": None, "start": f"img/{t}-A.png", "finish": f"img/{t}-B.png",
+                "description": ""} for t in trials]
+    (folder / ex.MANIFEST).write_text(json.dumps({"study": "d0d0d0d0d0d0", "task": "difficulty", "build": "b",
+                                                  "trials": entries, "anchors": [], "files": {}}))
+    return folder
+
+
+def _designed_csv(participant: int, trials=DESIGNED, shown=None) -> str:
+    """One participant's download of the designed study: the order study.js shows an
+    unpaired set in (stimuli.experiment.trial_order), n_trials the set's size."""
+    from stimuli import experiment as ex
+
+    order = ex.trial_order([{"id": t, "pair": None, "level": None} for t in trials], participant)
+    if shown:
+        order = [{**t, "id": shown.get(t["id"], t["id"])} for t in order]
+    text = _study_csv(participant, study="d0d0d0d0d0d0", trials=order)
+    for row in range(1, text.count("\n")):
+        text = _edit(text, row, "n_trials", str(len(trials)))
+    return text
+
+
+def test_a_designed_studys_downloads_import_on_its_own_trials_and_load_as_the_runs_human_data(capsys, tmp_path):
+    from analysis.data import using_trials
+    from stimuli import experiment as ex
+
+    folder = _designed_study(tmp_path)
+    files = [_write(tmp_path / f"p{p}.csv", _designed_csv(p)) for p in (0, 1)]
+    out = tmp_path / "human.csv"
+    code, err = _run([*files, "--study", folder, "--out", out], capsys)
+    assert code == 0, err
+    with using_trials(DESIGNED):  # what lgp.reproduce --stimuli DIR --human-data reads
+        human = load_human_data(out, allow_simulated=True)
+    assert len(human) == 2 * 4 and set(human["trial"]) == set(DESIGNED)
+    for p in (0, 1):  # each answer is the one the file gave (position + participant), on the trial it was given to
+        order = ex.trial_order([{"id": t, "pair": None, "level": None} for t in DESIGNED], p)
+        mine = human[human.participant == str(p)].set_index("trial")["response"].to_dict()
+        assert mine == {t["id"]: t["position"] + p for t in order}
+    # the same file against the paper's 24 (no --study) is refused, saying what to give
+    err = _refused(capsys, files, tmp_path)
+    assert "p0.csv: line 4: trial 'D" in err and "is not one of the 24 trial ids" in err and "give --study DIR" in err, err
+
+
+def test_a_trial_outside_the_designed_studys_set_is_refused_naming_file_line_trial_and_set(capsys, tmp_path):
+    folder = _designed_study(tmp_path)
+    good = _write(tmp_path / "p0.csv", _designed_csv(0))
+    a = _write(tmp_path / "p1.csv", _designed_csv(1, shown={"D03": "D13"}))
+    err = _refused(capsys, [good, a, "--study", folder], tmp_path)
+    line = 1 + 2 + next(k for k, r in enumerate(list(csv.DictReader(io.StringIO(Path(a).read_text())))[2:], 1)
+                        if r["trial"] == "D13")
+    assert (f"p1.csv: line {line}: trial 'D13' is not one of the 4 trial ids of {folder / 'study.json'} "
+            "(D01, D02, D03, D04)") in err, err
+    # a paper trial is no trial of the designed study either
+    b = _write(tmp_path / "p2.csv", _designed_csv(2, shown={"D01": "1E"}))
+    assert "trial '1E' is not one of the 4 trial ids of" in _refused(capsys, [b, "--study", folder], tmp_path)
+    # a participant with fewer trials than the designed set: truncated, counted against its 4
+    c = _write(tmp_path / "p3.csv", "".join(_designed_csv(3).splitlines(keepends=True)[:5]))
+    assert "p3.csv: line 5: truncated: participant 3 (difficulty) has 2 of 4 trials" in _refused(capsys, [c, "--study", folder], tmp_path)
+
+
+def test_a_study_json_without_a_trial_list_is_no_study_folder(capsys, tmp_path):
+    a = _write(tmp_path / "a.csv", _study_csv(0))
+    for k, trials in enumerate(([], "1E", [{"pair": 1}], [{"id": "1E"}, {"id": "1e"}])):
+        folder = tmp_path / f"s{k}"
+        folder.mkdir()
+        (folder / "study.json").write_text(json.dumps({"study": STUDY, "trials": trials}))
+        err = _refused(capsys, [a, "--study", folder], tmp_path)
+        assert f"s{k}/study.json: " in err and ("lists no trials" in err or "lists trial 1E twice" in err), err

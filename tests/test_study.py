@@ -225,7 +225,7 @@ def test_the_importer_refuses_files_that_are_not_study_csvs_and_simulated_mixed_
 def test_the_importer_checks_files_against_the_study_folder(capsys, tmp_path):
     folder = tmp_path / "study"
     folder.mkdir()
-    (folder / "study.json").write_text(json.dumps({"study": "ffffffffffff"}))
+    (folder / "study.json").write_text(json.dumps({"study": "ffffffffffff", "trials": [{"id": t} for t in TRIAL_IDS]}))
     a = _write(tmp_path / "a.csv", _study_csv(0))
     out = tmp_path / "h.csv"
     code = import_study.cli.run_cli(import_study.main, [a, "--study", str(folder), "--out", str(out)], prog=import_study.PROG)
