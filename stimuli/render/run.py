@@ -235,8 +235,16 @@ def cache_folder(trials, seed: int, size, layout: str = "sample0") -> Path:
     return render_cache_dir() / key
 
 
+#: Contact sheet spacing (pixels): white between a trial's A and B, and between two trials
+#: (with a grey rule down its middle), so that no two pictures touch.
+SHEET_AB_GAP = 6
+SHEET_TRIAL_GAP = 24
+SHEET_LABEL = 16
+
+
 def contact_sheet(out_dir: str | Path, path: str | Path, columns: int = 4, thumb: int = 320) -> Path:
-    """All pictures of `out_dir`'s renders.json on one PNG (A | B per trial, labelled)."""
+    """All pictures of `out_dir`'s renders.json on one PNG (A | B per trial, labelled;
+    SHEET_AB_GAP between A and B, SHEET_TRIAL_GAP and a grey rule between trials)."""
     from PIL import Image, ImageDraw
 
     out = Path(out_dir)
@@ -247,13 +255,18 @@ def contact_sheet(out_dir: str | Path, path: str | Path, columns: int = 4, thumb
     w = thumb
     h = round(thumb * record["camera"]["height"] / record["camera"]["width"])
     rows = -(-len(by_trial) // columns)
-    sheet = Image.new("RGB", (columns * 2 * w + (columns - 1) * 8, rows * (h + 16)), "white")
+    cell = 2 * w + SHEET_AB_GAP  # one trial: A, gap, B
+    sheet = Image.new("RGB", (columns * cell + (columns - 1) * SHEET_TRIAL_GAP,
+                              rows * (h + SHEET_LABEL) + (rows - 1) * SHEET_AB_GAP), "white")
     draw = ImageDraw.Draw(sheet)
+    for c in range(1, columns):  # a rule between trial columns
+        x = c * (cell + SHEET_TRIAL_GAP) - SHEET_TRIAL_GAP // 2 - 1
+        draw.rectangle((x, 0, x + 1, sheet.height - 1), fill=(160, 160, 160))
     for k, (tid, states) in enumerate(by_trial.items()):
         r, c = divmod(k, columns)
         for j, state in enumerate(("A", "B")):
-            x, y = c * (2 * w + 8) + j * w, r * (h + 16)
-            sheet.paste(Image.open(states[state]).convert("RGB").resize((w, h)), (x, y + 16))
+            x, y = c * (cell + SHEET_TRIAL_GAP) + j * (w + SHEET_AB_GAP), r * (h + SHEET_LABEL + SHEET_AB_GAP)
+            sheet.paste(Image.open(states[state]).convert("RGB").resize((w, h)), (x, y + SHEET_LABEL))
             draw.text((x + 4, y + 2), f"{tid}-{state} ({'Start' if state == 'A' else 'Finish'})", fill="black")
     sheet.save(path)
     return Path(path)
