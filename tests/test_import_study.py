@@ -286,3 +286,43 @@ def test_a_study_json_without_a_trial_list_is_no_study_folder(capsys, tmp_path):
         (folder / "study.json").write_text(json.dumps({"study": STUDY, "trials": trials}))
         err = _refused(capsys, [a, "--study", folder], tmp_path)
         assert f"s{k}/study.json: " in err and ("lists no trials" in err or "lists trial 1E twice" in err), err
+
+
+@pytest.mark.slow  # one lgp.reproduce --quick run on 6 generated trials: about 8 s
+def test_a_generated_studys_downloads_import_and_run_through_reproduce_on_its_own_trials(capsys, tmp_path):
+    """The loop of issue 34 item 5: a stimulus folder (stimuli.generate, as stimuli.design
+    writes one) -> its study's study.json (the builder's own trial entries and study id)
+    -> downloads of SIMULATED participants -> analysis.import_study --study ->
+    lgp.reproduce --stimuli DIR --human-data, fitted on the folder's trials."""
+    import pandas as pd
+
+    import stimuli
+    from lgp import reproduce
+    from stimuli import experiment as ex
+    from stimuli.generate import generate
+
+    stim = tmp_path / "stim"
+    generate(stim, 6, seed=2)
+    trials = stimuli.load_all(stim)
+    entries = [ex._trial_entry(t) for t in trials]
+    sid = ex.study_id(trials, [], 0, 0)
+    folder = tmp_path / "study"
+    folder.mkdir()
+    (folder / ex.MANIFEST).write_text(json.dumps({"study": sid, "trials": entries}))
+    ids = tuple(e["id"] for e in entries)
+    files = []
+    for p in range(4):
+        text = _study_csv(p, study=sid, trials=ex.trial_order(entries, p))
+        for row in range(1, text.count("\n")):
+            text = _edit(text, row, "n_trials", str(len(ids)))
+        files.append(_write(tmp_path / f"p{p}.csv", text))
+    human = tmp_path / "human.csv"
+    code, err = _run([*files, "--study", folder, "--out", human], capsys)
+    assert code == 0, err
+    out = tmp_path / "r"
+    assert reproduce.main(["--quick", "--stimuli", str(stim), "--samples", "1", "--n-sims", "8", "--sigmas", "0.065", "0.1",
+                           "--jobs", "1", "--n-boot", "20", "--n-perm", "9", "--no-replays", "--out", str(out),
+                           "--human-data", str(human), "--allow-simulated"]) == 0
+    fits = pd.read_csv(out / "analysis" / "simulated_fits.csv")
+    assert (fits["n_trials"] == len(ids)).all() and set(fits["model"]) >= {"full", "effort", "risk"}
+    assert sorted(pd.read_csv(out / "effort.csv")["trial"].unique()) == sorted(ids)
