@@ -14,7 +14,9 @@ def test_not_a_terminal_prints_one_line_when_the_stage_ends():
     assert len(lines) == 1 and lines[0].startswith("[effort] 10/10 plans in ")
 
 
-def test_a_terminal_sees_a_bar_with_count_rate_and_eta_in_words():
+def test_a_terminal_sees_a_bar_with_count_rate_and_eta_in_words(monkeypatch):
+    monkeypatch.setenv("COLUMNS", "120")  # a wide terminal: the whole line fits (pytest-xdist workers see 80)
+    monkeypatch.setenv("LINES", "24")
     out = io.StringIO()
     bar = Progress("risk", 100, "runs", stream=out, tty=True, interval=0.0, what="noisy runs of B")
     bar.advance(25)
