@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from analysis.crossval.permuted import HELD_OUT_STREAM, held_out_permutation_tests
+from analysis.reliability import CEILING_STREAM, noise_ceiling
 from analysis.crossval import (MIN_PAIRS, RISK_DRAW_STREAM, RISK_DRAWS, SCHEMES, STRUCTURE_SCHEME, bootstrap_comparison, comparison_tests,
                                gain_over_effort, grouping_label, held_out_tests, measure_grid, model_comparison, redraw_risk,
                                risk_grid, structure_groups, summarize_comparison)
@@ -47,11 +49,16 @@ class AnalysisResult(dict):
     bootstrap_tests (these in-sample, column scheme "in-sample"); with
     `compare`, model_comparison (in-sample and out-of-sample scores of every
     model side by side, with bootstrap intervals), model_comparison_gain (RMSE
-    below effort-only's, with intervals; the paper's percentile intervals and,
-    beside them, the same resamples centred on the point: *_centred),
-    model_comparison_tests (direct bootstrap, the paper's method, labelled
-    biased), model_comparison_held_out_tests (sign-flip over folds, calibrated),
-    cv_predictions, cv_bootstrap, permutation_test and permutation_null.
+    below effort-only's, with intervals centred on their points; the paper's
+    percentile interval, which can miss its point, is not reported),
+    model_comparison_tests (direct bootstrap, the paper's method, labelled NOT
+    CALIBRATED), model_comparison_held_out_permutation (the decision: the
+    calibrated held-out comparison test, Freedman-Lane null on folds by
+    structure, analysis.crossval.permuted), model_comparison_held_out_tests
+    (sign-flip over folds, labelled NOT CALIBRATED), noise_ceiling (split-half
+    reliability with Spearman-Brown and the r a model of the true trial means
+    would reach, analysis.reliability), cv_predictions, cv_bootstrap,
+    permutation_test and permutation_null.
     """
 
     def __init__(self, tables: dict, prefix: str = "", figures=(), trials=None):
@@ -103,8 +110,10 @@ def run_analysis(human_df: pd.DataFrame | str | Path | None, effort_by_trial,
     compare : with human data, also the out-of-sample comparison
         (analysis.crossval: leave-one-pair-out and leave-one-trial-out, sigma
         chosen inside each fold, the cross-validation redone in every bootstrap
-        resample) and the permutation tests of the risk term
-        (analysis.permutation).
+        resample), the permutation tests of the risk term
+        (analysis.permutation), the calibrated held-out comparison test of every
+        comparison (analysis.crossval.permuted) and the noise ceiling
+        (analysis.reliability).
     n_perm : permutations per permutation test (default 1000), a whole number >= 1.
     features : the heuristic predictors per trial (analysis.heuristics.trial_features).
         Given, every heuristic model of analysis.spec.HEURISTIC_MODELS (each
@@ -252,6 +261,7 @@ def _with_responses(human_df, E: pd.Series, risk_table: pd.DataFrame, *, seed, n
         groups = structure_groups(trial_ids(), source_R.risk, same)
         results.update(_comparison(means, boot_means, E, grids, models, comparisons, in_sample, seed, n_perm, draw,
                                    _feature_vectors(features), groups))
+        results["noise_ceiling"] = noise_ceiling(results["zscored"], np.random.default_rng([seed, CEILING_STREAM]))
         results["settings"] = results["settings"].assign(
             n_perm=n_perm, risk_draw=draw, cv_sigma_rule="chosen inside each fold: least mean training RMSE of Eq. 1",
             folds_by_structure=grouping_label(groups, trial_ids()))
@@ -350,7 +360,8 @@ def _comparison(means: pd.DataFrame, boot_means, E: pd.Series, grids, models, co
     """The out-of-sample comparison and the permutation tests (analysis.crossval,
     analysis.permutation) on the same participant resamples as the in-sample
     bootstrap. Risk redraws and permutations come from their own streams,
-    ``default_rng([seed, RISK_DRAW_STREAM])`` and ``default_rng([seed, PERMUTATION_STREAM])``."""
+    ``default_rng([seed, RISK_DRAW_STREAM])``, ``default_rng([seed, PERMUTATION_STREAM])``
+    and, for the calibrated held-out comparison test, ``default_rng([seed, HELD_OUT_STREAM])``."""
     y = {d: g.set_index("trial")["mean_z"].reindex(list(trial_ids())).to_numpy()
          for d, g in means.groupby("dataset", sort=False)}
     schemes = tuple(s for s in SCHEMES if s != "leave-one-pair-out" or len(pair_numbers()) >= MIN_PAIRS) \
@@ -372,7 +383,10 @@ def _comparison(means: pd.DataFrame, boot_means, E: pd.Series, grids, models, co
     perm, null = permutation_test(y, E, grids["R"], n_perm, np.random.default_rng([seed, PERMUTATION_STREAM]),
                                   groups=groups)
     gain = gain_over_effort(point, boot if risk_draw == "binomial" else fixed)
+    decision = held_out_permutation_tests(y, E.reindex(list(trial_ids())).to_numpy(), grids, comparisons, groups, n_perm,
+                                          np.random.default_rng([seed, HELD_OUT_STREAM]), features=features)
     return {"model_comparison": summary, "model_comparison_gain": gain, "model_comparison_tests": tests,
+            "model_comparison_held_out_permutation": decision,
             "model_comparison_held_out_tests": held_out_tests(cv_pred, comparisons),
             "cv_predictions": cv_pred,
             "cv_bootstrap": cv_boot, "permutation_test": perm, "permutation_null": null}

@@ -4,8 +4,10 @@ never see them, the in-sample full-vs-effort test cannot fail while the
 out-of-sample one can, permutation p-values are uniform under a null and small
 for a planted effect, and model recovery on SIMULATED participants (never human
 data) finds the true model out of sample."""
+import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -332,7 +334,7 @@ def test_run_analysis_writes_in_and_out_of_sample_tables_the_same_whatever_jobs(
         out = run_analysis(sim, E, risk, tmp_path / f"j{jobs}", seed=3, n_boot=60, n_perm=40, jobs=jobs, figures=False)
         files[jobs] = {p: open(p, "rb").read() for p in out["files"]["path"] if "comparison" in p or "cv_" in p
                        or "permutation" in p}
-    assert len(files[1]) == 8
+    assert len(files[1]) == 9   # with model_comparison_held_out_permutation
     assert [v for _, v in sorted(files[1].items())] == [v for _, v in sorted(files[2].items())]
     mc = out["model_comparison"]
     assert set(mc["scheme"]) == set(SCHEMES) | {STRUCTURE_SCHEME} and len(mc) == 3 * 4 * 3
@@ -373,6 +375,27 @@ def test_run_analysis_fits_every_heuristic_model_like_effort_and_every_centred_i
     assert set(out["permutation_test"]["kind"]) == set(KINDS)
     assert out["permutation_test"].loc[out["permutation_test"]["kind"] == "shuffle", "calibration"].str.startswith(
         "NOT CALIBRATED").all()
+    # the decision (the calibrated held-out comparison test) and the noise ceiling reach the run's outputs,
+    # each the function's own answer on its seed stream
+    from analysis.crossval.permuted import HELD_OUT_STREAM
+    from analysis.reliability import CEILING_STREAM, noise_ceiling
+
+    perm, ceiling = out["model_comparison_held_out_permutation"], out["noise_ceiling"]
+    datasets = set(out["trial_means"]["dataset"])
+    assert set(perm["dataset"]) == datasets == set(ceiling["dataset"])
+    for ab in (("full", "effort"), ("full", "effort+height"), ("full", "effort+stacked")):
+        assert {ab, ab[::-1]} <= set(zip(perm["model_a"], perm["model_b"]))
+    assert (perm["n_perm"] == 20).all() and perm["p_value"].between(1 / 21, 1).all()
+    assert perm["method"].str.contains("calibrated").all() and (perm["scheme"] == STRUCTURE_SCHEME).all()
+    np.testing.assert_allclose(perm["observed"], perm["rmse_b"] - perm["rmse_a"], rtol=1e-12, atol=1e-15)
+    assert ceiling["r_ceiling"].between(0, 1).all() and ceiling["reliability"].between(0, 1).all()
+    assert (ceiling["r_ceiling_low"] <= ceiling["r_ceiling"]).all() and (ceiling["r_ceiling"] <= ceiling["r_ceiling_high"]).all()
+    np.testing.assert_allclose(ceiling["r_ceiling"], np.sqrt(ceiling["reliability"]), rtol=1e-12)
+    pd.testing.assert_frame_equal(ceiling, noise_ceiling(out["zscored"], np.random.default_rng([3, CEILING_STREAM])))
+    written = {Path(p).name for p in out["files"]["path"]}
+    assert {"simulated_model_comparison_held_out_permutation.csv", "simulated_noise_ceiling.csv"} <= written
+    on_disk = pd.read_csv(tmp_path / "h" / "simulated_model_comparison_held_out_permutation.csv")
+    np.testing.assert_allclose(on_disk["p_value"], perm["p_value"])
 
 
 def test_centred_interval_holds_its_point_where_the_percentile_interval_does_not():
@@ -462,8 +485,13 @@ def test_reproduce_writes_the_comparison_the_permutations_and_the_recovery(tmp_p
     assert summary.startswith(f"human data: sigma = {sigma:g} d (")
     for d in ("difficulty", "time"):
         assert f"{d} {held[d, 'full']:.3f} vs {held[d, 'effort']:.3f} (" in summary, summary
-    for name in ("model_comparison", "model_comparison_tests", "cv_predictions", "permutation_test"):
-        assert (out / "analysis" / f"{name}.csv").exists()
+    listed = {e["path"] for e in json.loads((out / "manifest.json").read_text())["files"]}
+    for name in ("model_comparison", "model_comparison_tests", "cv_predictions", "permutation_test",
+                 "model_comparison_held_out_permutation", "noise_ceiling"):
+        assert (out / "analysis" / f"{name}.csv").exists() and f"analysis/{name}.csv" in listed
+    decision = pd.read_csv(out / "analysis" / "model_comparison_held_out_permutation.csv")
+    assert (decision["n_perm"] == 9).all() and decision["p_value"].between(0.1, 1).all()   # p >= 1/(1 + 9)
+    assert pd.read_csv(out / "analysis" / "noise_ceiling.csv")["r_ceiling"].dropna().between(0, 1).all()
     assert sorted(p.name for p in (out / "recovery").iterdir()) == [
         "simulated_recovery.csv", "simulated_recovery.pdf", "simulated_recovery.png", "simulated_recovery_summary.csv"]
     report = (out / "report.md").read_text()
@@ -471,6 +499,8 @@ def test_reproduce_writes_the_comparison_the_permutations_and_the_recovery(tmp_p
     assert "## fits (in-sample)" in report and "## Model recovery on SIMULATED studies" in report
     page = (out / "index.html").read_text()
     assert 'id="comparison"' in page and "SIMULATED participants, not human data" in page
+    assert "The decision: held-out comparison test (calibrated)" in page and "Noise ceiling beside the scores" in page
+    assert "**The decision: the held-out comparison test (calibrated).**" in report and "Noise ceiling beside" in report
     perm = pd.read_csv(out / "analysis" / "permutation_test.csv")
     assert (perm["n_perm"] == 9).all() and len(perm) == len(KINDS) * 2
 

@@ -51,8 +51,11 @@ def comparison_section(analysis: dict | None, recovery: pd.DataFrame | None = No
     parts = []
     if analysis is not None and "model_comparison" in analysis:
         parts += [f"<p>{_e(cr.CANNOT_FAIL)}</p>",
-                  f"<h3>Scores in sample and out of sample</h3>{table_html(cr.side_by_side(analysis['model_comparison']), 'plain')}",
-                  f"<h3>Eq. 1 against effort-only: direct bootstrap tests</h3>"
+                  f"<h3>Scores in sample and out of sample</h3>{table_html(cr.side_by_side(analysis['model_comparison']), 'plain')}"]
+        parts += _ceiling_part(analysis.get("noise_ceiling"))
+        parts += _decision_part(analysis.get("model_comparison_held_out_permutation"))
+        parts += [f"<h3>Eq. 1 against effort-only: direct bootstrap tests (the paper's method, NOT CALIBRATED: "
+                  f"shown to compare, not to decide)</h3>"
                   f"{table_html(cr.tests_table(analysis['model_comparison_tests']), 'plain')}",
                   f"<p>{_e(cr.widening_text(analysis['model_comparison']))}</p>"]
         if "permutation_test" in analysis:
@@ -68,6 +71,34 @@ def comparison_section(analysis: dict | None, recovery: pd.DataFrame | None = No
     if not parts:
         return ""
     return '<section id="comparison"><h2>Model comparison: in-sample and out of sample</h2>' + "".join(parts) + "</section>"
+
+
+def _ceiling_part(ceiling) -> list[str]:
+    """The noise ceiling beside the model scores (analysis.reliability), labelled."""
+    if not isinstance(ceiling, pd.DataFrame) or not len(ceiling):
+        return []
+    cols = ["dataset", "participants", "reliability", "reliability_low", "reliability_high", "r_ceiling",
+            "r_ceiling_low", "r_ceiling_high"]
+    return ["<h3>Noise ceiling beside the scores</h3>"
+            "<p>Split-half reliability of the trial means, Spearman-Brown corrected, and r_ceiling = "
+            "sqrt(reliability): the r a model predicting the true trial means would reach; compare each model's r "
+            "above with it (95% intervals centred on the point, participants resampled; analysis.reliability).</p>"
+            f"{table_html(ceiling[cols].round(3), 'plain')}"]
+
+
+def _decision_part(perm) -> list[str]:
+    """The calibrated held-out comparison test (analysis.crossval.permuted): the decision."""
+    if not isinstance(perm, pd.DataFrame) or not len(perm):
+        return []
+    shown = perm[["dataset", "model_a", "model_b", "rmse_a", "rmse_b", "observed", "n_perm"]].round(4).assign(
+        p_value=[p_value(p, n) for p, n in zip(perm["p_value"], perm["n_perm"])])
+    folds = "; ".join(dict.fromkeys(perm["folds"].astype(str)))
+    return ["<h3>The decision: held-out comparison test (calibrated)</h3>"
+            "<p>p of &quot;model_a predicts held-out trials better than model_b&quot;: the held-out RMSE difference "
+            "(observed = rmse_b - rmse_a) on folds by structure against its Freedman-Lane null (residuals of "
+            "model_b&#x27;s fit permuted, everything refit, sigma chosen inside every fold; "
+            f"analysis.crossval.permuted). Folds: {_e(folds)}.</p>"
+            f"{table_html(shown, 'plain', max_rows=400)}"]
 
 
 def participant_table(zscored: pd.DataFrame, predictions: pd.DataFrame | None) -> pd.DataFrame:
