@@ -2,7 +2,7 @@
 children it waited for) to a CSV: timings that hold up on a shared machine, where
 `--durations` wall times grow with the other jobs' load.
 
-    PYTHONPATH=.:bench python -m pytest -q -p pytest_cpu --cpu-csv times.csv [-m "not slow"]
+    PYTHONPATH=.:bench python -m pytest -q -n 0 -p pytest_cpu --cpu-csv times.csv [-m "not slow"]
     python bench/test_times.py times.csv [other.csv]   # per module, slowest tests, side by side
 
 Rows: nodeid, phase totals (setup + call + teardown), wall_s, cpu_s (own user+system),
@@ -69,5 +69,7 @@ class _Recorder:
 
 def pytest_configure(config):
     path = config.getoption("--cpu-csv")
+    if path and getattr(config.option, "numprocesses", None):
+        raise pytest.UsageError("--cpu-csv measures the tests of one process: add -n 0 (pyproject's addopts run two)")
     if path:
         config.pluginmanager.register(_Recorder(os.path.abspath(path)), "pytest-cpu-recorder")

@@ -1,6 +1,6 @@
 """Where the test suite's time goes, in CPU seconds (they hold up on a shared machine).
 
-    PYTHONPATH=.:bench python -m pytest -q -p pytest_cpu --cpu-csv after.csv    # bench/pytest_cpu.py
+    PYTHONPATH=.:bench python -m pytest -q -n 0 -p pytest_cpu --cpu-csv after.csv    # bench/pytest_cpu.py
     python bench/test_times.py after.csv                  # totals, per module, the slowest tests
     python bench/test_times.py before.csv after.csv       # the same, side by side
     python bench/test_times.py after.csv --over 0.4       # fast-subset tests over 0.4 CPU-s (candidates for slow)

@@ -2,6 +2,10 @@
 
     python -m pytest -q                 # everything (budget: 8 min on 2 quiet cores)
     python -m pytest -q -m "not slow"   # the fast subset (budget: 40 s; README: how long each takes)
+    python -m pytest -q -n 0 tests/test_x.py   # one process (pyproject's addopts run two workers)
+
+Session fixtures are per worker process: with two workers (pytest-xdist, --dist loadfile) a
+session fixture used by files on both workers is built twice.
 
 Fixtures: the trials (loaded once per session, not at import time), the synthetic
 effort and risk tables of the analysis tests, and the session's one small
