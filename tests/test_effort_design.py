@@ -293,6 +293,7 @@ def test_effort_sensitivity_section_ratios_and_order_changes(tmp_path):
     ctx = sensitivity.Context(args, trials, SerialExecutor(), Cache(tmp_path / "c"), tmp_path, None, lambda m: None,
                               effort_tables=effort_tables)
     section = sensitivity.effort_section(ctx)
+    sensitivity.write_sections([section], tmp_path)
     assert calls[:3] == [(1, 0.05, 20), (1, 0.02, 20), (1, 0.0, 20)] and calls[-1] == (1, 0.05, 40)
     assert len(calls) == 4 + 24  # the failing design again, trial by trial
     pairs = pd.read_csv(tmp_path / "effort_sensitivity_pairs.csv")
@@ -456,6 +457,7 @@ def test_effort_sensitivity_with_the_search_plans_each_design_as_physical_effort
     ctx = sensitivity.Context(args, trials, SerialExecutor(), Cache(tmp_path / "c"), tmp_path, None, lambda m: None,
                               effort_tables=stages.effort_tables)
     section = sensitivity.effort_section(ctx)
+    sensitivity.write_sections([section], tmp_path)
     table = pd.read_csv(tmp_path / "effort_sensitivity.csv")
     assert len(table) == len(sensitivity.effort_designs(args)) == 4
     failed = [line for line in section.lines if line.startswith("Failed: ")]

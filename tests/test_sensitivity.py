@@ -30,6 +30,10 @@ def test_risk_section_is_tidy_matches_the_api_and_is_cached(tmp_path, monkeypatc
     trials = [stimuli.load_trial(t) for t in ("4E", "4H")]
     ctx = context(tmp_path, trials)
     section = sensitivity.risk_section(ctx)
+    assert not (tmp_path / "risk_sensitivity.csv").exists()  # a section computes; the writer writes
+    written = sensitivity.write_sections([section], tmp_path)
+    assert [p.relative_to(tmp_path).as_posix() for p in written] == [
+        "risk_sensitivity.csv", "risk_sensitivity_summary.csv", "figures/risk_sensitivity.png"]
     table = pd.read_csv(tmp_path / "risk_sensitivity.csv")
     assert list(table.columns) == sensitivity.COLUMNS
     assert len(table) == (len(ENGINES) * len(sensitivity.RISK_RULES) * len(sensitivity.NOISE_RULES) * len(trials)
@@ -60,13 +64,13 @@ def test_risk_section_is_tidy_matches_the_api_and_is_cached(tmp_path, monkeypatc
 
     # cached: a second section simulates nothing and writes the same table
     monkeypatch.setattr("models.risk.risk_table", lambda *a, **k: pytest.fail("simulated again"))
-    sensitivity.risk_section(ctx)
+    sensitivity.write_sections([sensitivity.risk_section(ctx)], tmp_path)
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "risk_sensitivity.csv"), table)
 
 
 def test_sections_are_a_list_a_new_one_can_join(tmp_path, monkeypatch):
     calls = []
-    monkeypatch.setattr(sensitivity, "SECTIONS", [lambda ctx: calls.append(ctx) or sensitivity.Section("x", ["## x"], [])])
+    monkeypatch.setattr(sensitivity, "SECTIONS", [lambda ctx: calls.append(ctx) or sensitivity.Section("x", ["## x"])])
     ctx = context(tmp_path, [])
     assert [s.lines for s in sensitivity.run_sections(ctx)] == [["## x"]] and calls == [ctx]
 

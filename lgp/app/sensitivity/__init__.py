@@ -18,7 +18,7 @@ from lgp.app.sensitivity.effort import (EFFORT_HEIGHTS, EFFORT_QUICK_SAMPLES, ef
 from lgp.app.sensitivity.risk import (COLUMNS, DEFAULT_RISK_ENGINES, NOISE_RULES, RISK_RULES, RISK_SIGMAS, risk_engines,  # noqa: F401
                                       risk_section, risk_sensitivity_figure, risk_sensitivity_summary,
                                       risk_sensitivity_table)
-from lgp.app.sensitivity.section import Context, Section  # noqa: F401
+from lgp.app.sensitivity.section import Context, Section, write_sections  # noqa: F401
 
 
 def add_arguments(parser) -> None:
@@ -49,15 +49,15 @@ SECTIONS: list[Callable[[Context], Section]] = [risk_section, effort_section]
 
 
 def render(sections: list[Section], view):
-    """The report sections of --sensitivity (its files are written as it runs) and its tables for the trial cards."""
+    """The report sections of --sensitivity, its tables and figures written, and its tables for the trial cards."""
     from lgp.app.result import Rendered
 
-    return Rendered([f for s in sections for f in s.files], "\n".join("\n".join(s.lines) for s in sections),
+    return Rendered(write_sections(sections, view.out), "\n".join("\n".join(s.lines) for s in sections),
                     card_tables={name: df for s in sections for name, df in s.tables.items()})
 
 
 class _Stage:
-    """--sensitivity as a stage of lgp.app.run: its sections write their files into the staging folder as they run."""
+    """--sensitivity as a stage of lgp.app.run: its sections compute; `render` writes their files."""
 
     name, phase = "sensitivity", "compute"
 
@@ -73,6 +73,6 @@ class _Stage:
 
 STAGE = _Stage()
 
-__all__ = ["SECTIONS", "Context", "Section", "add_arguments", "check_arguments", "run_sections", "risk_section",
+__all__ = ["SECTIONS", "Context", "Section", "write_sections", "add_arguments", "check_arguments", "run_sections", "risk_section",
            "effort_section", "effort_designs", "effort_sensitivity_tables", "EFFORT_HEIGHTS",
            "risk_sensitivity_table", "risk_sensitivity_summary", "RISK_RULES", "RISK_SIGMAS", "NOISE_RULES"]

@@ -17,7 +17,6 @@ import time
 import numpy as np
 import pandas as pd
 
-from lgp.app.files import write_csv_atomic
 from lgp.app.sensitivity.section import Context, Section, markdown
 from lgp.planner.design import APPROACH, Design
 
@@ -103,9 +102,8 @@ def effort_sensitivity_tables(ctx: Context) -> tuple[pd.DataFrame, pd.DataFrame,
 
 def effort_section(ctx: Context) -> Section:
     if ctx.effort_tables is None:
-        return Section("effort", [], [])
+        return Section("effort", [])
     table, pairs, notes = effort_sensitivity_tables(ctx)
-    files = [write_csv_atomic(table, ctx.out / "effort_sensitivity.csv")]
     designs = list(dict.fromkeys(table["design"]))
     lines = ["## Sensitivity of effort to the motion design", "",
              f"Effort (J s, mean over {int(table['samples'].max()) if len(table) else 0} layout(s) per trial, seed "
@@ -121,7 +119,6 @@ def effort_section(ctx: Context) -> Section:
         lines += markdown(wide.reset_index())
         lines.append("")
     if len(pairs):
-        files.append(write_csv_atomic(pairs, ctx.out / "effort_sensitivity_pairs.csv"))
         ratio = pairs.pivot(index="pair", columns="design", values="ratio_H_over_E")[designs]
         order = pairs.pivot(index="pair", columns="design", values="order")[designs]
         changes = pairs.groupby("pair")["order_changes"].any()
@@ -141,4 +138,5 @@ def effort_section(ctx: Context) -> Section:
         lines += [f"Failed: {note}", ""]
     lines += ["Tables: `effort_sensitivity.csv` (one row per design and trial), `effort_sensitivity_pairs.csv` "
               "(one row per design and pair).", ""]
-    return Section("effort", lines, files, {"effort_sensitivity": table, "effort_sensitivity_pairs": pairs})
+    tables = {"effort_sensitivity": table} | ({"effort_sensitivity_pairs": pairs} if len(pairs) else {})
+    return Section("effort", lines, tables)

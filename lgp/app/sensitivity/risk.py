@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from lgp.app.cache import input_key
-from lgp.app.files import atomic_path, write_csv_atomic
+from lgp.app.files import atomic_path
 from lgp.app.sensitivity.section import Context, Section, markdown
 from lgp.paper import BLOCK_SIZE, PAPER_SIGMA, RISK_PAIRS
 from models.risk.model import DEFAULT_MODEL, FALL_COLUMNS, FALL_THRESHOLD, MODEL_COLUMNS, NOISE_RULES, FallRule, RiskModel
@@ -187,9 +187,6 @@ def risk_section(ctx: Context) -> Section:
     engines, notes = risk_engines(ctx.args)
     table = risk_sensitivity_table(ctx, engines)
     summary = risk_sensitivity_summary(table)
-    files = [write_csv_atomic(table, ctx.out / "risk_sensitivity.csv"),
-             write_csv_atomic(summary, ctx.out / "risk_sensitivity_summary.csv"),
-             risk_sensitivity_figure(table, ctx.out / "figures" / "risk_sensitivity.png")]
     shown = summary.assign(engine=[e if f else f"{e} (UNFAITHFUL)" for e, f in zip(summary["engine"], summary["faithful"])],
                            rule=[f"{r} > {t:g} d" for r, t in zip(*(summary[c] for c in FALL_COLUMNS))])
     shown = shown.assign(suite=["passes" if f else "fails (docs/risk.md)" for f in shown["faithful"]])
@@ -222,4 +219,5 @@ def risk_section(ctx: Context) -> Section:
                   + ", ".join(f"{e} {t}" for e, t in bad.itertuples(index=False)) + ".", ""]
     for note in notes:
         lines += [f"Left out: {note}.", ""]
-    return Section("risk", lines, files, {"risk_sensitivity": table, "risk_sensitivity_summary": summary})
+    return Section("risk", lines, {"risk_sensitivity": table, "risk_sensitivity_summary": summary},
+                   {"figures/risk_sensitivity.png": lambda path: risk_sensitivity_figure(table, path)})

@@ -1,6 +1,7 @@
 """What a sensitivity section takes and gives: a `Context` (the run's settings,
 trials, executor, cache, output folder) and a `Section` (markdown lines for
-report.md and the files it wrote), and the section's markdown tables."""
+report.md, the tables it computed, the figures it draws) and the section's markdown
+tables. A section computes; `write_sections` writes its tables and figures."""
 from __future__ import annotations
 
 import sys
@@ -36,9 +37,21 @@ class Context:
 class Section:
     title: str
     lines: list[str]
-    files: list[Path]
-    #: the tables written, by file stem (the page's trial cards show those with a trial column)
+    #: the tables to write, by file stem (<stem>.csv; the page's trial cards show those with a trial column)
     tables: dict[str, pd.DataFrame] = field(default_factory=dict)
+    #: the figures to draw, by path relative to the output folder: draw(path) -> path
+    figures: dict[str, Callable[[Path], Path]] = field(default_factory=dict)
+
+
+def write_sections(sections: list[Section], out: Path) -> list[Path]:
+    """Write every section's tables (<stem>.csv) and figures into `out`; the paths, in order."""
+    from lgp.app.files import write_csv_atomic
+
+    files = []
+    for section in sections:
+        files += [write_csv_atomic(table, out / f"{stem}.csv") for stem, table in section.tables.items()]
+        files += [draw(out / relative) for relative, draw in section.figures.items()]
+    return files
 
 
 def markdown(df: pd.DataFrame) -> list[str]:
