@@ -8,11 +8,11 @@
 Each command runs in a fresh subprocess and a fresh scratch folder, once cold (an
 empty cache, the render cache of the pictures too) and, for the pipeline, once more warm (the same command again: all
 cached), with ``--jobs 2`` and ``--jobs 1`` (a 2-core and a 1-core machine: the
-range a reader's machine is likely in). Writes `docs/command_times.csv` (one row
+range a reader's machine is likely in). Writes `lgp/command_times.csv` (package data; one row
 per command, jobs and cache state, with the machine: cores, CPU model, load
 average before and after) and the "commands" section of docs/benchmarks.md.
 README, `python -m lgp.reproduce --help` and docs/results.md quote these rows
-through `lgp.cli.measured_time` (tests/test_readme.py checks that they do).
+through `lgp.command_times.measured_time` (tests/test_readme.py checks that they do).
 """
 from __future__ import annotations
 
