@@ -64,3 +64,13 @@ def test_a_sigma_chosen_at_the_edge_of_the_grid_is_warned_about():
     (warning,) = sigma_edge_warnings(edge)
     assert "upper edge of the grid (0.05 to 0.1 d)" in warning and "--sigmas" in warning
     assert sigma_edge_warnings(inside) == [] and sigma_edge_warnings(None) == []
+
+
+def test_a_run_without_a_whole_pair_says_why_it_has_no_pair_table():
+    """A designed set without pairs (or a subset of the paper's trials) has no pair
+    table; the page says that, not that all 24 trials are needed."""
+    from lgp.app import page
+
+    html = page._pairs_section(None, None)
+    assert "No pair table: no two trials of this run are the easy and hard trial of one pair" in html
+    assert "needs all 24" not in html

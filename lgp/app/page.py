@@ -228,7 +228,7 @@ def _pairs_section(pairs: pd.DataFrame | None, analysis: dict | None, figure_sig
     from analysis.pairs import TIE_REL
 
     if pairs is None:
-        return '<section id="pairs"><h2>Easy/hard pairs</h2><p>A subset of trials was run: the pair table needs all 24.</p></section>'
+        return '<section id="pairs"><h2>Easy/hard pairs</h2><p>No pair table: no two trials of this run are the easy and hard trial of one pair (a subset of the paper&#x27;s pairs, or a trial set without pairs).</p></section>'
     df = pair_verdicts(pairs)
     sigma = df["sigma"].iloc[0]
     show = df[["pair", "dimension", "effort_E", "effort_H", "effort_rel_diff", "risk_E", "risk_H",
