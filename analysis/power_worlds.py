@@ -40,6 +40,9 @@ class TrialTable:
         return grouping_label(self.groups, self.trials)
 
 
+#: Trials the comparison needs (a held-out fit of Eq. 1 keeps at least 4 training trials).
+MIN_TRIALS = 5
+
 def trial_table(effort, risk_table: pd.DataFrame, features: pd.DataFrame,
                 trials: Sequence[str] | None = None, same: Sequence[Sequence[str]] = ()) -> TrialTable:
     """A TrialTable from tidy tables: `effort` (columns trial, effort; rows of a trial
@@ -53,8 +56,8 @@ def trial_table(effort, risk_table: pd.DataFrame, features: pd.DataFrame,
     else:
         e = effort.assign(trial=effort["trial"].astype(str)).groupby("trial", sort=False)["effort"].mean()
     trials = tuple(str(t) for t in (trials if trials is not None else e.index))
-    if len(trials) < 5:
-        raise PowerInputError("--stimuli", f"{len(trials)} trials; the comparison needs at least 5")
+    if len(trials) < MIN_TRIALS:
+        raise PowerInputError("--stimuli", f"{len(trials)} trials; the comparison needs at least {MIN_TRIALS}")
     missing = [t for t in trials if t not in e.index]
     if missing:
         raise PowerInputError("--stimuli", f"no effort for trial {missing[0]}")

@@ -147,6 +147,7 @@ BAD_INPUTS = [
     (["--sigma-prior", "0", "0.2"], "--sigma-prior"),
     (["--sigma-prior", "0.1", "1.5"], "--sigma-prior"),
     (["--budget", "0"], "--budget 0"),
+    (["--trials", "4"], "needs at least 5 trials (or --no-power)"),  # 4 is a set, but not one the power table can compare
 ]
 
 
@@ -213,6 +214,19 @@ def test_a_folder_holding_a_users_trial_files_is_refused_and_left_as_it_was(tmp_
     user = tmp_path / "mine"
     user.mkdir()
     (user / "D01.yaml").write_text("id: D01\n")
-    code = run_cli(main, ["--out", str(user), "--candidates", "10", "--trials", "4"], prog="python -m stimuli.design")
-    assert code == 1 and "did not write (D01.yaml)" in capsys.readouterr().err
+    code = run_cli(main, ["--out", str(user), "--candidates", "10", "--trials", "5"], prog="python -m stimuli.design")
+    assert code == 1 and "no design run wrote (D01.yaml)" in capsys.readouterr().err
     assert [p.name for p in user.iterdir()] == ["D01.yaml"] and (user / "D01.yaml").read_text() == "id: D01\n"
+
+
+def test_a_folder_holding_any_file_of_a_user_is_refused_and_left_as_it_was(tmp_path, capsys):
+    """Not only trial files: a folder with a user's thesis and no design.json is not a design run's."""
+    from stimuli.design.__main__ import main
+    from lgp.cli import run_cli
+
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "thesis.txt").write_text("mine\n")
+    code = run_cli(main, ["--out", str(user), "--candidates", "10", "--trials", "5"], prog="python -m stimuli.design")
+    assert code == 1 and "no design run wrote (thesis.txt)" in capsys.readouterr().err
+    assert [p.name for p in user.iterdir()] == ["thesis.txt"] and (user / "thesis.txt").read_text() == "mine\n"

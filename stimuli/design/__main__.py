@@ -33,7 +33,7 @@ def parse_args(argv=None):
     p = cli.parser(PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, type=cli.output_dir, help="folder for the designed set (created if missing)")
     size = p.add_mutually_exclusive_group()
-    size.add_argument("--trials", type=int, default=None, help=f"trials in the set, >= 4 (default {D.trials})")
+    size.add_argument("--trials", type=int, default=None, help=f"trials in the set, >= 4 (>= 5 with the power table; default {D.trials})")
     size.add_argument("--pairs", type=int, default=None,
                       help="design 2 x PAIRS trials and pair them (by effort; E the lower risk): ids 1E, 1H, ...")
     p.add_argument("--seed", type=cli.seed, default=D.seed)
@@ -63,6 +63,11 @@ def parse_args(argv=None):
         check_config(cfg)
         if args.studies < 1:
             raise InputError(f"--studies must be >= 1, got {args.studies}")
+        from analysis.power_worlds import MIN_TRIALS
+
+        if not args.no_power and trials < MIN_TRIALS:
+            raise InputError(f"--trials {trials}: the power table's comparison needs at least {MIN_TRIALS} trials "
+                             "(or --no-power)")
     except ValueError as e:
         p.error(str(e))  # one line, exit 2, before anything is written
     return args, cfg
@@ -136,8 +141,9 @@ def _cpu_seconds() -> float:
 
 def claim_folder(out: Path) -> list[str]:
     """The trial files an earlier design run wrote into `out` (its design.json's
-    "written"), to be replaced; RuntimeError naming them if `out` holds trial files
-    (*.yaml) this command did not write: a user's folder is never written over."""
+    "written"), to be replaced. InputError if `out` holds anything and no design.json
+    (not a design run's folder), or trial files (*.yaml) this command did not write:
+    a user's folder is never written into."""
     import json
 
     if not out.is_dir():
@@ -149,6 +155,12 @@ def claim_folder(out: Path) -> list[str]:
             mine = [str(n) for n in json.loads(record.read_text()).get("written", [])]
         except (ValueError, AttributeError, TypeError):
             mine = []
+    if not record.is_file() and any(out.iterdir()):
+        from lgp.errors import InputError
+
+        held = sorted(p.name for p in out.iterdir())
+        raise InputError(f"--out {out} holds files no design run wrote ({', '.join(held[:5])}{' ...' if len(held) > 5 else ''}) "
+                         "and no design.json; choose an empty or new folder")
     foreign = sorted(p.name for p in out.glob("*.yaml") if p.name not in mine)
     if foreign:
         from lgp.errors import InputError
