@@ -326,6 +326,8 @@ def main(argv=None) -> int:
     p.add_argument("--scheduler", help="tcp://HOST:8786 or local-dask, as lgp.reproduce (docs/scaling.md)")
     p.add_argument("--out", default="results/power", type=cli.output_dir)
     args = p.parse_args(argv)
+    from lgp.owned import ForeignFiles, refuse_foreign_folder
+
     try:
         check_settings(args.participants, args.noise, args.studies, args.n_perm)
         if args.n_boot < 1:
@@ -335,6 +337,7 @@ def main(argv=None) -> int:
                 raise PowerInputError("--tests", f"unknown test {t!r}; expected one of {', '.join(TESTS)}")
         worlds = [parse_world(w) for w in args.world]
         _precheck(worlds, args.stimuli, args.results)
+        refuse_foreign_folder(Path(args.out), "power.csv")  # before the simulated studies, not after
         t0 = time.perf_counter()
         with executor_for_scheduler(args.scheduler, args.jobs) as ex:
             if args.results:
@@ -352,7 +355,7 @@ def main(argv=None) -> int:
             result = power(table, worlds, args.participants, args.noise, args.studies, args.seed, ex,
                            tests=args.tests, n_perm=args.n_perm, n_boot=args.n_boot, progress=progress)
             print(file=sys.stderr)
-    except PowerInputError as e:
+    except (PowerInputError, ForeignFiles) as e:
         p.exit(2, f"{PROG}: error: {e}\n")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -162,6 +162,20 @@ def foreign_entries(root: Path, skip=(), limit: int = 5) -> list[str]:
     return found
 
 
+def refuse_foreign_folder(out: Path, record: str, what: str = "--out") -> None:
+    """ForeignFiles if `out` holds anything but is not a folder an earlier run of the
+    command wrote: no `record` file there (the file such a run writes, e.g. its
+    summary.json). For commands that write into their folder without a manifest:
+    they never write beside a user's files."""
+    out = Path(out)
+    if (out / record).is_file():
+        return
+    names = foreign_entries(out, limit=5)
+    if names:
+        raise ForeignFiles(f"{what} {out} holds files no run of this command wrote ({describe(names, len(names) >= 5)}) "
+                           f"and no {record}; give a new or empty folder")
+
+
 def collisions(root: Path, new: list[str], replaceable: set[str]) -> list[str]:
     """The paths among `new` that would overwrite something not in `replaceable`
     (a file that is not the command's own, a folder, a link), or lie under a link or

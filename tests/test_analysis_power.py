@@ -256,3 +256,14 @@ def test_read_trial_table_refuses_a_missing_or_broken_run_naming_results_and_rea
     t = pw.read_trial_table(tmp_path, samples=2)
     assert t.trials == tuple(T) and np.allclose(t.effort, effort.groupby("trial", sort=False)["effort"].mean())
     assert "1E 1H 9E 9H 11E 11H" in t.grouping and set(t.features) == set(pw.FEATURES)
+
+
+def test_power_refuses_a_folder_holding_a_users_file_before_any_study(tmp_path, capsys):
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "power.png").write_text("my figure\n")
+    with pytest.raises(SystemExit) as e:
+        pw.main(["--out", str(user), "--cache", str(tmp_path / "c"), "--studies", "2"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1 and "no run of this command wrote (power.png) and no power.csv" in err[0]
+    assert [p.name for p in user.iterdir()] == ["power.png"] and not (tmp_path / "c").exists()

@@ -40,3 +40,16 @@ def test_the_command_fits_a_tiny_clone_and_reproduce_takes_its_sigma(tmp_path, c
     assert link.sigma == summary["rules"]["paper-3d"]["best_sigma"] and link.experiment == 2
     config = parse_args(["--sigma-from", str(out / "summary.json"), "--out", str(tmp_path / "run")])
     assert link.sigma in config.sigmas and not (tmp_path / "run").exists()
+
+
+def test_a_folder_holding_a_users_file_is_refused_before_any_simulation_and_left_as_it_was(tmp_path, capsys):
+    from analysis.mental_jenga import main
+
+    repo = fake_repo(tmp_path, {1: "stacked"})
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "fit.csv").write_text("my own fit\n")
+    assert main(["--repo", str(repo), "--experiment", "2", "--out", str(user), "--runs", "1", "--sigmas", "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no run of this command wrote (fit.csv) and no summary.json" in err[0], err
+    assert [p.name for p in user.iterdir()] == ["fit.csv"] and (user / "fit.csv").read_text() == "my own fit\n"

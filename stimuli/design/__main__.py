@@ -155,12 +155,9 @@ def claim_folder(out: Path) -> list[str]:
             mine = [str(n) for n in json.loads(record.read_text()).get("written", [])]
         except (ValueError, AttributeError, TypeError):
             mine = []
-    if not record.is_file() and any(out.iterdir()):
-        from lgp.errors import InputError
+    from lgp.owned import refuse_foreign_folder
 
-        held = sorted(p.name for p in out.iterdir())
-        raise InputError(f"--out {out} holds files no design run wrote ({', '.join(held[:5])}{' ...' if len(held) > 5 else ''}) "
-                         "and no design.json; choose an empty or new folder")
+    refuse_foreign_folder(out, "design.json")
     foreign = sorted(p.name for p in out.glob("*.yaml") if p.name not in mine)
     if foreign:
         from lgp.errors import InputError
