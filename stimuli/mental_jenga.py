@@ -401,9 +401,12 @@ def main(argv=None) -> int:
     ap.add_argument("--experiment", type=int, required=True)
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
+    from lgp.owned import ForeignFiles, refuse_foreign_folder
+
     try:
+        refuse_foreign_folder(Path(args.out), "scenes.csv")  # a user's folder is not written into
         done = write_outputs(args.repo, args.experiment, args.out)
-    except MentalJengaError as e:
+    except (MentalJengaError, ForeignFiles) as e:
         print(f"stimuli.mental_jenga: {e}", file=sys.stderr)
         return 2
     print(f"stimuli.mental_jenga: {done['scenes']} scenes, {done['trial_files']} in the trial format, "

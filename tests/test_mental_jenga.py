@@ -100,6 +100,12 @@ def test_cli_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path):
         r = _cli("--repo", str(path), "--experiment", str(exp), "--out", str(out))
         assert r.returncode == 2 and problem in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
         assert not out.exists()
+    user = tmp_path / "mine"  # a folder of the user's: refused, left as it was
+    user.mkdir()
+    (user / "notes.txt").write_text("mine\n")
+    r = _cli("--repo", str(repo), "--experiment", "2", "--out", str(user))
+    assert r.returncode == 2 and "no run of this command wrote (notes.txt) and no scenes.csv" in r.stderr, r.stderr
+    assert [p.name for p in user.iterdir()] == ["notes.txt"] and (user / "notes.txt").read_text() == "mine\n"
 
 
 @pytest.mark.slow
