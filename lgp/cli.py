@@ -397,7 +397,8 @@ def run_cli(main: Callable[[Sequence[str] | None], int | None], argv: Sequence[s
             prog: str, interrupted: str = "interrupted") -> int:
     """Run ``main(argv)`` and turn known errors and Ctrl-C into one line on stderr.
 
-    Returns the exit code (main's, 1 for a known error, 130 for Ctrl-C); argparse's
+    Returns the exit code (main's, 1 for a known error, 2 for an output folder it may
+    not write into (lgp.owned.ForeignFiles), 130 for Ctrl-C); argparse's
     own exit (2 for usage) passes through as SystemExit. Use as
     ``raise SystemExit(run_cli(main, prog=PROG))``.
     """
@@ -414,7 +415,9 @@ def run_cli(main: Callable[[Sequence[str] | None], int | None], argv: Sequence[s
         if debug:
             traceback.print_exc()
         print(f"{prog}: error: {one_line(exc)}", file=sys.stderr, flush=True)
-        return EXIT_DATA
+        from lgp.owned import ForeignFiles
+
+        return EXIT_USAGE if isinstance(exc, ForeignFiles) else EXIT_DATA  # a folder it may not write into: as a bad --out
 
 
 class deferred_interrupt:

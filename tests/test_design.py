@@ -215,7 +215,7 @@ def test_a_folder_holding_a_users_trial_files_is_refused_and_left_as_it_was(tmp_
     user.mkdir()
     (user / "D01.yaml").write_text("id: D01\n")
     code = run_cli(main, ["--out", str(user), "--candidates", "10", "--trials", "5"], prog="python -m stimuli.design")
-    assert code == 1 and "no run of this command wrote (D01.yaml) and no design.json" in capsys.readouterr().err
+    assert code == 2 and "no run of this command wrote (D01.yaml) and no design.json" in capsys.readouterr().err
     assert [p.name for p in user.iterdir()] == ["D01.yaml"] and (user / "D01.yaml").read_text() == "id: D01\n"
 
 
@@ -228,5 +228,5 @@ def test_a_folder_holding_any_file_of_a_user_is_refused_and_left_as_it_was(tmp_p
     user.mkdir()
     (user / "thesis.txt").write_text("mine\n")
     code = run_cli(main, ["--out", str(user), "--candidates", "10", "--trials", "5"], prog="python -m stimuli.design")
-    assert code == 1 and "no run of this command wrote (thesis.txt) and no design.json" in capsys.readouterr().err
+    assert code == 2 and "no run of this command wrote (thesis.txt) and no design.json" in capsys.readouterr().err
     assert [p.name for p in user.iterdir()] == ["thesis.txt"] and (user / "thesis.txt").read_text() == "mine\n"

@@ -7,7 +7,8 @@ first: sample 0 of `--seed`, drawn by ``models.effort.sample_rng(seed, 0)``; wit
 ``--layout pair``, sample p - 1 for a trial of pair p, as the study shows) and
 ``DIR/<id>-B.png``, and ``DIR/renders.json`` (camera, size, seed and every
 picture's inputs hash and sha256). A second run skips pictures whose inputs are
-unchanged.
+unchanged. A folder of the user's files (no renders.json), or a picture's name holding what
+no render run wrote, is refused in one line (exit 2) before anything is written.
 
 The renderer is Drake's RenderEngineVtk (VTK, OpenGL offscreen on the CPU; Drake is
 already a dependency): directional lights clustered around one direction, each

@@ -8,7 +8,7 @@ import hashlib
 import json
 import os
 import sys
-import tempfile
+import pickle
 import time
 from pathlib import Path
 
@@ -16,6 +16,8 @@ import numpy as np
 
 from stimuli.render.camera import AZIMUTH_DEG, DEFAULT_SIZE, ELEVATION_DEG, FOV_Y_DEG, MIN_AREA, Camera, trial_camera
 from stimuli.render.engine import Renderer
+from lgp.owned import (ForeignFiles, collisions, describe, foreign_entries, new_staging, own_files, read_manifest,
+                       remove_staging, sha256_of, signals_deferred)
 from stimuli.sheet import finished_scene
 
 PROG = "python -m stimuli.render"
@@ -78,10 +80,6 @@ def _picture_key(scene, camera: Camera, code: str) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
 
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def _render_chunk(jobs: list[tuple[str, str, Camera]]) -> list[float]:
     """Worker: render (scene pickle path, png path, camera) triples with one engine; seconds each."""
     import pickle
@@ -107,9 +105,13 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
     `executor`: a running local lgp.executor (ProcessExecutor or SerialExecutor,
     e.g. lgp.reproduce's, whose workers have pydrake loaded already) renders the
     pictures in its own processes, one chunk per worker; otherwise `jobs` fresh
-    processes are started (worth it for many pictures only)."""
-    import pickle
+    processes are started (worth it for many pictures only).
 
+    The folder is the user's: a picture's name, or renders.json, holding what no
+    render run wrote (sha256 in renders.json), or a folder of other files and no
+    renders.json, is refused with ForeignFiles before anything is written; new
+    pictures are rendered into a staging folder inside `out_dir` and moved in when
+    all are done (lgp/owned.py), so an interrupted run leaves the folder as it was."""
     log = log or (lambda msg: print(f"{PROG}: {msg}", file=sys.stderr, flush=True))
     out = Path(out_dir)
     pictures = pictures_of(trials, seed, layout)
@@ -118,44 +120,98 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
         scenes.setdefault(tid, []).append(scene)
     cameras = {tid: trial_camera(both, *size) for tid, both in scenes.items()}
     code = _code_version()
-    record_path = out / "renders.json"
-    old = _previous(record_path)
+    names = [f"{tid}-{state}.png" for tid, state, _ in pictures]
+    old, own = _refuse_foreign(out, names)
     out.mkdir(parents=True, exist_ok=True)
     rows, todo = [], []
-    scratch = tempfile.TemporaryDirectory(prefix="lgp-scenes-")
-    for k, (tid, state, scene) in enumerate(pictures):
-        name = f"{tid}-{state}.png"
-        camera = cameras[tid]
-        key = _picture_key(scene, camera, code)
-        sample = layout_sample(next(t for t in trials if t.id == tid), layout)
-        rows.append({"trial": tid, "state": state, "file": name, "key": key,
-                     "blocks": len(scene.blocks), "sample": sample})
-        prev = old.get(name)
-        if prev and prev.get("key") == key and (out / name).exists() and prev.get("sha256") == _sha256(out / name):
-            continue
-        scene_file = Path(scratch.name) / f"{k}.pkl"
-        scene_file.write_bytes(pickle.dumps(scene))
-        todo.append((str(scene_file), str(out / name), camera))
-    t0 = time.perf_counter()
-    _render_all(todo, len(rows), size, jobs, executor, log, out)
-    scratch.cleanup()
-    for r in rows:
-        r["sha256"] = _sha256(out / r["file"])
-    record = _run_record(seed, layout, size, cameras, code, len(todo), time.perf_counter() - t0, rows)
-    tmp = record_path.with_name(".renders.json.tmp")
-    tmp.write_text(json.dumps(record, indent=1) + "\n")
-    os.replace(tmp, record_path)
+    stage = new_staging(out)  # new pictures are rendered here and moved in when all are done
+    try:
+        for k, (tid, state, scene) in enumerate(pictures):
+            name = f"{tid}-{state}.png"
+            camera = cameras[tid]
+            key = _picture_key(scene, camera, code)
+            sample = layout_sample(next(t for t in trials if t.id == tid), layout)
+            rows.append({"trial": tid, "state": state, "file": name, "key": key,
+                         "blocks": len(scene.blocks), "sample": sample})
+            prev = old.get(name)
+            if prev and prev.get("key") == key and name in own:
+                rows[-1]["sha256"] = own[name]
+                continue
+            scene_file = stage / f"{k}.pkl"
+            scene_file.write_bytes(pickle.dumps(scene))
+            todo.append((str(scene_file), str(stage / name), camera))
+        t0 = time.perf_counter()
+        _render_all(todo, len(rows), size, jobs, executor, log, out)
+        for r in rows:
+            if "sha256" not in r:
+                r["sha256"] = sha256_of(stage / r["file"])
+        record = _run_record(seed, layout, size, cameras, code, len(todo), time.perf_counter() - t0, rows)
+        _move_in(out, stage, record, names)
+    finally:
+        remove_staging(stage)
     return record
 
 
-def _previous(record_path: Path) -> dict:
-    """file -> row of the pictures the last run into the folder recorded ({} when none, or unreadable)."""
-    if not record_path.exists():
-        return {}
-    try:
-        return {p["file"]: p for p in json.loads(record_path.read_text()).get("pictures", [])}
-    except (ValueError, KeyError, TypeError):
-        return {}
+def _is_render_record(data) -> bool:
+    return isinstance(data, dict) and "renderer" in data and isinstance(data.get("pictures"), list)
+
+
+def _listed(record: dict) -> dict[str, set[str]]:
+    """file -> sha256s a render record lists (its pictures and, in an interim record,
+    the earlier run's)."""
+    listed: dict[str, set[str]] = {}
+    for p in record.get("pictures", []) + record.get("pictures_earlier", []):
+        if isinstance(p, dict) and isinstance(p.get("file"), str) and isinstance(p.get("sha256"), str):
+            listed.setdefault(p["file"], set()).add(p["sha256"])
+    return listed
+
+
+def _refuse_foreign(out: Path, names: list[str]) -> tuple[dict, dict[str, str]]:
+    """(file -> row of the earlier run's record, file -> sha256 of the pictures still
+    as an earlier run wrote them), or ForeignFiles before anything is written: a
+    picture's name or renders.json holds what no render run wrote (a user's file, an
+    edited picture, a renders.json of another program), or the folder holds the
+    user's files and no render record."""
+    status, record = read_manifest(out / "renders.json", _is_render_record)
+    if status == "foreign":
+        raise ForeignFiles(f"--out {out}: renders.json there is not a render record of {PROG}; nothing was written: "
+                           "give a new or empty folder")
+    if status == "absent":
+        names_there = foreign_entries(out, limit=5)
+        if names_there:
+            raise ForeignFiles(f"--out {out} holds files no render run wrote ({describe(names_there, len(names_there) >= 5)}) "
+                               "and no renders.json; nothing was written: give a new or empty folder")
+        return {}, {}
+    own = own_files(out, _listed(record))
+    bad = collisions(out, names + ["renders.json"], set(own) | {"renders.json"})
+    if bad:
+        raise ForeignFiles(f"--out {out}: {describe(bad)} would replace what no render run wrote (or what changed since); "
+                           "nothing was written: move it away and rerun")
+    return {p["file"]: p for p in record["pictures"] if isinstance(p, dict) and "file" in p}, own
+
+
+def _move_in(out: Path, stage: Path, record: dict, names: list[str]) -> None:
+    """Move the new pictures from `stage` into `out` and write renders.json: an interim
+    record listing the earlier run's pictures too comes first, so a process killed
+    during the move leaves every picture provably a render run's own. Checks the
+    folder again (a run beside this one may have written since)."""
+    from lgp.atomic import write_json_atomic
+
+    status, earlier = read_manifest(out / "renders.json", _is_render_record)
+    if status == "foreign":
+        raise ForeignFiles(f"--out {out}: renders.json changed into something not a render record while rendering; "
+                           "nothing was moved")
+    own = own_files(out, _listed(earlier)) if earlier else {}
+    new = [r["file"] for r in record["pictures"] if (stage / r["file"]).exists()]
+    bad = collisions(out, new, set(own))
+    if bad:
+        raise ForeignFiles(f"--out {out}: {describe(bad)} appeared while rendering and is not a render run's; nothing was moved")
+    with signals_deferred():
+        interim = dict(record, pictures_earlier=[{"file": f, "sha256": sha} for f, sha in sorted(own.items())])
+        write_json_atomic(interim, out / "renders.json")
+        for name in new:
+            os.replace(stage / name, out / name)
+        write_json_atomic(record, out / "renders.json")
 
 
 def _render_all(todo: list, n_pictures: int, size, jobs: int, executor, log, out: Path) -> list[float]:
