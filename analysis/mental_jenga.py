@@ -313,9 +313,9 @@ def main(argv=None) -> int:
             raise MentalJengaError(f"unknown --engine {args.engine!r}; known: {', '.join(WORLDS)}")
         if bad or args.runs < 1 or any(not np.isfinite(s) or s < 0 for s in sigmas):
             raise MentalJengaError(f"--rules must be among {', '.join(RULES)}, --runs >= 1, sigmas finite and >= 0")
-        from lgp.owned import refuse_foreign_folder
+        from lgp.owned import json_record, refuse_foreign_folder
 
-        refuse_foreign_folder(Path(args.out), "summary.json")  # before the simulations, not after
+        refuse_foreign_folder(Path(args.out), "summary.json", is_ours=json_record("rules", "human_means"))  # before the simulations, not after
         fixed = None
         if args.fixed:
             try:

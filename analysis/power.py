@@ -326,7 +326,7 @@ def main(argv=None) -> int:
     p.add_argument("--scheduler", help="tcp://HOST:8786 or local-dask, as lgp.reproduce (docs/scaling.md)")
     p.add_argument("--out", default="results/power", type=cli.output_dir)
     args = p.parse_args(argv)
-    from lgp.owned import ForeignFiles, refuse_foreign_folder
+    from lgp.owned import ForeignFiles, csv_record, refuse_foreign_folder
 
     try:
         check_settings(args.participants, args.noise, args.studies, args.n_perm)
@@ -337,7 +337,7 @@ def main(argv=None) -> int:
                 raise PowerInputError("--tests", f"unknown test {t!r}; expected one of {', '.join(TESTS)}")
         worlds = [parse_world(w) for w in args.world]
         _precheck(worlds, args.stimuli, args.results)
-        refuse_foreign_folder(Path(args.out), "power.csv")  # before the simulated studies, not after
+        refuse_foreign_folder(Path(args.out), "power.csv", is_ours=csv_record("world", "procedure", "verdict", "count", "n_studies"))  # before the simulated studies, not after
         t0 = time.perf_counter()
         with executor_for_scheduler(args.scheduler, args.jobs) as ex:
             if args.results:

@@ -162,18 +162,44 @@ def foreign_entries(root: Path, skip=(), limit: int = 5) -> list[str]:
     return found
 
 
-def refuse_foreign_folder(out: Path, record: str, what: str = "--out") -> None:
+def refuse_foreign_folder(out: Path, record: str, what: str = "--out", is_ours=None) -> None:
     """ForeignFiles if `out` holds anything but is not a folder an earlier run of the
     command wrote: no `record` file there (the file such a run writes, e.g. its
-    summary.json). For commands that write into their folder without a manifest:
-    they never write beside a user's files."""
+    summary.json), or one that `is_ours(path)` (`json_record`, `csv_record`) says
+    is not the command's (a user's own summary.json). For commands that write into
+    their folder without a manifest: they never write beside a user's files."""
     out = Path(out)
-    if (out / record).is_file():
-        return
+    path = out / record
+    if regular_inside(out, record) is not None:
+        if is_ours is None or is_ours(path):
+            return
+        raise ForeignFiles(f"{what} {out}: its {record} was not written by this command (it is not its record); "
+                           "nothing was written: give a new or empty folder")
     names = foreign_entries(out, limit=5)
     if names:
         raise ForeignFiles(f"{what} {out} holds files no run of this command wrote ({describe(names, len(names) >= 5)}) "
                            f"and no {record}; give a new or empty folder")
+
+
+def json_record(*keys: str):
+    """`is_ours` for refuse_foreign_folder: a JSON object holding every key in `keys`."""
+    return lambda path: read_manifest(Path(path), lambda data: all(k in data for k in keys))[0] == "ours"
+
+
+def csv_record(*columns: str):
+    """`is_ours` for refuse_foreign_folder: a CSV whose header names every column in `columns`."""
+    def ours(path) -> bool:
+        try:
+            with open(path, newline="", encoding="utf-8") as fh:
+                header = fh.readline(1 << 16)
+        except (OSError, UnicodeDecodeError):
+            return False
+        import csv
+
+        names = next(csv.reader([header]), [])
+        return all(c in names for c in columns)
+
+    return ours
 
 
 def collisions(root: Path, new: list[str], replaceable: set[str]) -> list[str]:

@@ -401,10 +401,10 @@ def main(argv=None) -> int:
     ap.add_argument("--experiment", type=int, required=True)
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
-    from lgp.owned import ForeignFiles, refuse_foreign_folder
+    from lgp.owned import ForeignFiles, csv_record, refuse_foreign_folder
 
     try:
-        refuse_foreign_folder(Path(args.out), "scenes.csv")  # a user's folder is not written into
+        refuse_foreign_folder(Path(args.out), "scenes.csv", is_ours=csv_record("trial", "id", "black", "trial_format"))  # a user's folder is not written into
         done = write_outputs(args.repo, args.experiment, args.out)
     except (MentalJengaError, ForeignFiles) as e:
         print(f"stimuli.mental_jenga: {e}", file=sys.stderr)

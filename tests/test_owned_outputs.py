@@ -440,3 +440,44 @@ def test_a_run_inside_or_around_a_running_ones_folder_is_refused_before_it_write
             reproduce.main([*tiny, "--out", str(tmp_path / "rn")])
     assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*")) == \
         ["rn", "rn/figures", "rn/manifest.json"]
+
+
+# ----------------------------------------------------------------------------- record files of commands without a manifest
+
+
+def test_a_users_file_named_like_a_commands_record_does_not_license_writing_beside_it(tmp_path):
+    """refuse_foreign_folder: a summary.json, power.csv ... of the user's is not the
+    command's record (it lacks the record's keys or columns), so the folder is refused."""
+    from lgp.owned import csv_record, json_record, refuse_foreign_folder
+
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "summary.json").write_text('{"title": "my own summary"}')
+    (out / "power.csv").write_text("participant,response\n1,3\n")
+    before = snapshot(out)
+    with pytest.raises(owned.ForeignFiles, match="its summary.json was not written by this command"):
+        refuse_foreign_folder(out, "summary.json", is_ours=json_record("rules", "human_means"))
+    with pytest.raises(owned.ForeignFiles, match="its power.csv was not written by this command"):
+        refuse_foreign_folder(out, "power.csv", is_ours=csv_record("world", "procedure", "verdict"))
+    assert snapshot(out) == before
+    # the commands' own records pass
+    (out / "summary.json").write_text('{"rules": {}, "human_means": {}, "timing": {}}')
+    (out / "power.csv").write_text("world,procedure,verdict,count,n_studies\n")
+    refuse_foreign_folder(out, "summary.json", is_ours=json_record("rules", "human_means"))
+    refuse_foreign_folder(out, "power.csv", is_ours=csv_record("world", "procedure", "verdict"))
+    (out / "summary.json").unlink()
+    (out / "summary.json").symlink_to(out / "power.csv")  # a link is never a record
+    with pytest.raises(owned.ForeignFiles):
+        refuse_foreign_folder(out, "summary.json", is_ours=json_record("rules", "human_means"))
+
+
+def test_stimuli_design_refuses_a_users_design_json_in_one_line(tmp_path, capsys):
+    from lgp.cli import run_cli
+    from stimuli.design.__main__ import main
+
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "design.json").write_text('{"my": "interior design notes"}')
+    code = run_cli(main, ["--out", str(user), "--candidates", "10", "--trials", "5"], prog="python -m stimuli.design")
+    assert code == 2 and "its design.json was not written by this command" in capsys.readouterr().err
+    assert [p.name for p in user.iterdir()] == ["design.json"]

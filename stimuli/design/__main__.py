@@ -155,9 +155,9 @@ def claim_folder(out: Path) -> list[str]:
             mine = [str(n) for n in json.loads(record.read_text()).get("written", [])]
         except (ValueError, AttributeError, TypeError):
             mine = []
-    from lgp.owned import refuse_foreign_folder
+    from lgp.owned import json_record, refuse_foreign_folder
 
-    refuse_foreign_folder(out, "design.json")
+    refuse_foreign_folder(out, "design.json", is_ours=json_record("written", "config"))
     foreign = sorted(p.name for p in out.glob("*.yaml") if p.name not in mine)
     if foreign:
         from lgp.errors import InputError
