@@ -208,6 +208,15 @@ def _study(files):
     return act
 
 
+def _render(root):
+    """`act`: stimuli.render's check of its output folder (before any picture renders)."""
+    import stimuli
+    from stimuli.render.run import _refuse_foreign
+
+    _refuse_foreign(root, ["1E-A.png", "1E-B.png"])
+    return f"accepted ({len(stimuli.trial_ids())} trials)"
+
+
 def output_cases(tmp: Path):
     """What lgp.reproduce and stimuli.experiment do with a folder that holds what they
     did not write: a refusal must leave it byte-identical; a kept case must keep
@@ -258,3 +267,16 @@ def output_cases(tmp: Path):
         lambda: _folder(tmp, {"thesis.tex": "x", "index.html": "mine", "study.json": json.dumps(stray)}), _study({}))
     yield "stimuli.experiment: a study.json of another program", _untouched(
         lambda: _folder(tmp, {"study.json": '{"x": 1}'}), _study({}))
+
+    yield "stimuli.render --out DIR: the user's 1E-A.png and thesis.txt, no renders.json (overwritten before)", _untouched(
+        lambda: _folder(tmp, {"1E-A.png": b"\x89PNG my photograph", "thesis.txt": "x"}), _render)
+    yield "stimuli.render: a renders.json of another program", _untouched(
+        lambda: _folder(tmp, {"renders.json": '{"pictures": "queue"}'}), _render)
+    from lgp.owned import csv_record, json_record, refuse_foreign_folder
+
+    for command, record, ours in (("analysis.mental_jenga", "summary.json", json_record("rules", "human_means")),
+                                  ("analysis.power", "power.csv", csv_record("world", "procedure", "verdict")),
+                                  ("stimuli.design", "design.json", json_record("written", "config"))):
+        yield f"{command}: the user's own {record} beside their notes (licensed writing before)", _untouched(
+            lambda record=record: _folder(tmp, {record: "mine\n", "notes.md": "mine"}),
+            lambda r, record=record, ours=ours: refuse_foreign_folder(r, record, is_ours=ours))
