@@ -31,12 +31,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from lgp.errors import InputError
 from stimuli.mental_jenga import BRICK_A, MentalJengaError, read_predictions, read_scenes
 
 #: sigma grids: authors' units for "authors-x" (their level k is 0.03 k), a fraction
 #: of the brick's edge along each axis for "paper-3d".
 DEFAULT_GRID = tuple(round(0.01 * k, 2) for k in range(31))
 RULES = ("authors-x", "paper-3d")
+#: The rules of the 2-D Box2D engine (models/box2d_engine.py): the authors' own.
+BOX2D_RULES = ("authors-x",)
 KIND = "mjruns"
 
 
@@ -46,6 +49,9 @@ KIND = "mjruns"
 def _code_key(engine: str = "mujoco") -> dict:
     from lgp.app.cache import library_versions, modules_digest
 
+    if engine == "box2d":
+        return {"code": modules_digest("models.counterfactual", "models.box2d_engine"),
+                "libraries": library_versions(("numpy", "Box2D"))}
     libs = ("mujoco", "numpy") if engine == "mujoco" else ("mujoco", "numpy", "sapien")
     return {"code": modules_digest("models.counterfactual"), "libraries": library_versions(libs)}
 
@@ -74,6 +80,9 @@ def simulate_all(scenes, rules, sigmas, n_runs: int, seed: int, cache_dir: Path,
         from models.risk.physx_engine import PROFILES
 
         extra = {"engine": engine, "physx": asdict(PROFILES["faithful"])}
+    elif engine == "box2d":
+        base.pop("settings")  # the Box2D world has the authors' settings only (models/box2d_engine.py)
+        extra = {"engine": engine}
     tables, todo = {}, []
     for s in scenes:
         for rule in rules:
@@ -295,7 +304,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     ap.add_argument("--runs", type=int, default=100)
     ap.add_argument("--sigmas", default=None, help="comma-separated grid (default 0, 0.01, ..., 0.30)")
-    ap.add_argument("--rules", default=",".join(RULES))
+    ap.add_argument("--rules", default=None, help=f"comma-separated noise rules (default {','.join(RULES)}; "
+                    f"with --engine box2d, a 2-D world: {','.join(BOX2D_RULES)})")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--engine", default="mujoco", help="mujoco (default) or physx (the sapien package)")
     ap.add_argument("--jobs", type=int, default=2)
@@ -305,14 +315,20 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     try:
         sigmas = DEFAULT_GRID if args.sigmas is None else tuple(float(v) for v in args.sigmas.split(","))
-        rules = tuple(args.rules.split(","))
-        bad = [r for r in rules if r not in RULES]
         from models.counterfactual import WORLDS
 
         if args.engine not in WORLDS:
             raise MentalJengaError(f"unknown --engine {args.engine!r}; known: {', '.join(WORLDS)}")
+        known = BOX2D_RULES if args.engine == "box2d" else RULES
+        rules = known if args.rules is None else tuple(args.rules.split(","))
+        bad = [r for r in rules if r not in known]
+        if args.engine == "box2d":
+            from models.box2d_engine import import_box2d
+
+            import_box2d()  # the one-line hint of the extra to install, before anything is written
         if bad or args.runs < 1 or any(not np.isfinite(s) or s < 0 for s in sigmas):
-            raise MentalJengaError(f"--rules must be among {', '.join(RULES)}, --runs >= 1, sigmas finite and >= 0")
+            raise MentalJengaError(f"--rules must be among {', '.join(known)} (engine {args.engine}), --runs >= 1, "
+                                   "sigmas finite and >= 0")
         from lgp.owned import json_record, refuse_foreign_folder
 
         refuse_foreign_folder(Path(args.out), "summary.json", is_ours=json_record("rules", "human_means"))  # before the simulations, not after
@@ -324,7 +340,7 @@ def main(argv=None) -> int:
             except (OSError, ValueError, KeyError, TypeError) as e:
                 raise MentalJengaError(f"{args.fixed}: not a summary.json of analysis.mental_jenga ({type(e).__name__}: {e})") from None
         s = analyse(args.repo, args.experiment, args.out, sigmas, args.runs, args.seed, args.jobs, rules, args.cache, fixed=fixed, engine=args.engine)
-    except (MentalJengaError, ValueError) as e:
+    except (MentalJengaError, ValueError, InputError) as e:
         print(f"analysis.mental_jenga: {e}", file=sys.stderr)
         return 2
     for rule, v in s["rules"].items():

@@ -296,8 +296,11 @@ class PhysxJengaWorld:
         return fallen
 
 
-#: The engines a counterfactual run can use, by name.
-WORLDS = {"mujoco": JengaWorld, "physx": PhysxJengaWorld}
+from models.box2d_engine import Box2DJengaWorld, Box2DNoise  # noqa: E402 (pybox2d itself is imported when a world is made)
+
+#: The engines a counterfactual run can use, by name. "box2d" is the authors' own
+#: engine in their 2-D world (models/box2d_engine.py; the optional extra `box2d`).
+WORLDS = {"mujoco": JengaWorld, "physx": PhysxJengaWorld, "box2d": Box2DJengaWorld}
 
 
 class Perturbation:
@@ -427,7 +430,7 @@ def counterfactual_runs(scene: JengaScene, rule: str, sigmas, n_runs: int, seed:
     import pandas as pd
 
     world = make_world(scene, settings, engine)
-    noise = Perturbation(world)
+    noise = Box2DNoise(world) if isinstance(world, Box2DJengaWorld) else Perturbation(world)
     z = draw_normals(n_runs, world.n, seed, scene.trial)
     rows = []
     names = [b.name for b in scene.bricks]
