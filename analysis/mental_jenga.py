@@ -64,12 +64,14 @@ def _simulate(scene, rule, sigmas, n_runs, seed, engine="mujoco"):
     return df, time.process_time() - t0
 
 
-def simulate_all(scenes, rules, sigmas, n_runs: int, seed: int, cache_dir: Path, jobs: int = 2, log=sys.stderr,
+def simulate_all(scenes, rules, sigmas, n_runs: int, seed: int, cache_dir: Path, jobs: int = 2, log=None,
                  engine: str = "mujoco"):
     """Per-run table of every (scene, rule): trial, rule, sigma, run, fallen, ids;
     each (scene, rule) a cache entry keyed by its inputs, computed on `jobs` processes."""
     from lgp.app.cache import Cache, input_key
     from models.counterfactual import FallSettings
+
+    log = sys.stderr if log is None else log  # the stream of the moment (a default bound at import outlives a test's capture)
 
     cache = Cache(cache_dir)
     base = {**_code_key(engine), "settings": FallSettings().as_dict(), "sigmas": list(map(float, sigmas)), "runs": n_runs, "seed": seed}
@@ -192,7 +194,7 @@ def sigma_units(rule: str, sigma: float) -> dict:
 
 
 def analyse(repo, experiment: int, out, sigmas=DEFAULT_GRID, n_runs: int = 100, seed: int = 0, jobs: int = 2,
-            rules=RULES, cache_dir=None, log=sys.stderr, fixed: dict | None = None, engine: str = "mujoco") -> dict:
+            rules=RULES, cache_dir=None, log=None, fixed: dict | None = None, engine: str = "mujoco") -> dict:
     """The whole check (module docstring). `fixed` ({rule: sigma}, e.g. the best sigmas
     of another experiment's summary.json): r and RMSE at those sigmas too, the
     held-out test of a sigma chosen elsewhere."""
