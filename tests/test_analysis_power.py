@@ -209,20 +209,44 @@ def test_bad_worlds_are_refused_naming_the_flag(table, tmp_path):
         pw.simulate_studies(table, ["noise"], participants=1, studies=2)
 
 
-@pytest.mark.slow
-def test_power_cli_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path):
+def _bad_power_inputs(tmp_path):
+    """(argv, flag its refusal names): each refused at the door, before any simulation."""
     csv = tmp_path / "w.csv"
     pd.DataFrame({"trial": ["1E", "99H"], "mean": [0.0, 1.0]}).to_csv(csv, index=False)
-    for args, flag in [(["--world", "tallness"], "--world"), (["--world", "full:b2b1=0"], "--world"),
-                       (["--world", "full:b2b1=3,sigma=0.5"], "--world"), (["--participants", "1"], "--participants"),
-                       (["--world", f"csv:{csv}"], "--world")]:
+    return [(["--world", "tallness"], "--world"), (["--world", "full:b2b1=0"], "--world"),
+            (["--world", "full:b2b1=3,sigma=0.5"], "--world"), (["--participants", "1"], "--participants"),
+            (["--world", f"csv:{csv}"], "--world")]
+
+
+def test_power_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
+    """The command's main, in this process (its imports paid once): exit 2, one line
+    naming the flag, no output folder and no cache; a warning on the way is an error.
+    The command itself, `python -m analysis.power`, is run on one of them below."""
+    import warnings
+
+    for args, flag in _bad_power_inputs(tmp_path):
         out = tmp_path / "out"
-        r = subprocess.run([sys.executable, "-m", "analysis.power", "--out", str(out), "--cache", str(tmp_path / "c"),
-                            *args], capture_output=True, text=True)
-        assert r.returncode == 2, r.stderr
-        lines = r.stderr.strip().splitlines()
-        assert len(lines) == 1 and flag in lines[0], r.stderr
+        with warnings.catch_warnings(), pytest.raises(SystemExit) as e:
+            warnings.simplefilter("error")
+            pw.main(["--out", str(out), "--cache", str(tmp_path / "c"), *args])
+        captured = capsys.readouterr()
+        lines = captured.err.strip().splitlines()
+        assert e.value.code == 2 and captured.out == "", (args, captured)
+        assert len(lines) == 1 and flag in lines[0] and lines[0].startswith(f"{pw.PROG}: error:"), captured.err
         assert not out.exists() and not (tmp_path / "c").exists()
+
+
+@pytest.mark.slow  # a fresh interpreter importing the analysis package, ~2.5 CPU-s
+def test_power_cli_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path):
+    # the csv world: the one whose refusal reads a file of the user's (pandas on the way)
+    (args, flag), = [case for case in _bad_power_inputs(tmp_path) if case[1] == "--world" and "csv:" in case[0][1]]
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "analysis.power", "--out", str(out), "--cache", str(tmp_path / "c"),
+                        *args], capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and flag in lines[0] and "unknown trial 99H" in lines[0], r.stderr
+    assert not out.exists() and not (tmp_path / "c").exists()
 
 
 @pytest.mark.slow
@@ -251,7 +275,7 @@ def test_read_trial_table_refuses_a_missing_or_broken_run_naming_results_and_rea
     risk = pd.DataFrame([(t, s, 0.0) for s in (0.1, 0.2) for t in T], columns=["trial", "sigma", "risk"])
     risk.iloc[:-1].to_csv(tmp_path / "risk.csv", index=False)                 # 12H lacks sigma 0.2
     with pytest.raises(pw.PowerInputError, match="no risk for trial 12H at sigma 0.2"):
-        pw.read_trial_table(tmp_path, samples=2)
+        pw.read_trial_table(tmp_path, samples=1)   # the heuristics of one layout: the refusal is risk.csv's
     risk.to_csv(tmp_path / "risk.csv", index=False)
     t = pw.read_trial_table(tmp_path, samples=2)
     assert t.trials == tuple(T) and np.allclose(t.effort, effort.groupby("trial", sort=False)["effort"].mean())
