@@ -5,6 +5,7 @@ Plans are checked by tests/plan_checker.py, written apart from the planner and
 lgp.scene (its own box geometry)."""
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -81,6 +82,12 @@ def test_carry_bound_is_the_straight_constant_speed_carry():
 
 
 def _paper_plan(trial_id, sample=0):
+    """The paper planner's plan of layout `sample` of seed 0 (planned once per module)."""
+    return _planned(trial_id, sample)
+
+
+@functools.lru_cache(maxsize=None)  # a plan is read, never changed: several tests read the same trial's plan
+def _planned(trial_id, sample):
     from lgp.planner import plan
 
     trial = stimuli.load_trial(trial_id)
@@ -122,12 +129,20 @@ def test_lower_bound_holds_without_legs():
 # ----------------------------------------------------------------------------- never worse than the paper
 
 
+@functools.lru_cache(maxsize=None)  # a result is read, never changed
+def _searched(trial_id):
+    """The search's result on layout 0 of seed 0, the layout of _paper_plan(trial_id)
+    (searched once per module)."""
+    trial = stimuli.load_trial(trial_id)
+    rng = sample_rng(0, 0)
+    return search(trial.sample_initial(rng), trial.target, rng)
+
+
 @pytest.mark.parametrize("trial_id", [pytest.param("7H", marks=pytest.mark.slow), "10H", "6E"])
 def test_search_never_returns_more_effort_than_the_paper_planner(trial_id):
     trial = stimuli.load_trial(trial_id)
     paper = kinetic_energy(_paper_plan(trial_id))
-    rng = sample_rng(0, 0)
-    result = search(trial.sample_initial(rng), trial.target, rng)
+    result = _searched(trial_id)
     assert result.paper_effort == pytest.approx(paper, rel=1e-12)
     assert result.effort <= paper
     assert check_plan(result.plan, trial.target) == []
@@ -142,9 +157,7 @@ def test_a_closed_gap_does_not_cover_the_order_of_the_same_carries():
     from lgp.planner import plan_symbolic
     from lgp.symbolic import SymbolicPlan
 
-    trial = stimuli.load_trial("2H")
-    rng = sample_rng(0, 0)
-    result = search(trial.sample_initial(rng), trial.target, rng)
+    result = _searched("2H")
     s = result.symbolic
     carries = [s.actions[k:k + 2] for k in range(0, len(s.actions), 2)]
     reversed_order = SymbolicPlan(s.initial, s.target, s.assignment, tuple(a for c in carries[::-1] for a in c))
@@ -231,12 +244,13 @@ def test_search_plans_a_generated_set_of_20_rearrangements_and_each_plan_passes_
 @pytest.mark.slow
 def test_search_never_returns_more_effort_than_the_paper_planner_on_any_paper_trial():
     # layout 0 of seed 0 of all 24 trials (docs/results.md has all 30 layouts)
+    # the paper plans and the searches some are shared with the tests above (planned once per module)
     for trial_id in stimuli.trial_ids():
         trial = stimuli.load_trial(trial_id)
         paper = kinetic_energy(_paper_plan(trial_id))
-        rng = sample_rng(0, 0)
-        result = search(trial.sample_initial(rng), trial.target, rng)
+        result = _searched(trial_id)
         assert result.effort <= paper, trial_id
+        assert result.paper_effort == pytest.approx(paper, rel=1e-12), trial_id
         assert check_plan(result.plan, trial.target) == [], trial_id
 
 
@@ -285,20 +299,14 @@ def test_a_budget_that_is_not_positive_is_refused_in_one_line(argv, message, cap
 
 @pytest.mark.slow
 def test_reproduce_runs_generated_rearrangements_end_to_end_with_the_search(tmp_path):
-    import os
-    import subprocess
-    import sys
-
+    # the command's main in this process (its imports paid once; test_cli checks `python -m` itself)
     import pandas as pd
+    from lgp import reproduce
     from stimuli.generate import generate
 
     generate(tmp_path / "set", 2, seed=0, kind="rearrange")
-    root = Path(__file__).resolve().parent.parent
-    env = {**os.environ, "PYTHONPATH": str(root) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    r = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--stimuli", str(tmp_path / "set"), "--out", str(tmp_path / "out"),
-                        "--samples", "1", "--n-sims", "2", "--sigmas", "0.05", "--jobs", "1", "--planner", "search"],
-                       cwd=root, env=env, capture_output=True, text=True, timeout=900)
-    assert r.returncode == 0, r.stderr[-2000:]
+    assert reproduce.main(["--stimuli", str(tmp_path / "set"), "--out", str(tmp_path / "out"), "--samples", "1",
+                           "--n-sims", "2", "--sigmas", "0.05", "--jobs", "1", "--planner", "search"]) == 0
     samples = pd.read_csv(tmp_path / "out" / "effort_samples.csv")
     assert (samples["set_asides"] > 0).all() and samples["paper_effort"].isna().all()
     assert (tmp_path / "out" / "replays" / "R0001.html").exists()
