@@ -439,7 +439,7 @@ def test_model_comparison_counts_pairs_ordered_out_of_sample_by_the_tie_rule(E):
 
 
 @pytest.mark.slow
-def test_recovery_cli_writes_only_simulated_files_and_refuses_bad_counts(tmp_path, E):
+def test_recovery_cli_writes_only_simulated_files_and_refuses_bad_counts(tmp_path, E, capsys):
     results = tmp_path / "results"
     results.mkdir()
     pd.DataFrame({"trial": list(TRIAL_IDS), "sample": 0, "effort": E.to_numpy()}).to_csv(results / "effort_samples.csv", index=False)
@@ -449,15 +449,20 @@ def test_recovery_cli_writes_only_simulated_files_and_refuses_bad_counts(tmp_pat
     bad = subprocess.run(cmd[:-5] + ["--studies", "2.5", "--out", str(tmp_path / "bad")], capture_output=True, text=True)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "--studies" in bad.stderr
     assert not (tmp_path / "bad").exists()
-    ok = subprocess.run(cmd + ["--out", str(tmp_path / "rec")], capture_output=True, text=True)
-    assert ok.returncode == 0, ok.stderr
+    # the rest through the command's own main and its run_cli wrapper, in this process (imports paid once)
+    from analysis import recovery as command
+    from lgp.cli import run_cli
+
+    argv = cmd[3:]
+    assert run_cli(command.main, argv + ["--out", str(tmp_path / "rec")], prog=command.PROG) == 0
     written = sorted(p.name for p in (tmp_path / "rec").iterdir())
     assert written and all(name.startswith("simulated_") for name in written)
     human = tmp_path / "human"
     human.mkdir()
     pd.DataFrame([{"human_data": True}]).to_csv(human / "settings.csv", index=False)
-    refused = subprocess.run(cmd + ["--out", str(human)], capture_output=True, text=True)
-    assert refused.returncode == 1 and "human-data analysis" in refused.stderr
+    capsys.readouterr()
+    assert run_cli(command.main, argv + ["--out", str(human)], prog=command.PROG) == 1
+    assert "human-data analysis" in capsys.readouterr().err
     assert sorted(p.name for p in human.iterdir()) == ["settings.csv"]
 
 
