@@ -26,6 +26,23 @@ def _distributed():
 
     # Workers unpickle functions by module name; this test file is not importable there.
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    yield
+    _stop_dask_offload_thread()
+
+
+def _stop_dask_offload_thread() -> None:
+    """distributed keeps a thread ("Dask-Offload") alive after its clients close. A
+    process with a second thread starts its worker pools by spawn, not fork
+    (lgp.executor), and a spawned worker imports the pipeline again: ~2.5 CPU-s per
+    worker of every later pool in this pytest process. Swap in a fresh executor (it
+    starts a thread only when used again) and let the old thread end."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import distributed.utils
+
+    old = distributed.utils._offload_executor
+    distributed.utils._offload_executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="Dask-Offload")
+    old.shutdown(wait=True)
 
 RUN = ["--trials", "1E", "4H", "10E", "--samples", "2", "--n-sims", "4", "--sigmas", "0.05", "0.08", "--no-replays"]
 
