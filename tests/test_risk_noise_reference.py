@@ -115,10 +115,34 @@ def test_vectorised_noise_rule_equals_the_per_run_rule_on_every_trial(trial):
     assert_same_as_reference(trial, [3], 8, [0.05, 0.065, 0.1, 0.4])
 
 
+def noise_inputs(scene) -> tuple:
+    """All the noise rule reads of a scene (NoiseRule and reference_positions alike):
+    block centres, sizes and yaws in block order, and the fixed boxes."""
+    return (scene.positions.tobytes(), np.array([b.size for b in scene.blocks]).tobytes(),
+            tuple(float(b.yaw) for b in scene.blocks), tuple((tuple(f.p_WO), tuple(f.size)) for f in scene.fixed))
+
+
+#: Each trial -> the first trial whose B gives the noise rule the same inputs (the
+#: same blocks at the same places in the same order: 2H copies 2E; 9E, 9H, 11E and
+#: 11H copy 1H). Same inputs, same arithmetic: one check stands for the copies.
+_first: dict = {}
+FIRST_SAME_INPUTS = {tid: _first.setdefault(noise_inputs(scene), tid) for tid, scene in TRIALS.items()}
+
+
+def test_a_copied_b_gives_the_noise_rule_the_numbers_of_the_b_it_copies():
+    copies = {tid: first for tid, first in FIRST_SAME_INPUTS.items() if tid != first}
+    assert copies == {"2H": "2E", "9E": "1H", "9H": "1H", "11E": "1H", "11H": "1H"}
+    for tid, first in copies.items():
+        z = draw_normals(40, len(TRIALS[tid]), 0)
+        assert np.array_equal(NoiseRule(TRIALS[tid]).positions(0.4, z), NoiseRule(TRIALS[first]).positions(0.4, z)), tid
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("trial", list(TRIALS))
+@pytest.mark.parametrize("trial", [tid for tid, first in FIRST_SAME_INPUTS.items() if tid == first])
 def test_vectorised_noise_rule_equals_the_per_run_rule_over_the_paper_grid(trial):
-    """All 24 trials, the paper's sigma grid plus heavier noise, 40 runs x 3 seeds."""
+    """All 24 trials, the paper's sigma grid plus heavier noise, 40 runs x 3 seeds
+    (a trial whose B copies an earlier one's blocks in order, 2H, 9E, 9H, 11E, 11H,
+    through that one: test_a_copied_b_gives_the_noise_rule_the_numbers_of_the_b_it_copies)."""
     assert_same_as_reference(trial, [0, 1, 2], 40, [*SIGMA_GRID, 0.2, 0.4])
 
 
