@@ -15,6 +15,15 @@
    issue's target (42 scenes x 31 sigmas x 100 runs on 2 cores).
 
     python bench/mental_jenga.py --repo /work/shared/mental-jenga/repo-exp2 [--runs 10] [--write]
+    python bench/mental_jenga.py --box2d [--runs 5] [--fit DIR]
+
+5. --box2d: the authors' own engine (models/box2d_engine.py) against MuJoCo:
+   deterministic verdicts against the authors' `fall` column and their level-0
+   output, the carried set against their `above` feature, and CPU per run side by
+   side (the authors' rule at a few sigmas, the same normals, scene by scene
+   interleaved); with --fit DIR (an `analysis.mental_jenga --engine box2d` output of
+   experiment 2) the mean count per scene at the authors' levels k (sigma 0.03 k)
+   against their own perceptual-noise outputs at level k.
 """
 from __future__ import annotations
 
@@ -167,6 +176,8 @@ def main() -> int:
                     help="only: faster MuJoCo settings (a change of the physics) against the measure's, run by run (own section)")
     ap.add_argument("--engine-sigma", type=float, default=0.18, help="the paper's rule's sigma for the engine comparison")
     ap.add_argument("--engine-runs", type=int, default=20)
+    ap.add_argument("--box2d", action="store_true", help="only: Box2D (the authors' engine) against MuJoCo (printed)")
+    ap.add_argument("--fit", default=None, help="with --box2d: an analysis.mental_jenga --engine box2d output folder")
     args = ap.parse_args()
     repo = Path(args.repo)
     load0 = machine()
@@ -176,6 +187,8 @@ def main() -> int:
         return engines_section(args, repo, scenes, load0)
     if args.variants:
         return variants_section(args, scenes, load0)
+    if args.box2d:
+        return box2d_section(args, repo, scenes, info, load0)
     big = {s.trial: s for s in read_scenes(repo, 2, scale=0.2)}
     feats = json.loads((repo / "code/R/data/features/black_exp2.json").read_text())
     n_red = agree_scale = agree_ref = agree_nodamp = agree_above = 0
@@ -319,6 +332,79 @@ the same normals in both engines.
     if args.write:
         write_section(Path(__file__).resolve().parents[1] / "docs" / "benchmarks.md",
                       "Mental Jenga engines (bench/mental_jenga.py --engines)", text)
+    return 0
+
+
+def box2d_section(args, repo: Path, scenes, info, load0: str) -> int:
+    from analysis.mental_jenga import fit_stats
+    from models.box2d_engine import Box2DJengaWorld
+    from stimuli.mental_jenga import read_predictions
+
+    feats = json.loads((repo / "code/R/data/features/black_exp2.json").read_text())
+    sims = repo / "code/R/simulations/exp2"
+    ref0 = json.loads((sims / "perceptual,impulse-aligned,dynamics_0,0,0.json").read_text())
+    n_red, agree = 0, {"box2d": 0, "mujoco": 0}
+    same_ids = {"box2d": 0, "mujoco": 0}
+    above = 0
+    cpu = {"box2d": 0.0, "mujoco": 0.0}
+    runs = {"box2d": 0, "mujoco": 0}
+    t0 = time.time()
+    for s in scenes:
+        ref = info[info.trial == s.trial].set_index("index")["fall"]
+        red = [k for k, b in enumerate(s.bricks) if not b.black]
+        n_red += len(red)
+        for e in ("box2d", "mujoco"):
+            f = deterministic_falls(s, engine=e)
+            agree[e] += int(sum(int(f[k]) == ref.get(s.bricks[k].index, 0) for k in red))
+            mine = sorted(s.bricks[k].index for k in red if f[k])
+            same_ids[e] += int(mine == sorted(ref0[f"trial_{s.trial}"][0]))
+        above += int(Box2DJengaWorld(s).carried.sum() + 1 == feats[f"trial_{s.trial}"]["above"])
+        for e in ("box2d", "mujoco"):  # interleaved scene by scene: the same load for both engines
+            c0 = time.process_time()
+            counterfactual_runs(s, "authors-x", SPEED_SIGMAS, args.runs, engine=e)
+            cpu[e] += time.process_time() - c0
+            runs[e] += len(SPEED_SIGMAS) * args.runs
+    wall = time.time() - t0
+    per = {e: cpu[e] / runs[e] for e in cpu}
+    target = 42 * 30 * 100 + 42  # sigma 0: one run per scene (equal starts once)
+    text = f"""## Mental Jenga: Box2D, the authors' engine, against MuJoCo (bench/mental_jenga.py --box2d)
+
+Machine at start: {load0}; at end: {machine()}. {wall:.0f} s wall.
+
+| measure (experiment 2, 42 scenes, {n_red} red bricks) | Box2D | MuJoCo |
+|---|---|---|
+| deterministic verdicts = the authors' `fall` column | {agree['box2d']}/{n_red} | {agree['mujoco']}/{n_red} |
+| fallen bricks (ids) = the authors' level-0 output, scenes | {same_ids['box2d']}/42 | {same_ids['mujoco']}/42 |
+| bricks the black one carries + 1 = the authors' `above` feature, scenes | {above}/42 | |
+| CPU per run, the authors' rule at sigma {", ".join(map(str, SPEED_SIGMAS))}, {args.runs} runs (with settling) | {per['box2d'] * 1000:.1f} ms | {per['mujoco'] * 1000:.1f} ms |
+| ratio MuJoCo / Box2D | {per['mujoco'] / per['box2d']:.1f} | |
+| projected CPU, full grid (42 x 31 x 100; sigma 0 once per scene) | {target * per['box2d'] / 60:.1f} min ({target * per['box2d'] / 120:.1f} min on 2 cores) | {target * per['mujoco'] / 60:.0f} min |
+"""
+    if args.fit:
+        pred = read_predictions(repo, 2)
+        human = pred.groupby("trial").response.mean()
+        means = __import__("pandas").read_csv(Path(args.fit) / "scenes.csv")
+        means = means[means.rule == "authors-x"]
+        rows = []
+        for level in range(11):
+            data = json.loads((sims / f"perceptual,impulse-aligned,dynamics_{level},0,0.json").read_text())
+            trials = sorted(human.index)
+            theirs = np.array([np.mean([len(r) for r in data[f"trial_{t}"]]) for t in trials])
+            m = means[np.isclose(means.sigma, 0.03 * level)].set_index("scene")["mean"]
+            ours = np.array([m[t] for t in trials])
+            h = human[trials].to_numpy()
+            r_eng = float(np.corrcoef(ours, theirs)[0, 1]) if np.std(ours) and np.std(theirs) else float("nan")
+            (r1, e1), (r2, e2) = fit_stats(ours, h), fit_stats(theirs, h)
+            rows.append(f"| {level} ({0.03 * level:.2f}) | {r_eng:.2f} | {np.mean(np.abs(ours - theirs)):.2f} | "
+                        f"{r1:.2f}, {e1:.2f} | {r2:.2f}, {e2:.2f} |")
+        text += f"""
+Mean count per scene at the authors' perceptual-noise levels ({args.fit}: Box2D here, 100 runs; theirs: 200
+runs, code/R/simulations/exp2), and each against the human means (r, RMSE, no linear map):
+
+| level (sigma) | r ours vs theirs | mean abs. difference | ours vs people | theirs vs people |
+|---|---|---|---|---|
+""" + "\n".join(rows) + "\n"
+    print(text)
     return 0
 
 

@@ -20,7 +20,8 @@ def test_the_command_fits_a_tiny_clone_and_reproduce_takes_its_sigma(tmp_path, c
                          "trial": [1.0, 2.0, 1.0, 2.0], "response": [1.0, 2.0, 2.0, 1.0]})  # SIMULATED
     repo = fake_repo(tmp_path, {1: "stacked", 2: "overhang"}, pred)
     out = tmp_path / "fit"
-    argv = ["--repo", str(repo), "--experiment", "2", "--out", str(out), "--runs", "2", "--sigmas", "0.05,0.2", "--jobs", "1"]
+    argv = ["--repo", str(repo), "--experiment", "2", "--out", str(out), "--runs", "2", "--sigmas", "0.05,0.2", "--jobs", "1",
+            "--engine", "mujoco"]  # the paper's rule, which --sigma-from reads, needs a 3-D engine
     assert main(argv) == 0
     printed = capsys.readouterr().out.splitlines()
     summary = json.loads((out / "summary.json").read_text())
