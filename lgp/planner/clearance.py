@@ -44,6 +44,14 @@ REFERENCE_SLACK = 0.002
 #: with IPOPT to the same optimum, 3E over 4 minutes with SNOPT and 43 s with IPOPT
 #: (docs/effort.md, "Modelling choices").
 CLEARANCE_SOLVER = "ipopt"
+#: approach_height = 0: IPOPT options of the clearance program (on top of lgp.komo.solve's).
+#: IPOPT's linear solver SPRAL by default scales the KKT matrix by a matching
+#: (spral_scaling = matching), recomputed with its ordering at every iteration (the
+#: symbolic factorisation, about 1/4 of the solve); unscaled, the 24 trials' layout 0
+#: planned in 72.4 instead of 108.5 CPU s (3E 37.5 -> 22.4, 7E 18.5 -> 13.3) to the same
+#: optimum: every effort within 1.5e-11 relative (bench/clearance.py
+#: --options measures both side by side; IPOPT's tol is 1e-9).
+CLEARANCE_OPTIONS = {"spral_scaling": "none"}
 #: approach_height = 0: the carried block's bottom corners stay this far (m) above
 #: the table top. With a bound of exactly 0 the block slides on the table right
 #: after the grasp's rest and SNOPT stalled 6e-8 m short of it (info 41, 2E); 10 um
@@ -196,7 +204,7 @@ def plan_with_clearance(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str,
         # vs 6.7 s); later rounds from the last solution, which misses only the few
         # constraints just added.
         guess = result.q[1:] if round_ >= 2 else reference.q[1:]
-        result = komo.solve(formulation=formulation, solver=CLEARANCE_SOLVER, initial_guess=guess)
+        result = komo.solve(formulation=formulation, solver=CLEARANCE_SOLVER, initial_guess=guess, options=_options())
         elapsed += result.solve_time
         if not usable(result, 0.0):
             break
@@ -209,6 +217,11 @@ def plan_with_clearance(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str,
             raise _stuck(symbolic, worst, S, round_ + 1)
     result.solve_time = elapsed
     return komo, result
+
+
+def _options() -> dict | None:
+    """CLEARANCE_OPTIONS if CLEARANCE_SOLVER is IPOPT (its option names), else none."""
+    return dict(CLEARANCE_OPTIONS) if CLEARANCE_SOLVER == "ipopt" else None
 
 
 def _reference(symbolic: SymbolicPlan, arm: Arm, rng, formulation: str, solver: str, slices_per_phase: int):
