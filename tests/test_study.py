@@ -362,20 +362,22 @@ def test_a_rendered_block_lies_where_the_camera_model_projects_it(tmp_path):
 
 
 @pytest.mark.slow
-def test_a_stimulus_folder_without_pairs_builds_with_pair_counterbalancing_off(tmp_path, monkeypatch):
+def test_a_stimulus_folder_without_pairs_builds_with_pair_counterbalancing_off(tmp_path, monkeypatch, capsys):
     """Generated trials (G0001 ...) form no easy/hard pair: the study says so and
     gives each participant their own shuffle."""
-    import subprocess
-    import sys
-
+    from lgp.cli import run_cli
+    from stimuli.experiment.__main__ import PROG, main as experiment
     from stimuli.generate import main as generate
 
     monkeypatch.setenv("LGP_RENDER_CACHE", str(tmp_path / "renders"))
     assert generate(["--out", str(tmp_path / "gen"), "--count", "3", "--seed", "1"]) == 0
-    run = subprocess.run([sys.executable, "-m", "stimuli.experiment", "--task", "difficulty", "--out", str(tmp_path / "study"),
-                          "--stimuli", str(tmp_path / "gen"), "--size", "96x64"], capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr
-    assert "pair counterbalancing is off" in run.stderr
+    capsys.readouterr()
+    # the command's main and run_cli wrapper in this process (a fresh interpreter re-imports the renderer, ~2.5 CPU-s)
+    code = run_cli(experiment, ["--task", "difficulty", "--out", str(tmp_path / "study"), "--stimuli", str(tmp_path / "gen"),
+                                "--size", "96x64"], prog=PROG)
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "pair counterbalancing is off" in err
     config = json.loads((tmp_path / "study" / "study.json").read_text())
     assert config["pair_counterbalancing"] is False and [t["id"] for t in config["trials"]] == ["G0001", "G0002", "G0003"]
     pictures = sorted(p.name for p in (tmp_path / "study" / "img").iterdir())
