@@ -189,6 +189,9 @@ def main() -> int:
         return variants_section(args, scenes, load0)
     if args.box2d:
         return box2d_section(args, repo, scenes, info, load0)
+    if args.fit:
+        print(levels_table(repo, Path(args.fit)))
+        return 0
     big = {s.trial: s for s in read_scenes(repo, 2, scale=0.2)}
     feats = json.loads((repo / "code/R/data/features/black_exp2.json").read_text())
     n_red = agree_scale = agree_ref = agree_nodamp = agree_above = 0
@@ -335,10 +338,39 @@ the same normals in both engines.
     return 0
 
 
-def box2d_section(args, repo: Path, scenes, info, load0: str) -> int:
+def levels_table(repo: Path, fit: Path) -> str:
+    """The mean count per scene of an `analysis.mental_jenga --engine box2d` run of
+    experiment 2 (fit/scenes.csv) at the authors' levels k (sigma 0.03 k) against their
+    own perceptual-noise outputs at level k, and each against the human means."""
+    import pandas as pd
+
     from analysis.mental_jenga import fit_stats
-    from models.box2d_engine import Box2DJengaWorld
     from stimuli.mental_jenga import read_predictions
+
+    sims = repo / "code/R/simulations/exp2"
+    human = read_predictions(repo, 2).groupby("trial").response.mean()
+    means = pd.read_csv(fit / "scenes.csv")
+    means = means[means.rule == "authors-x"]
+    trials = sorted(human.index)
+    rows = []
+    for level in range(11):
+        data = json.loads((sims / f"perceptual,impulse-aligned,dynamics_{level},0,0.json").read_text())
+        theirs = np.array([np.mean([len(r) for r in data[f"trial_{t}"]]) for t in trials])
+        m = means[np.isclose(means.sigma, 0.03 * level)].set_index("scene")["mean"]
+        ours = np.array([m[t] for t in trials])
+        h = human[trials].to_numpy()
+        r_eng = float(np.corrcoef(ours, theirs)[0, 1]) if np.std(ours) and np.std(theirs) else float("nan")
+        (r1, e1), (r2, e2) = fit_stats(ours, h), fit_stats(theirs, h)
+        rows.append(f"| {level} ({0.03 * level:.2f}) | {r_eng:.2f} | {np.mean(np.abs(ours - theirs)):.2f} | "
+                    f"{r1:.2f}, {e1:.2f} | {r2:.2f}, {e2:.2f} |")
+    return (f"Mean count per scene at the authors' perceptual-noise levels ({fit}: Box2D here; theirs: 200 runs, "
+            "code/R/simulations/exp2), and each against the human means (r, RMSE, no linear map):\n\n"
+            "| level (sigma) | r ours vs theirs | mean abs. difference | ours vs people | theirs vs people |\n"
+            "|---|---|---|---|---|\n" + "\n".join(rows) + "\n")
+
+
+def box2d_section(args, repo: Path, scenes, info, load0: str) -> int:
+    from models.box2d_engine import Box2DJengaWorld
 
     feats = json.loads((repo / "code/R/data/features/black_exp2.json").read_text())
     sims = repo / "code/R/simulations/exp2"
@@ -381,29 +413,7 @@ Machine at start: {load0}; at end: {machine()}. {wall:.0f} s wall.
 | projected CPU, full grid (42 x 31 x 100; sigma 0 once per scene) | {target * per['box2d'] / 60:.1f} min ({target * per['box2d'] / 120:.1f} min on 2 cores) | {target * per['mujoco'] / 60:.0f} min |
 """
     if args.fit:
-        pred = read_predictions(repo, 2)
-        human = pred.groupby("trial").response.mean()
-        means = __import__("pandas").read_csv(Path(args.fit) / "scenes.csv")
-        means = means[means.rule == "authors-x"]
-        rows = []
-        for level in range(11):
-            data = json.loads((sims / f"perceptual,impulse-aligned,dynamics_{level},0,0.json").read_text())
-            trials = sorted(human.index)
-            theirs = np.array([np.mean([len(r) for r in data[f"trial_{t}"]]) for t in trials])
-            m = means[np.isclose(means.sigma, 0.03 * level)].set_index("scene")["mean"]
-            ours = np.array([m[t] for t in trials])
-            h = human[trials].to_numpy()
-            r_eng = float(np.corrcoef(ours, theirs)[0, 1]) if np.std(ours) and np.std(theirs) else float("nan")
-            (r1, e1), (r2, e2) = fit_stats(ours, h), fit_stats(theirs, h)
-            rows.append(f"| {level} ({0.03 * level:.2f}) | {r_eng:.2f} | {np.mean(np.abs(ours - theirs)):.2f} | "
-                        f"{r1:.2f}, {e1:.2f} | {r2:.2f}, {e2:.2f} |")
-        text += f"""
-Mean count per scene at the authors' perceptual-noise levels ({args.fit}: Box2D here, 100 runs; theirs: 200
-runs, code/R/simulations/exp2), and each against the human means (r, RMSE, no linear map):
-
-| level (sigma) | r ours vs theirs | mean abs. difference | ours vs people | theirs vs people |
-|---|---|---|---|---|
-""" + "\n".join(rows) + "\n"
+        text += "\n" + levels_table(repo, Path(args.fit))
     print(text)
     return 0
 

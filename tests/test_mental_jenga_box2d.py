@@ -4,10 +4,8 @@ against what the pictures show, against MuJoCo, and against the authors' own
 deterministic verdicts on Experiment 2 where that copy is present."""
 import importlib.util
 import sys
-from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pytest
 
 from tests.test_mental_jenga import EXP2, scene
@@ -88,6 +86,7 @@ def test_noise_shifts_only_along_x_by_sigma_and_level_zero_is_no_noise():
         noise.positions("paper-3d", 0.1, z)
 
 
+@pytest.mark.slow  # 1.9 CPU-s
 def test_without_pybox2d_the_engine_says_which_extra_to_install_in_one_line(monkeypatch, tmp_path, capsys):
     from analysis.mental_jenga import main
     from models.counterfactual import make_world
