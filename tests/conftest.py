@@ -5,7 +5,9 @@
     python -m pytest -q -n 0 tests/test_x.py   # one process (pyproject's addopts run two workers)
 
 Session fixtures are per worker process: with two workers (pytest-xdist, --dist loadfile) a
-session fixture used by files on both workers is built twice.
+session fixture used by files on both workers is built twice, unless it is built once
+per suite run (`suite_folder`, `Claim`): the session's --quick run, the undisturbed pool
+run and the studies are; the first worker to ask builds, the other waits and reads.
 
 Fixtures: the trials (loaded once per session, not at import time), the synthetic
 effort and risk tables of the analysis tests, and the session's one small
@@ -34,10 +36,13 @@ and an x86-64 CPU with AVX-512 runs both. The whole fast subset passes under eac
 A tie the data leave open is broken by an explicit rule (e.g. the smaller sigma
 within 1e-9, analysis.sigma.least_sigma_index), never left to rounding.
 """
+import fcntl
 import functools
+import os
 import shutil
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -160,6 +165,72 @@ def make_risk():
     return synthetic_risk
 
 
+# ----------------------------------------------------------------------------- built once per suite run
+
+
+def suite_folder(tmp_path_factory) -> Path:
+    """A folder shared by every worker of this pytest run: under pytest-xdist each worker's
+    base temporary folder is <run>/popen-gwN, so <run>/suite; with -n 0 (no workers) the
+    session's own <run>/suite (the parent then holds other runs' folders)."""
+    base = tmp_path_factory.getbasetemp()
+    root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "suite"
+    root.mkdir(exist_ok=True)
+    return root
+
+
+class Claim:
+    """The right to build `name` in `suite_folder` (the pytest-xdist recipe: a file lock
+    under the run's shared folder). `Claim(root, name, wait=False)` takes the fcntl lock
+    <name>.lock if it is free; `.build` is True when this worker must build (nobody
+    finished it: <name>/done is absent) and then holds the lock until `finish` (or its
+    process ends, which frees the lock). With `wait=True` it waits while another worker
+    holds the lock. `.held` is False when another worker holds it (wait=False)."""
+
+    def __init__(self, root: Path, name: str, wait: bool = True):
+        self.folder, self.done = root / name, root / name / "done"
+        self._fd = os.open(root / f"{name}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError:
+            os.close(self._fd)
+            self._fd, self.held, self.build = None, False, False
+            return
+        self.held = True
+        self.build = not self.done.exists()
+        if self.build:  # nobody built it, or a worker died half way: start afresh (this run's own folder)
+            shutil.rmtree(self.folder, ignore_errors=True)
+            self.folder.mkdir()
+        else:
+            self.release()
+
+    def finish(self, text: str = "ok") -> None:
+        """Mark it built (`text`: "ok" or why not) and let the other workers read it."""
+        tmp = self.done.with_name("done.tmp")
+        tmp.write_text(text)
+        tmp.replace(self.done)
+        self.release()
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # frees the lock
+            self._fd = None
+
+
+def built_once(tmp_path_factory, name: str, build) -> Path:
+    """The folder `name` of this suite run, `build(folder)` run in it by the first worker
+    that asks (the others wait, then read it). A build that raises leaves no `done`:
+    the next worker to ask builds again (and fails again, with its own message)."""
+    claim = Claim(suite_folder(tmp_path_factory), name)
+    if claim.build:
+        try:
+            build(claim.folder)
+        except BaseException:
+            claim.release()
+            raise
+        claim.finish()
+    return claim.folder
+
+
 # ----------------------------------------------------------------------------- one small --quick run for the session
 
 #: The session's --quick run of the paper's 24 trials (2 layouts, 5 runs, 4 sigmas): the
@@ -169,14 +240,18 @@ QUICK_RUN = ["--quick", "--samples", "2", "--n-sims", "5", "--sigmas", "0.05", "
 
 class _Run:
     """`python -m lgp.reproduce ARGS --out DIR` started in the background; `wait()`
-    checks it exited 0 (the tail of its stderr if not) and returns DIR."""
+    checks it exited 0 (the tail of its stderr if not) and returns DIR. With a `claim`
+    (`Claim`): its exit status goes to the claim's `done` when the run ends, which lets
+    the other workers read DIR."""
 
-    def __init__(self, args: list[str], out: Path, log: Path):
+    def __init__(self, args: list[str], out: Path, log: Path, claim: "Claim | None" = None):
         self.out, self.log = out, log
         with open(log, "w") as err:
             self.process = subprocess.Popen([sys.executable, "-m", "lgp.reproduce", *args, "--out", str(out)],
                                             stdout=subprocess.DEVNULL, stderr=err)
         self.code = None
+        if claim is not None:
+            threading.Thread(target=lambda: claim.finish(str(self.process.wait())), daemon=True).start()
 
     def wait(self) -> Path:
         if self.code is None:
@@ -190,12 +265,41 @@ class _Run:
             self.process.wait()
 
 
+class _RunOfAnotherWorker:
+    """The session's run that another worker started: `wait()` waits for its lock (held
+    until the run ends), checks its exit status and returns its folder; if that worker
+    died before the run ended, this one runs it."""
+
+    def __init__(self, root: Path, name: str, args: list[str]):
+        self.root, self.name, self.args = root, name, args
+        self.out, self.log = root / name / "out", root / name / "stderr"
+
+    def wait(self) -> Path:
+        claim = Claim(self.root, self.name)
+        if claim.build:
+            _Run(self.args, self.out, self.log, claim).wait()
+        code = claim.done.read_text()
+        assert code == "0", f"the session's run (exit status {code}): " + self.log.read_text()[-3000:]
+        return self.out
+
+    def stop(self) -> None:
+        pass
+
+
 @pytest.fixture(scope="session")
 def quick_run_started(tmp_path_factory):
     """The session's QUICK_RUN, started (a fixture that has other work to do meanwhile,
-    as the study build, asks for this one first and waits on `quick_run`)."""
-    run = _Run(QUICK_RUN, tmp_path_factory.mktemp("quick-run"), tmp_path_factory.mktemp("quick-run-log") / "stderr")
+    as the study build, asks for this one first and waits on `quick_run`). Once per
+    suite run: the first worker to ask starts it, another waits for it (`Claim`)."""
+    root = suite_folder(tmp_path_factory)
+    claim = Claim(root, "quick-run", wait=False)
+    if claim.build:
+        run = _Run(QUICK_RUN, claim.folder / "out", claim.folder / "stderr", claim)
+    else:  # started (or finished) by another worker
+        run = _RunOfAnotherWorker(root, "quick-run", QUICK_RUN)
     yield run
+    if os.environ.get("PYTEST_XDIST_WORKER") and isinstance(run, _Run) and run.process.poll() is None:
+        run.process.wait()  # another worker may be waiting for it
     run.stop()
 
 
@@ -204,6 +308,33 @@ def quick_run(quick_run_started) -> Path:
     """The folder of the session's QUICK_RUN (read it, do not write into it: a test
     that reruns copies it first, `copy_of_run`)."""
     return quick_run_started.wait()
+
+
+# ----------------------------------------------------------------------------- the studies, built once per suite run
+
+#: The picture size of the suite's studies: larger than a laptop shows them, so that their size
+#: on screen is set by the layout (tests/test_study_layout.py). LGP_STUDY_LAYOUT_SIZE=960x640
+#: (the study's own size) makes the docs' study_trial_<W>x<H>.png screenshots.
+STUDY_SIZE = os.environ.get("LGP_STUDY_LAYOUT_SIZE", "720x480")
+
+
+@pytest.fixture(scope="session")
+def suite_studies(tmp_path_factory) -> dict:
+    """{task: folder} of the paper's three studies (`python -m stimuli.experiment --task
+    T --size STUDY_SIZE`), built once per suite run (`built_once`): the first build
+    renders the pictures into the folder's render cache (or the caller's
+    LGP_RENDER_CACHE), the other two find them there. Read them, do not write into them."""
+    from stimuli import experiment as ex
+
+    def build(root: Path) -> None:
+        env = {"LGP_RENDER_CACHE": str(root / "renders"), **os.environ}  # a render cache given by the caller is used
+        for task in ex.TASKS:
+            run = subprocess.run([sys.executable, "-m", "stimuli.experiment", "--task", task, "--out", str(root / task),
+                                  "--size", STUDY_SIZE], capture_output=True, text=True, env=env)
+            assert run.returncode == 0, run.stderr[-3000:]
+
+    root = built_once(tmp_path_factory, "studies", build)
+    return {task: root / task for task in ex.TASKS}
 
 
 def copy_of_run(run: Path, out: Path) -> Path:
@@ -301,13 +432,14 @@ def _project_env(**extra) -> dict:
 @pytest.fixture(scope="session")
 def pool_run_undisturbed(tmp_path_factory) -> Path:
     """The output folder of POOL_RUN without a fault and without a cache (once per
-    session: the worker-death and worker-stall cases compare their CSVs with it)."""
-    out = tmp_path_factory.mktemp("pool-run") / "undisturbed"
-    root = Path(__file__).resolve().parents[1]
-    ref = subprocess.run([sys.executable, *POOL_RUN, "--no-cache", "--out", str(out)], cwd=root, env=_project_env(),
-                         capture_output=True, text=True, timeout=600)
-    assert ref.returncode == 0, ref.stderr[-3000:]
-    return out
+    suite run, `built_once`: the worker-death and worker-stall cases compare their CSVs with it)."""
+    def build(folder: Path) -> None:
+        ref = subprocess.run([sys.executable, *POOL_RUN, "--no-cache", "--out", str(folder / "undisturbed")],
+                             cwd=Path(__file__).resolve().parents[1], env=_project_env(),
+                             capture_output=True, text=True, timeout=600)
+        assert ref.returncode == 0, ref.stderr[-3000:]
+
+    return built_once(tmp_path_factory, "pool-run", build) / "undisturbed"
 
 
 def pool_run_signalling_a_worker(out: Path, cue: str, sig, pause: float = 0.0, **env) -> tuple[int, str]:

@@ -34,7 +34,6 @@ pytestmark = pytest.mark.slow
 
 #: Participant numbers of the estimation tasks: two blocks of two (an even number).
 PARTICIPANTS = (0, 1, 2, 3)
-SIZE = "320x240"  # small pictures: the test is about the study, not the rendering
 TIMINGS: dict[str, list[float]] = {}
 
 
@@ -48,58 +47,19 @@ def browser():
 
 
 
-class _Started:
-    """A command started in the background; `wait()` checks it exited 0 (its stderr's tail if not)."""
-
-    def __init__(self, argv: list[str], log: Path, env=None):
-        self.log = log
-        with open(log, "w") as err:
-            self.process = subprocess.Popen([sys.executable, *argv], stdout=subprocess.DEVNULL, stderr=err, env=env)
-
-    def wait(self) -> None:
-        code = self.process.wait()
-        assert code == 0, self.log.read_text()[-3000:]
+@pytest.fixture(scope="module")
+def studies(quick_run_started, suite_studies) -> dict[str, Path]:
+    """The three tasks, built once per suite run (conftest.suite_studies: pictures of
+    conftest.STUDY_SIZE, shared with tests/test_study_layout.py) while the session's
+    --quick run runs (started first: they are independent)."""
+    return suite_studies
 
 
 @pytest.fixture(scope="module")
-def _started(quick_run_started, tmp_path_factory):
-    """The session's --quick run (conftest.QUICK_RUN) and the first study build,
-    started together (they are independent): (results folder, studies folder, the
-    builds' env, {name: _Started})."""
-    root, logs = (tmp_path_factory.mktemp(name) for name in ("studies", "logs"))
-    env = {**os.environ, "LGP_RENDER_CACHE": str(root / "renders")}
-    first = ex.TASKS[0]
-    started = {"results": quick_run_started, first: _Started(_build_argv(first, root), logs / f"{first}.err", env)}
-    yield quick_run_started.out, root, env, started
-    run = started[first]  # a fixture that failed early leaves nothing running (the session's run: conftest)
-    if run.process.poll() is None:
-        run.process.kill()
-        run.process.wait()
-
-
-def _build_argv(task: str, root: Path) -> list[str]:
-    return ["-m", "stimuli.experiment", "--task", task, "--out", str(root / task), "--size", SIZE]
-
-
-@pytest.fixture(scope="module")
-def results(_started) -> Path:
+def results(quick_run) -> Path:
     """The session's small --quick run: the effort and risk tables the simulated
     participants answer from (read only: the analysis below reruns into a copy)."""
-    out, _, _, started = _started
-    started["results"].wait()
-    return out
-
-
-@pytest.fixture(scope="module")
-def studies(_started) -> dict[str, Path]:
-    """The three tasks built; the first build renders the pictures into the shared
-    render cache, the other two (one after another, after it) find them there."""
-    _, root, env, started = _started
-    started[ex.TASKS[0]].wait()
-    for task in ex.TASKS[1:]:
-        run = subprocess.run([sys.executable, *_build_argv(task, root)], capture_output=True, text=True, env=env)
-        assert run.returncode == 0, run.stderr[-3000:]
-    return {task: root / task for task in ex.TASKS}
+    return quick_run
 
 
 @pytest.fixture(scope="module")

@@ -1,8 +1,8 @@
 """The study fits the participant's screen: a phone (390x844, and 360 px wide), laptops
 (1280x720, 1366x768) and a desktop (1920x1080).
 
-A Difficulty Estimation study and a Time Estimation study are built
-(`python -m stimuli.experiment`) and opened in headless Chromium (Debian's, via
+The suite's Difficulty Estimation and Time Estimation studies (`python -m
+stimuli.experiment`, built once per suite run: conftest.suite_studies) are opened in headless Chromium (Debian's, via
 playwright) from the local file with every network request refused. On each screen
 size the test goes through the two anchors and the first trial and checks what docs/experiment.md promises:
 nothing is wider than the window (no horizontal scroll); both pictures and the slider
@@ -16,10 +16,6 @@ picture size).
 """
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-
 import pytest
 
 from offline_browser import chromium, keep_screenshot, offline_page
@@ -28,8 +24,6 @@ pytestmark = pytest.mark.slow
 
 #: (width, height, touch screen) of the screens checked.
 SCREENS = ((390, 844, True), (360, 640, True), (1280, 720, False), (1366, 768, False), (1920, 1080, False))
-#: Pictures larger than a laptop shows them, so that their size is set by the layout.
-SIZE = os.environ.get("LGP_STUDY_LAYOUT_SIZE", "720x480")
 
 _MEASURE = """() => {
   const box = s => { const r = document.querySelector(s).getBoundingClientRect();
@@ -45,16 +39,10 @@ _MEASURE = """() => {
 
 
 @pytest.fixture(scope="module")
-def studies(tmp_path_factory):
-    root = tmp_path_factory.mktemp("studies")
-    env = {"LGP_RENDER_CACHE": str(root / "renders"), **os.environ}  # a render cache given by the caller is used
-    out = {}
-    for task in ("difficulty", "time"):
-        run = subprocess.run([sys.executable, "-m", "stimuli.experiment", "--task", task, "--out", str(root / task),
-                              "--size", SIZE], capture_output=True, text=True, env=env)
-        assert run.returncode == 0, run.stderr[-3000:]
-        out[task] = root / task
-    return out
+def studies(suite_studies):
+    """The Difficulty and Time Estimation studies with pictures of conftest.STUDY_SIZE
+    (720x480, or LGP_STUDY_LAYOUT_SIZE), built once per suite run (conftest.suite_studies)."""
+    return suite_studies
 
 
 @pytest.fixture(scope="module")
