@@ -10,9 +10,13 @@ import pytest
 
 from analysis import TIE_REL, pair_order, pair_table
 from lgp import reproduce
+from conftest import QUICK_RUN, copy_of_run
 from lgp.paper import TRIAL_IDS
 
-TINY = ["--samples", "1", "--n-sims", "2", "--sigmas", "0.065", "--jobs", "1", "--n-boot", "10", "--no-replays"]
+#: The session's --quick run's effort and risk (conftest.QUICK_RUN; a copy of its cache,
+#: `copy_of_run`, holds them), without --quick's analysis settings: one job, 10 bootstrap
+#: resamples, no replays.
+TINY = [*(a for a in QUICK_RUN if a != "--quick"), "--jobs", "1", "--n-boot", "10", "--no-replays"]
 
 
 def _listed(out: Path) -> set[str]:
@@ -40,8 +44,8 @@ def _participants(path: Path) -> str:
 
 
 @pytest.mark.slow
-def test_each_run_lists_and_leaves_only_its_own_outputs_and_reports_true_times(tmp_path, capsys):
-    out = tmp_path / "r"
+def test_each_run_lists_and_leaves_only_its_own_outputs_and_reports_true_times(tmp_path, capsys, quick_run):
+    out = copy_of_run(quick_run, tmp_path / "r")  # a first run whose results were computed by the session's run
     assert reproduce.main([*TINY, "--out", str(out), "--verbose"]) == 0
     full = capsys.readouterr()
     assert _listed(out) == _on_disk(out)
