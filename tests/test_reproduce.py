@@ -39,9 +39,10 @@ def _tables(out):
 
 
 @pytest.mark.slow
-def test_reproduce_writes_tables_and_report_then_reuses_the_cache(tmp_path, capsys):
+def test_reproduce_writes_tables_and_report_then_reuses_the_cache(undisturbed, tmp_path, capsys):
+    whole, _, result = undisturbed  # the first run of ARGS into a fresh folder
     out = tmp_path / "r"
-    result = _run([*ARGS, "--out", str(out)])
+    shutil.copytree(whole, out)
     assert _cache_counts(result) == {("effort", "hit"): 0, ("effort", "miss"): 3, ("effort", "recomputed"): 0,
                                      ("riskruns", "hit"): 0, ("riskruns", "miss"): 3, ("riskruns", "recomputed"): 0}
     assert _cache_counts(result, ["stable"])["stable", "miss"] == 3  # B checked once per trial, before effort
@@ -64,10 +65,8 @@ def test_reproduce_writes_tables_and_report_then_reuses_the_cache(tmp_path, caps
 
 
 @pytest.mark.slow
-def test_interrupted_run_resumes_to_the_same_results(tmp_path, monkeypatch, capsys):
-    whole = tmp_path / "whole"
-    reproduce.main([*ARGS, "--out", str(whole)])
-
+def test_interrupted_run_resumes_to_the_same_results(undisturbed, tmp_path, monkeypatch, capsys):
+    whole, _, _ = undisturbed  # the same command line, run once without interruption (read only)
     cut = tmp_path / "cut"
     real = models.risk.risk_table
     calls = []
@@ -203,14 +202,16 @@ def _garble(b):  # not UTF-8, in the middle of the CSV
 
 @pytest.fixture(scope="module")
 def undisturbed(tmp_path_factory):
-    """A whole run and its cache, and the same run's tables after a second, undisturbed run."""
+    """A whole run of ARGS into a fresh folder (read it, do not write into it: a test
+    that reruns copies it): (its folder, its cache entries {(kind, trial): file
+    name}, its RunResult)."""
     out = tmp_path_factory.mktemp("undisturbed") / "r"
-    assert reproduce.main([*ARGS, "--out", str(out)]) == 0
+    result = _run([*ARGS, "--out", str(out)])
     entries = {}
     for path in sorted([*(out / "cache").glob("effort-*.csv"), *(out / "cache").glob("riskruns-*.csv")]):
         entries[path.name.split("-")[0], read_entry(path)["trial"].iloc[0]] = path.name
     assert len(entries) == 6
-    return out, entries
+    return out, entries, result
 
 
 def _without_wall_clock(path):
@@ -221,7 +222,7 @@ def _without_wall_clock(path):
 @pytest.mark.slow
 @pytest.mark.parametrize("damage, effort_trial, risk_trial", [(_truncate, "9E", "10E"), (_empty, "10E", "6H"), (_garble, "6H", "9E")])
 def test_damaged_cache_entries_are_recomputed_exactly_and_the_run_ends_the_same(undisturbed, tmp_path, capsys, damage, effort_trial, risk_trial):
-    whole, entries = undisturbed
+    whole, entries, _ = undisturbed
     out = tmp_path / "r"
     shutil.copytree(whole, out)
     damaged = {out / "cache" / entries["effort", effort_trial], out / "cache" / entries["riskruns", risk_trial]}
