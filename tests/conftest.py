@@ -276,8 +276,8 @@ class _RunOfAnotherWorker:
 
     def wait(self) -> Path:
         claim = Claim(self.root, self.name)
-        if claim.build:
-            _Run(self.args, self.out, self.log, claim).wait()
+        if claim.build:  # the worker that started it ended before the run did: run it here
+            return _Run(self.args, self.out, self.log, claim).wait()
         code = claim.done.read_text()
         assert code == "0", f"the session's run (exit status {code}): " + self.log.read_text()[-3000:]
         return self.out

@@ -1,0 +1,59 @@
+"""A product of the suite (the session's --quick run, the studies) is built once per
+pytest run, whichever xdist worker asks first (conftest.Claim, conftest.built_once):
+the first claim builds and holds the lock; a claim made meanwhile does not build; once
+it is finished every later claim reads it; a build that fails leaves it to the next."""
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from conftest import Claim, built_once, suite_folder
+
+
+def test_the_first_claim_builds_a_claim_meanwhile_waits_and_a_later_one_reads(tmp_path):
+    first = Claim(tmp_path, "product", wait=False)
+    assert first.build and first.folder.is_dir()
+    meanwhile = Claim(tmp_path, "product", wait=False)  # another open file: the lock is held
+    assert not meanwhile.held and not meanwhile.build
+    (first.folder / "table.csv").write_text("x\n")
+    first.finish()
+    later = Claim(tmp_path, "product")
+    assert not later.build and (later.folder / "table.csv").read_text() == "x\n"
+
+
+def test_a_claim_in_another_process_waits_for_the_build_to_finish(tmp_path):
+    first = Claim(tmp_path, "product", wait=False)
+    root = str(Path(__file__).parent)
+    asking = tmp_path / "asking"
+    script = ("import sys; sys.path.insert(0, %r); from pathlib import Path; from conftest import Claim;"
+              "Path(%r).touch(); c = Claim(Path(%r), 'product');"
+              "print(c.build, (c.folder / 'table.csv').read_text().strip())") % (root, str(asking), str(tmp_path))
+    other = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True,
+                             env={**os.environ, "PYTHONPATH": str(Path(root).parent)})
+    deadline = time.monotonic() + 60
+    while not asking.exists() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.2)  # the other process is waiting on the lock now
+    assert other.poll() is None
+    (first.folder / "table.csv").write_text("built\n")
+    first.finish()
+    out, _ = other.communicate(timeout=60)
+    assert other.returncode == 0 and out.split() == ["False", "built"]
+
+
+def test_a_failed_build_is_built_again_by_the_next_worker_that_asks(tmp_path_factory):
+    calls = []
+
+    def fails(folder):
+        calls.append(folder)
+        raise RuntimeError("no disk")
+
+    with pytest.raises(RuntimeError, match="no disk"):
+        built_once(tmp_path_factory, "sharing-test", fails)
+    folder = built_once(tmp_path_factory, "sharing-test", lambda f: (f / "ok").write_text("y"))
+    assert len(calls) == 1 and (folder / "ok").read_text() == "y"
+    assert built_once(tmp_path_factory, "sharing-test", fails) == folder and len(calls) == 1  # built: read, not rebuilt
+    assert folder.parent == suite_folder(tmp_path_factory)
