@@ -78,8 +78,12 @@ def run(command: str, jobs: int, folder: Path) -> dict:
 
 
 def _write_csv(path: Path, old: list[dict], rows: list[dict]) -> list[dict]:
+    """The CSV's earlier rows with this run's `rows` in place of those of the commands
+    they measure: a command that has no new row yet (it failed, or the run was stopped)
+    keeps its earlier rows."""
     order = {COMMANDS[n][0]: k for k, n in enumerate(COMMANDS)}
-    table = sorted(old + rows, key=lambda r: (order.get(r["command"], 99), -int(r["jobs"]), r["cache"]))
+    measured = {r["command"] for r in rows}
+    table = sorted([r for r in old if r["command"] not in measured] + rows, key=lambda r: (order.get(r["command"], 99), -int(r["jobs"]), r["cache"]))
     with path.open("w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=FIELDS)
         w.writeheader()
@@ -99,7 +103,7 @@ def main(argv=None) -> int:
     old = []
     if args.csv.exists():
         with args.csv.open() as f:
-            old = [r for r in csv.DictReader(f) if r["command"] not in {COMMANDS[n][0] for n in names}]
+            old = list(csv.DictReader(f))
     start, rows = machine(), []
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
