@@ -467,16 +467,18 @@ def test_recovery_cli_writes_only_simulated_files_and_refuses_bad_counts(tmp_pat
 
 
 @pytest.mark.slow
-def test_reproduce_writes_the_comparison_the_permutations_and_the_recovery(tmp_path, capsys):
+def test_reproduce_writes_the_comparison_the_permutations_and_the_recovery(tmp_path, capsys, quick_run):
     # Random responses in the human-data format stand in for a file (no claim is tested on them).
+    # The effort and risk are the session's --quick run's (a copy of its cache: nothing recomputed).
+    from conftest import QUICK_RUN, copy_of_run
     from lgp import reproduce
 
     rng = np.random.default_rng(0)
     rows = [(d, f"p{k}", t, float(rng.normal())) for d in ("difficulty", "time") for k in range(8) for t in TRIAL_IDS]
     path = tmp_path / "h.csv"
     pd.DataFrame(rows, columns=["dataset", "participant", "trial", "response"]).to_csv(path, index=False)
-    out = tmp_path / "r"
-    args = ["--samples", "1", "--n-sims", "4", "--sigmas", "0.065", "0.1", "--jobs", "1", "--n-boot", "20",
+    out = copy_of_run(quick_run, tmp_path / "r")
+    args = [*(a for a in QUICK_RUN if a != "--quick"), "--jobs", "1", "--n-boot", "20",
             "--no-replays", "--out", str(out), "--human-data", str(path), "--n-perm", "9", "--recovery",
             "--recovery-studies", "4"]
     capsys.readouterr()
