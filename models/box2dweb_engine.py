@@ -136,9 +136,9 @@ class Box2DWebJengaWorld:
         f[[self.position[int(k)] for k in ids]] = True
         return f & ~self.black
 
-    def runs(self, starts, early_stop: bool = EARLY_STOP) -> list[np.ndarray]:
-        """One Node process for every start (each (n, 3) as Box2DNoise.positions
-        gives, or None: no noise). Returns (n,) bools per start."""
+    def batch(self, starts) -> dict:
+        """The scene with its starts (each (n, 3) as Box2DNoise.positions gives, or
+        None: no noise) in jenga.js's input format."""
         runs = []
         for start in starts:
             dx = np.zeros(len(self.bricks_a))
@@ -147,8 +147,16 @@ class Box2DWebJengaWorld:
                 dx[self.file_index] = start[:, 0]
                 sleep = bool(np.any(start[:, 1] > 0))
             runs.append({"dx": dx.tolist(), "sleep": sleep})
-        (res,) = run_batch([self._scene(runs=runs)], early_stop)
-        return [self._fallen(ids) for ids in res["fallen"]]
+        return self._scene(runs=runs)
+
+    def fallen(self, result: dict) -> list[np.ndarray]:
+        """(n,) bools per run of jenga.js's result for this scene."""
+        return [self._fallen(ids) for ids in result["fallen"]]
+
+    def runs(self, starts, early_stop: bool = EARLY_STOP) -> list[np.ndarray]:
+        """One Node process for every start (batch). Returns (n,) bools per start."""
+        (res,) = run_batch([self.batch(starts)], early_stop)
+        return self.fallen(res)
 
     def run(self, start: np.ndarray | None = None) -> np.ndarray:
         """One counterfactual run: (n,) bools, True for a red brick that fell."""
