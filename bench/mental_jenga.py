@@ -186,7 +186,7 @@ def main() -> int:
     ap.add_argument("--engine-sigma", type=float, default=0.18, help="the paper's rule's sigma for the engine comparison")
     ap.add_argument("--engine-runs", type=int, default=20)
     ap.add_argument("--box2d", action="store_true", help="only: Box2D (the authors' engine) against MuJoCo (printed)")
-    ap.add_argument("--fit", default=None, help="with --box2d: an analysis.mental_jenga --engine box2d output folder")
+    ap.add_argument("--fit", default=None, help="an analysis.mental_jenga output folder of experiment 2 in a 2-D engine (box2dweb or box2d): its means at the authors' levels against theirs")
     ap.add_argument("--box2dweb", action="store_true",
                     help="only: box2dweb (the authors' exact engine) against their saved runs, and its speed beside "
                          "pybox2d and MuJoCo (own section with --write)")
