@@ -5,8 +5,9 @@ of `cicl-stanford/mental_jenga` (stimuli/mental_jenga.py).
     python -m analysis.mental_jenga --repo PATH --experiment 2 --out DIR [--runs 100] [--jobs 2] [--engine mujoco]
 
 Per noise rule and sigma on a grid: the model's mean count of red bricks off the
-table per scene (models/counterfactual.py: by default in the authors' own engine, Box2D, with their x-only
-noise; MuJoCo or PhysX with --engine, which also draw the paper's 3-D rule) against the human mean per
+table per scene (models/counterfactual.py: by default in the authors' exact engine,
+box2dweb through Node, with their x-only noise; pybox2d, MuJoCo or PhysX with
+--engine, the last two also drawing the paper's 3-D rule) against the human mean per
 scene: Pearson r and RMSE of the raw counts (no linear map: the model predicts a
 count in the same unit as the answer). The best sigma is the one of least RMSE
 (ties to the smaller sigma), with a bootstrap interval over participants
@@ -39,11 +40,14 @@ from stimuli.mental_jenga import BRICK_A, MentalJengaError, read_predictions, re
 #: of the brick's edge along each axis for "paper-3d".
 DEFAULT_GRID = tuple(round(0.01 * k, 2) for k in range(31))
 RULES = ("authors-x", "paper-3d")
-#: The command's engine: the authors' own (Box2D, models/box2d_engine.py). It
-#: reproduces their deterministic verdicts best (579 of 588 red bricks of
-#: experiment 2, MuJoCo 554) and their perceptual-noise means (docs/mental-jenga.md).
-DEFAULT_ENGINE = "box2d"
-#: The rules of the 2-D Box2D engine (models/box2d_engine.py): the authors' own.
+#: The command's engine: the authors' exact one, box2dweb (Box2D 2.1a in JavaScript,
+#: through Node; models/box2dweb_engine.py). It reproduces their saved perceptual-noise
+#: runs run for run (every one of the first 100 runs of the 42 scenes of experiment 2
+#: at level 8); pybox2d ("box2d", Box2D 2.3) does not: it finds other contact points
+#: and loses no brick in scenes 26 and 35 (docs/mental-jenga.md).
+DEFAULT_ENGINE = "box2dweb"
+#: The 2-D engines (the authors' world) and their rules: the authors' own.
+ENGINES_2D = ("box2dweb", "box2d")
 BOX2D_RULES = ("authors-x",)
 KIND = "mjruns"
 
@@ -57,16 +61,29 @@ def _code_key(engine: str = "mujoco") -> dict:
     if engine == "box2d":
         return {"code": modules_digest("models.counterfactual", "models.box2d_engine"),
                 "libraries": library_versions(("numpy", "Box2D"))}
+    if engine == "box2dweb":
+        from models.box2dweb_engine import engine_versions, node_version
+
+        return {"code": modules_digest("models.counterfactual", "models.box2dweb_engine"),
+                "libraries": library_versions(("numpy",)), "box2dweb": {**engine_versions(), "node": node_version()}}
     libs = ("mujoco", "numpy") if engine == "mujoco" else ("mujoco", "numpy", "sapien")
     return {"code": modules_digest("models.counterfactual"), "libraries": library_versions(libs)}
+
+
+def _cpu() -> float:
+    """CPU seconds of this process and of its finished children (box2dweb's Node processes)."""
+    import resource
+
+    c = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + c.ru_utime + c.ru_stime
 
 
 def _simulate(scene, rule, sigmas, n_runs, seed, engine="mujoco"):
     from models.counterfactual import counterfactual_runs
 
-    t0 = time.process_time()
+    t0 = _cpu()
     df = counterfactual_runs(scene, rule, sigmas, n_runs, seed, engine=engine)
-    return df, time.process_time() - t0
+    return df, _cpu() - t0
 
 
 def simulate_all(scenes, rules, sigmas, n_runs: int, seed: int, cache_dir: Path, jobs: int = 2, log=None,
@@ -87,8 +104,8 @@ def simulate_all(scenes, rules, sigmas, n_runs: int, seed: int, cache_dir: Path,
         from models.risk.physx_engine import PROFILES
 
         extra = {"engine": engine, "physx": asdict(PROFILES["faithful"])}
-    elif engine == "box2d":
-        base.pop("settings")  # the Box2D world has the authors' settings only (models/box2d_engine.py)
+    elif engine in ENGINES_2D:
+        base.pop("settings")  # the Box2D worlds have the authors' settings only (models/box2d_engine.py)
         extra = {"engine": engine}
     tables, todo = {}, []
     for s in scenes:
@@ -284,7 +301,7 @@ def scatter(path: Path, trials, human: pd.Series, summary: dict, ref, experiment
     for ax, (rule, s) in zip(axes[0], panels):
         m = np.array([s["model_means"][int(t)] for t in trials])
         ax.scatter(m, h, s=18, color="C0")
-        ax.set_title(f"{rule}: sigma {s['best_sigma']:g}\nr {s['r']:.2f}, RMSE {s['rmse']:.2f}, held-out r {s['held_out_r']:.2f}", fontsize=9)
+        ax.set_title(f"{rule} ({summary['engine']}): sigma {s['best_sigma']:g}\nr {s['r']:.2f}, RMSE {s['rmse']:.2f}, held-out r {s['held_out_r']:.2f}", fontsize=9)
     if ref is not None:
         a = summary["authors_perceptual"]
         m = ref.means[a["best_rmse_level"]]
@@ -312,12 +329,14 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", type=int, default=100)
     ap.add_argument("--sigmas", default=None, help="comma-separated grid (default 0, 0.01, ..., 0.30)")
     ap.add_argument("--rules", default=None, help=f"comma-separated noise rules (default {','.join(RULES)}; "
-                    f"with --engine box2d, a 2-D world: {','.join(BOX2D_RULES)})")
+                    f"with --engine box2dweb or box2d, a 2-D world: {','.join(BOX2D_RULES)})")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--engine", default=DEFAULT_ENGINE,
-                    help="box2d (default: the authors' own engine and 2-D world, the extra `box2d`; its rule is the "
-                         "authors' x-only noise), mujoco or physx (the sapien package; these two also draw the paper's "
-                         "rule paper-3d, which lgp.reproduce --sigma-from reads)")
+                    help="box2dweb (default: the authors' exact engine, Box2D 2.1a in JavaScript, through node; "
+                         "npm ci --prefix models/box2dweb), box2d (the same protocol in pybox2d, Box2D 2.3, the extra "
+                         "`box2d`; both 2-D, the authors' world, and their rule is the authors' x-only noise), mujoco "
+                         "or physx (the sapien package; these two also draw the paper's rule paper-3d, which "
+                         "lgp.reproduce --sigma-from reads)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--cache", default=None, help="cache folder (default OUT/cache)")
     ap.add_argument("--fixed", default=None, metavar="SUMMARY",
@@ -329,13 +348,17 @@ def main(argv=None) -> int:
 
         if args.engine not in WORLDS:
             raise MentalJengaError(f"unknown --engine {args.engine!r}; known: {', '.join(WORLDS)}")
-        known = BOX2D_RULES if args.engine == "box2d" else RULES
+        known = BOX2D_RULES if args.engine in ENGINES_2D else RULES
         rules = known if args.rules is None else tuple(args.rules.split(","))
         bad = [r for r in rules if r not in known]
         if args.engine == "box2d":
             from models.box2d_engine import import_box2d
 
             import_box2d()  # the one-line hint of the extra to install, before anything is written
+        if args.engine == "box2dweb":
+            from models.box2dweb_engine import node_command
+
+            node_command()  # the one-line hint: node and npm ci --prefix models/box2dweb
         if bad or args.runs < 1 or any(not np.isfinite(s) or s < 0 for s in sigmas):
             raise MentalJengaError(f"--rules must be among {', '.join(known)} (engine {args.engine}), --runs >= 1, "
                                    "sigmas finite and >= 0")

@@ -17,6 +17,15 @@
     python bench/mental_jenga.py --repo /work/shared/mental-jenga/repo-exp2 [--runs 10] [--write]
     python bench/mental_jenga.py --box2d [--runs 5] [--fit DIR]
 
+    python bench/mental_jenga.py --box2dweb [--runs 5] [--levels 8] [--seed-runs 100] [--write]
+
+6. --box2dweb: the authors' exact engine (models/box2dweb_engine.py, box2dweb
+   through Node): with the authors' seed (jenga.js `authors_seed`), run for run
+   against their saved perceptual-noise runs at the --levels, with the early stop
+   and without it; then CPU per run of box2dweb (Node's CPU counted: the children's
+   rusage), pybox2d and MuJoCo side by side, the authors' rule at a few sigmas, the
+   same normals, scene by scene interleaved, and the projection of the issue's grid.
+
 5. --box2d: the authors' own engine (models/box2d_engine.py) against MuJoCo:
    deterministic verdicts against the authors' `fall` column and their level-0
    output, the carried set against their `above` feature, and CPU per run side by
@@ -177,7 +186,12 @@ def main() -> int:
     ap.add_argument("--engine-sigma", type=float, default=0.18, help="the paper's rule's sigma for the engine comparison")
     ap.add_argument("--engine-runs", type=int, default=20)
     ap.add_argument("--box2d", action="store_true", help="only: Box2D (the authors' engine) against MuJoCo (printed)")
-    ap.add_argument("--fit", default=None, help="with --box2d: an analysis.mental_jenga --engine box2d output folder")
+    ap.add_argument("--fit", default=None, help="an analysis.mental_jenga output folder of experiment 2 in a 2-D engine (box2dweb or box2d): its means at the authors' levels against theirs")
+    ap.add_argument("--box2dweb", action="store_true",
+                    help="only: box2dweb (the authors' exact engine) against their saved runs, and its speed beside "
+                         "pybox2d and MuJoCo (own section with --write)")
+    ap.add_argument("--levels", default="8", help="with --box2dweb: the authors' levels checked run for run")
+    ap.add_argument("--seed-runs", type=int, default=100, help="with --box2dweb: runs per scene and level checked")
     args = ap.parse_args()
     repo = Path(args.repo)
     load0 = machine()
@@ -189,6 +203,8 @@ def main() -> int:
         return variants_section(args, scenes, load0)
     if args.box2d:
         return box2d_section(args, repo, scenes, info, load0)
+    if args.box2dweb:
+        return box2dweb_section(args, repo, scenes, load0)
     if args.fit:
         print(levels_table(repo, Path(args.fit)))
         return 0
@@ -415,6 +431,111 @@ Machine at start: {load0}; at end: {machine()}. {wall:.0f} s wall.
     if args.fit:
         text += "\n" + levels_table(repo, Path(args.fit))
     print(text)
+    return 0
+
+
+def cpu_with_children() -> float:
+    """CPU seconds of this process and its waited-for children (Node's runs)."""
+    import resource
+
+    c = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + c.ru_utime + c.ru_stime
+
+
+def authors_seed_check(repo: Path, scenes, levels, n_runs: int, early_stop: bool) -> dict:
+    """box2dweb with the authors' seed against their saved runs: runs identical brick
+    for brick, per level; one Node process per scene; CPU and Box2D steps per run."""
+    from models.box2dweb_engine import Box2DWebJengaWorld, run_batch
+
+    sims = repo / "code/R/simulations/exp2"
+    saved = {k: json.loads((sims / f"perceptual,impulse-aligned,dynamics_{k},0,0.json").read_text()) for k in levels}
+    out = {"runs": 0, "same": 0, "steps": 0, "differ": set()}
+    c0 = cpu_with_children()
+    for s in scenes:
+        w = Box2DWebJengaWorld(s)
+        (res,) = run_batch([w._scene(authors_seed={"levels": list(levels), "runs": n_runs})], early_stop)
+        out["steps"] += res["steps"]
+        for i, k in enumerate(levels):
+            mine = res["fallen"][i * n_runs:(i + 1) * n_runs]
+            theirs = saved[k][f"trial_{s.trial}"][:n_runs]
+            same = sum(sorted(a) == sorted(b) for a, b in zip(mine, theirs))
+            out["runs"] += n_runs
+            out["same"] += same
+            if same < n_runs:
+                out["differ"].add(s.trial)
+    out["cpu"] = cpu_with_children() - c0
+    return out
+
+
+def box2dweb_section(args, repo: Path, scenes, load0: str) -> int:
+    levels = [int(k) for k in args.levels.split(",")]
+    t0 = time.time()
+    check = {stop: authors_seed_check(repo, scenes, levels, args.seed_runs, stop) for stop in (True, False)}
+    from models.box2d_engine import Box2DNoise
+    from models.box2dweb_engine import Box2DWebJengaWorld, run_batch
+
+    engines = ("box2dweb", "box2d", "mujoco")
+    cpu = dict.fromkeys(engines, 0.0)
+    n = len(scenes) * len(SPEED_SIGMAS) * args.runs
+    # box2dweb as the analysis runs it, a Node process with thousands of starts (there: one per scene,
+    # 3,001 starts; here: every scene's starts, 42 x 3 x runs, in one process), the same normals
+    batch, worlds = [], []
+    c0 = cpu_with_children()
+    for s in scenes:
+        w = Box2DWebJengaWorld(s)
+        z = draw_normals(args.runs, w.n, 0, s.trial)
+        batch.append(w.batch([p for sg in SPEED_SIGMAS for p in Box2DNoise(w).positions("authors-x", sg, z)]))
+        worlds.append(w)
+    results = run_batch(batch)
+    cpu["box2dweb"] = cpu_with_children() - c0
+    c0 = cpu_with_children()
+    for w in worlds[:5]:  # the fixed cost of a process: Node's start, loading box2dweb, V8's warm-up
+        w.run()
+    fixed = (cpu_with_children() - c0) / 5
+    for s in scenes:  # the other engines scene by scene
+        for e in engines[1:]:
+            c0 = cpu_with_children()
+            counterfactual_runs(s, "authors-x", SPEED_SIGMAS, args.runs, engine=e)
+            cpu[e] += cpu_with_children() - c0
+    wall = time.time() - t0
+    per = {e: cpu[e] / n for e in engines}
+    marginal = (cpu["box2dweb"] - fixed) / (n - 1)
+    target = 42 * 30 * 100 + 42  # sigma 0: one run per scene (equal starts once)
+    proj = {e: target * per[e] for e in engines}
+    proj["box2dweb"] = 42 * fixed + (target - 42) * marginal  # the analysis: one process per scene
+    on, off = check[True], check[False]
+    text = f"""## Mental Jenga: box2dweb, the authors' exact engine (bench/mental_jenga.py --box2dweb)
+
+Machine at start: {load0}; at end: {machine()}. {wall:.0f} s wall. Node's CPU is counted (children's rusage;
+it includes V8's garbage-collector and compiler threads).
+
+The authors' seed (jenga.js `authors_seed`: seedrandom(0) per scene and level, their gaussian and draw
+order) against their saved perceptual-noise runs (code/R/simulations/exp2), level {", ".join(map(str, levels))},
+the first {args.seed_runs} runs of each of the {len(scenes)} scenes; one Node process per scene:
+
+| run | runs identical to theirs, brick for brick | Box2D steps per run after the removal | CPU per run (with each process's start) |
+|---|---|---|---|
+| early stop (once a step leaves every brick asleep and unmoved) | {on['same']:,}/{on['runs']:,} | {on['steps'] / on['runs']:.0f} | {1000 * on['cpu'] / on['runs']:.1f} ms |
+| every one of the 700 steps (their loop) | {off['same']:,}/{off['runs']:,} | {off['steps'] / off['runs']:.0f} | {1000 * off['cpu'] / off['runs']:.1f} ms |
+
+{"Scenes with a differing run: " + ", ".join(map(str, sorted(on["differ"] | off["differ"]))) if on["differ"] | off["differ"] else "No run differs."}
+
+CPU per run side by side ({n:,} runs per engine: {len(scenes)} scenes x the authors' rule at sigma
+{", ".join(map(str, SPEED_SIGMAS))} x {args.runs} runs, the same normals; each with its settling and noise). box2dweb
+ran them in one Node process ({n:,} starts; the analysis gives each process a scene's 3,001), then pybox2d
+and MuJoCo scene by scene. A Node process that runs one start costs {fixed:.2f} s of CPU (Node's start,
+loading box2dweb, V8's warm-up; the mean of 5 scenes). The projection of the issue's grid (42 x 31 x 100;
+sigma 0 once per scene: 126,042 starts) counts for box2dweb 42 such processes and the rest of its CPU
+per start here; for the others, their CPU per run here.
+
+| engine | CPU per run here | ratio to box2dweb | projected full grid, CPU | on 2 cores |
+|---|---|---|---|---|
+""" + "\n".join(f"| {e} | {per[e] * 1000:.1f} ms | {per[e] / per['box2dweb']:.2f} | {proj[e] / 60:.0f} min | "
+                f"{proj[e] / 120:.1f} min |" for e in engines) + "\n"
+    print(text)
+    if args.write:
+        write_section(Path(__file__).resolve().parents[1] / "docs" / "benchmarks.md",
+                      "Mental Jenga: box2dweb, the authors' exact engine (bench/mental_jenga.py --box2dweb)", text)
     return 0
 
 

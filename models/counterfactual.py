@@ -297,10 +297,15 @@ class PhysxJengaWorld:
 
 
 from models.box2d_engine import Box2DJengaWorld, Box2DNoise  # noqa: E402 (pybox2d itself is imported when a world is made)
+from models.box2dweb_engine import Box2DWebJengaWorld  # noqa: E402
 
-#: The engines a counterfactual run can use, by name. "box2d" is the authors' own
-#: engine in their 2-D world (models/box2d_engine.py; the optional extra `box2d`).
-WORLDS = {"mujoco": JengaWorld, "physx": PhysxJengaWorld, "box2d": Box2DJengaWorld}
+#: The engines a counterfactual run can use, by name. "box2dweb" is the authors'
+#: exact engine (box2dweb, Box2D 2.1a in JavaScript, through Node;
+#: models/box2dweb_engine.py), "box2d" the same protocol in pybox2d (Box2D 2.3; the
+#: optional extra `box2d`, models/box2d_engine.py), both in their 2-D world.
+WORLDS = {"mujoco": JengaWorld, "physx": PhysxJengaWorld, "box2d": Box2DJengaWorld, "box2dweb": Box2DWebJengaWorld}
+#: The 2-D engines: they draw the authors' noise (Box2DNoise), not Perturbation's rules.
+WORLDS_2D = (Box2DJengaWorld, Box2DWebJengaWorld)
 
 
 class Perturbation:
@@ -430,13 +435,16 @@ def counterfactual_runs(scene: JengaScene, rule: str, sigmas, n_runs: int, seed:
     import pandas as pd
 
     world = make_world(scene, settings, engine)
-    noise = Box2DNoise(world) if isinstance(world, Box2DJengaWorld) else Perturbation(world)
+    noise = Box2DNoise(world) if isinstance(world, WORLDS_2D) else Perturbation(world)
     z = draw_normals(n_runs, world.n, seed, scene.trial)
     rows = []
     names = [b.name for b in scene.bricks]
     done: dict[bytes, np.ndarray] = {}  # a run is a function of its start: equal starts are simulated once
-    for sigma in sigmas:
-        P = noise.positions(rule, float(sigma), z)
+    starts = [noise.positions(rule, float(sigma), z) for sigma in sigmas]
+    if hasattr(world, "runs"):  # an engine that takes a batch (box2dweb: one Node process per scene)
+        todo = {P[r].tobytes(): P[r] for P in starts for r in range(n_runs)}
+        done = dict(zip(todo, world.runs(list(todo.values()))))
+    for sigma, P in zip(sigmas, starts):
         for r in range(n_runs):
             key = P[r].tobytes()
             if key not in done:

@@ -123,6 +123,10 @@ class JengaScene:
     scale: float = SCALE
     source: str = ""
     digest: str = ""
+    #: (x, y, angle) of every brick of the scene file, in file order, parked ones
+    #: included, exactly as read (the authors' units): the box2dweb engine loads
+    #: these, as the authors' code does (models/box2dweb_engine.py).
+    authors_bricks: tuple = ()
 
     @property
     def label(self) -> str:
@@ -176,7 +180,7 @@ def parse_scene(data, where: str, experiment: int, trial: int, scale: float = SC
 
     if not isinstance(data, list):
         raise MentalJengaError(f"{where}: expected a list of bricks, got {type(data).__name__}")
-    bricks = []
+    bricks, raw = [], []
     for k, item in enumerate(data):
         if not isinstance(item, dict) or not {"x", "y", "angle"} <= set(item):
             raise MentalJengaError(f"{where}: brick {k} is not a mapping with x, y and angle")
@@ -186,6 +190,7 @@ def parse_scene(data, where: str, experiment: int, trial: int, scale: float = SC
             raise MentalJengaError(f"{where}: brick {k} has a non-numeric x, y or angle") from None
         if not all(map(math.isfinite, (x, y, a))):
             raise MentalJengaError(f"{where}: brick {k} has a non-finite x, y or angle")
+        raw.append((x, y, a))
         if x < 0:  # parked off-screen: not in the scene (the authors' loadData destroys it)
             if k == black_index:
                 raise MentalJengaError(f"{where}: the black brick (index {k}) is parked off the scene")
@@ -198,7 +203,7 @@ def parse_scene(data, where: str, experiment: int, trial: int, scale: float = SC
         raise MentalJengaError(f"{where}: has no brick of index {black_index} (the black brick)")
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
     return JengaScene(experiment, trial, tuple(bricks), table_box(scale), TABLE_FRICTION_A.get(experiment, FRICTION_A),
-                      scale, where, digest)
+                      scale, where, digest, tuple(raw))
 
 
 def read_scene(path: str | Path, experiment: int, trial: int, scale: float = SCALE) -> JengaScene:
