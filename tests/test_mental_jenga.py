@@ -15,7 +15,8 @@ import pytest
 from stimuli.mental_jenga import (GROUND_Y_A, SCALE, TABLE_TOP_Y_A, MentalJengaError, parse_scene, read_scene)
 
 HERE = Path(__file__).parent / "data" / "mental_jenga"
-EXP2 = Path("/work/shared/mental-jenga/repo-exp2")
+#: The shared copy of Experiment 2 beside the clone (../shared), as CI places it.
+EXP2 = Path(__file__).resolve().parents[2] / "shared" / "mental-jenga" / "repo-exp2"
 
 
 def scene(name: str, black_index: int = 0):
