@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from lgp.errors import InputError
+from lgp.command_times import cpu_seconds
 from stimuli.mental_jenga import BRICK_A, MentalJengaError, read_predictions, read_scenes
 
 #: sigma grids: authors' units for "authors-x" (their level k is 0.03 k), a fraction
@@ -70,20 +71,12 @@ def _code_key(engine: str = "mujoco") -> dict:
     return {"code": modules_digest("models.counterfactual"), "libraries": library_versions(libs)}
 
 
-def _cpu() -> float:
-    """CPU seconds of this process and of its finished children (box2dweb's Node processes)."""
-    import resource
-
-    c = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return time.process_time() + c.ru_utime + c.ru_stime
-
-
 def _simulate(scene, rule, sigmas, n_runs, seed, engine="mujoco"):
     from models.counterfactual import counterfactual_runs
 
-    t0 = _cpu()
+    t0 = cpu_seconds()
     df = counterfactual_runs(scene, rule, sigmas, n_runs, seed, engine=engine)
-    return df, _cpu() - t0
+    return df, cpu_seconds() - t0
 
 
 def simulate_all(scenes, rules, sigmas, n_runs: int, seed: int, cache_dir: Path, jobs: int = 2, log=None,

@@ -47,6 +47,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.common import machine, write_section  # noqa: E402
+from lgp.command_times import cpu_seconds  # noqa: E402
 from models.counterfactual import FallSettings, JengaWorld, Perturbation, counterfactual_runs, deterministic_falls, draw_normals  # noqa: E402
 from models.risk.engine import CHECK_INTERVAL, REST_SLACK, REST_SPEED, REST_WINDOW, block_speeds  # noqa: E402
 from stimuli.mental_jenga import read_info, read_scenes  # noqa: E402
@@ -175,9 +176,10 @@ def distinct_starts(scenes, n_runs: int = 100, rules=("paper-3d", "authors-x")) 
     return out
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--repo", default="/work/shared/mental-jenga/repo-exp2")
+    ap.add_argument("--repo", default=str(Path(__file__).resolve().parents[2] / "shared" / "mental-jenga" / "repo-exp2"),
+                    help="a clone of cicl-stanford/mental_jenga (default: the shared copy of experiment 2 beside this clone, ../shared)")
     ap.add_argument("--write", action="store_true", help="write the section of docs/benchmarks.md")
     ap.add_argument("--runs", type=int, default=10, help="runs per sigma in the side-by-side timing")
     ap.add_argument("--engines", action="store_true", help="only MuJoCo against PhysX (its own section)")
@@ -192,7 +194,7 @@ def main() -> int:
                          "pybox2d and MuJoCo (own section with --write)")
     ap.add_argument("--levels", default="8", help="with --box2dweb: the authors' levels checked run for run")
     ap.add_argument("--seed-runs", type=int, default=100, help="with --box2dweb: runs per scene and level checked")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     repo = Path(args.repo)
     load0 = machine()
     info = read_info(repo, 2)
@@ -434,14 +436,6 @@ Machine at start: {load0}; at end: {machine()}. {wall:.0f} s wall.
     return 0
 
 
-def cpu_with_children() -> float:
-    """CPU seconds of this process and its waited-for children (Node's runs)."""
-    import resource
-
-    c = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return time.process_time() + c.ru_utime + c.ru_stime
-
-
 def authors_seed_check(repo: Path, scenes, levels, n_runs: int, early_stop: bool) -> dict:
     """box2dweb with the authors' seed against their saved runs: runs identical brick
     for brick, per level; one Node process per scene; CPU and Box2D steps per run."""
@@ -450,7 +444,7 @@ def authors_seed_check(repo: Path, scenes, levels, n_runs: int, early_stop: bool
     sims = repo / "code/R/simulations/exp2"
     saved = {k: json.loads((sims / f"perceptual,impulse-aligned,dynamics_{k},0,0.json").read_text()) for k in levels}
     out = {"runs": 0, "same": 0, "steps": 0, "differ": set()}
-    c0 = cpu_with_children()
+    c0 = cpu_seconds()
     for s in scenes:
         w = Box2DWebJengaWorld(s)
         (res,) = run_batch([w._scene(authors_seed={"levels": list(levels), "runs": n_runs})], early_stop)
@@ -463,7 +457,7 @@ def authors_seed_check(repo: Path, scenes, levels, n_runs: int, early_stop: bool
             out["same"] += same
             if same < n_runs:
                 out["differ"].add(s.trial)
-    out["cpu"] = cpu_with_children() - c0
+    out["cpu"] = cpu_seconds() - c0
     return out
 
 
@@ -480,23 +474,23 @@ def box2dweb_section(args, repo: Path, scenes, load0: str) -> int:
     # box2dweb as the analysis runs it, a Node process with thousands of starts (there: one per scene,
     # 3,001 starts; here: every scene's starts, 42 x 3 x runs, in one process), the same normals
     batch, worlds = [], []
-    c0 = cpu_with_children()
+    c0 = cpu_seconds()
     for s in scenes:
         w = Box2DWebJengaWorld(s)
         z = draw_normals(args.runs, w.n, 0, s.trial)
         batch.append(w.batch([p for sg in SPEED_SIGMAS for p in Box2DNoise(w).positions("authors-x", sg, z)]))
         worlds.append(w)
-    results = run_batch(batch)
-    cpu["box2dweb"] = cpu_with_children() - c0
-    c0 = cpu_with_children()
+    run_batch(batch)  # timed only: the runs themselves are the analysis's
+    cpu["box2dweb"] = cpu_seconds() - c0
+    c0 = cpu_seconds()
     for w in worlds[:5]:  # the fixed cost of a process: Node's start, loading box2dweb, V8's warm-up
         w.run()
-    fixed = (cpu_with_children() - c0) / 5
+    fixed = (cpu_seconds() - c0) / 5
     for s in scenes:  # the other engines scene by scene
         for e in engines[1:]:
-            c0 = cpu_with_children()
+            c0 = cpu_seconds()
             counterfactual_runs(s, "authors-x", SPEED_SIGMAS, args.runs, engine=e)
-            cpu[e] += cpu_with_children() - c0
+            cpu[e] += cpu_seconds() - c0
     wall = time.time() - t0
     per = {e: cpu[e] / n for e in engines}
     marginal = (cpu["box2dweb"] - fixed) / (n - 1)
@@ -540,4 +534,6 @@ per start here; for the others, their CPU per run here.
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from lgp.cli import run_cli
+
+    sys.exit(run_cli(main, prog="bench/mental_jenga.py"))

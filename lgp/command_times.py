@@ -1,19 +1,29 @@
 """Wall times in words: the one duration format of every command line, progress line
 and page (`duration_text`), and the measured times of the README's commands that
 README, ``--help`` and docs/results.md quote (`measured_time`, from the rows
-``python bench/commands.py`` writes to the package's command_times.csv).
+``python bench/commands.py`` writes to the package's command_times.csv), and the one
+CPU clock of a command's own report (`cpu_seconds`).
 
 Imports nothing of the project, so `lgp.cli` (on the ground floor) re-exports both.
 """
 from __future__ import annotations
 
 import csv
+import resource
 from pathlib import Path
 
 
 #: How long the README's commands took: rows written by ``python bench/commands.py``.
 #: Package data, not docs/: ``--help`` of an installed copy quotes them too.
 COMMAND_TIMES = Path(__file__).resolve().parent / "command_times.csv"
+
+
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process and of the child processes it has
+    waited for (a closed pool's workers, box2dweb's Node processes): differences of
+    two readings are a command's CPU."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def duration_text(seconds: float) -> str:

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from lgp import cli
+from lgp.command_times import cpu_seconds
 from lgp.errors import InputError
 
 PROG = "python -m stimuli.design"
@@ -87,7 +88,7 @@ def main(argv=None) -> int:
     for name in previous:  # the set an earlier design run wrote here (its design.json lists them)
         (out / name).unlink(missing_ok=True)
     cache = Cache(out / "cache")
-    t0, cpu0 = time.perf_counter(), _cpu_seconds()
+    t0, cpu0 = time.perf_counter(), cpu_seconds()
     with executor_for_scheduler(args.scheduler, args.jobs) as ex:
         design = run_design(cfg, out, ex, cache, log)
         paths = outputs.write_set(design, out)
@@ -120,7 +121,7 @@ def main(argv=None) -> int:
             contact_sheet(out / "pictures", out / "contact_sheet.png")
             design.timings["render"] = time.perf_counter() - t2
     design.timings["command"] = time.perf_counter() - t0
-    design.timings["cpu"] = _cpu_seconds() - cpu0
+    design.timings["cpu"] = cpu_seconds() - cpu0
     outputs.write_json({"written": [p.name for p in paths], "config": cfg.__dict__ | {"sigmas": cfg.sigmas, "faithful_sigmas": cfg.faithful_sigmas}, "objective": design.terms,
                         "timings_s": design.timings, "screened": cfg.candidates, "passed_screen": len(design.pool),
                         "discards": dict(design.reasons)}, out / "design.json")
@@ -129,14 +130,6 @@ def main(argv=None) -> int:
           f"{design.timings['command']:.0f} s (python -m lgp.reproduce --stimuli {args.out})")
     return 0
 
-
-def _cpu_seconds() -> float:
-    """User + system CPU seconds of this process and of the child processes it has
-    waited for (the pool's workers once the executor is closed)."""
-    import resource
-
-    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def claim_folder(out: Path) -> list[str]:
