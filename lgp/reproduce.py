@@ -254,7 +254,11 @@ def reproduce(config: RunConfig, argv=None) -> RunResult:
     t0 = time.perf_counter()
     inputs = check_inputs(config)  # every input validated before anything is written or computed
     out = Path(config.out)
-    check_output_folder(out, config.into_existing)  # a folder of foreign files: refused now, before any work
+    try:  # a folder of foreign files: refused now, before any work
+        check_output_folder(out, config.into_existing)
+    except owned.ForeignFiles:
+        OutputLock(out).refuse_if_held()  # unless a run holds it: what looks foreign may be its files half written
+        raise
     created = _missing_folders(out)
     new_cache = not (out / "cache").exists()
     out.mkdir(parents=True, exist_ok=True)

@@ -65,6 +65,42 @@ def test_a_run_in_a_held_folder_says_who_holds_it_and_touches_nothing(tmp_path):
     assert time.monotonic() - t0 < 60
 
 
+
+def test_a_run_that_finds_the_holders_staging_half_made_is_told_who_holds_the_folder(tmp_path):
+    # The holder makes its staging folder (mkdtemp) and then its mark: a second run's
+    # early check, made without the lock, can see the folder unmarked in between (a
+    # CI failure of test_two_real_runs_in_one_folder_...: "holds files no run ...
+    # wrote (.lgp-new-f69dngu1)", exit 2). The holder is the reason to refuse: exit 1,
+    # named; nothing touched. Without a holder the same folder is foreign (exit 2).
+    from lgp import reproduce
+
+    out = tmp_path / "out"
+    (out / ".lgp-new-abcd1234").mkdir(parents=True)
+    argv = ["--trials", "1E", "--samples", "1", "--n-sims", "2", "--out", str(out)]
+    with OutputLock(out, "python -m lgp.reproduce --out out (the holder)"):
+        with pytest.raises(OutputFolderBusy, match=rf"in use by another run \(process {os.getpid()}: python -m lgp.reproduce --out out \(the holder\)\)"):
+            reproduce.run(reproduce.parse_args(argv), argv)
+    assert sorted(p.name for p in out.iterdir()) == [".lgp-new-abcd1234"]
+    assert reproduce.main(argv) == 2  # no holder: an unmarked folder is not a run's
+    assert sorted(p.name for p in out.iterdir()) == [".lgp-new-abcd1234"]
+
+
+def test_a_study_build_that_finds_the_holders_staging_half_made_is_told_who_holds_the_folder(tmp_path, capsys):
+    # The same race for python -m stimuli.experiment (its early check is also made without the lock).
+    from lgp import cli
+    from stimuli.experiment.__main__ import PROG, main
+
+    out = tmp_path / "study"
+    (out / ".lgp-new-abcd1234").mkdir(parents=True)
+    argv = ["--task", "difficulty", "--out", str(out)]
+    with OutputLock(out, "python -m stimuli.experiment --out study (the holder)"):
+        assert cli.run_cli(main, argv, prog=PROG) == 1
+    assert f"in use by another run (process {os.getpid()}: python -m stimuli.experiment --out study (the holder))" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:  # no holder: refused as a folder of foreign files (argparse, exit 2)
+        main(argv)
+    assert stop.value.code == 2 and "holds no study" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == [".lgp-new-abcd1234"]
+
 def test_concurrent_writers_of_one_file_use_unique_temporary_names(tmp_path):
     path, errors = tmp_path / "page" / "10E.png", []
 

@@ -133,12 +133,9 @@ class OutputLock:
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
-                holder = os.pread(fd, 4096, 0).decode("utf-8", "replace").strip().splitlines()
+                message = self._busy(fd)
                 os.close(fd)
-                pid = holder[0] if holder else "?"
-                what = f": {holder[1]}" if len(holder) > 1 else ""
-                raise OutputFolderBusy(f"{self.path.parent} is in use by another run (process {pid}{what}); "
-                                       "wait for it to end or give another --out") from None
+                raise OutputFolderBusy(message) from None
             try:  # the holder we waited on may have removed the file as we opened it: lock the one on disk
                 same = os.stat(self.path, follow_symlinks=False).st_ino == os.fstat(fd).st_ino
             except FileNotFoundError:
@@ -157,6 +154,35 @@ class OutputLock:
             self.__exit__()
             raise OutputFolderBusy(str(e)) from None
         return self
+
+    def _busy(self, fd: int) -> str:
+        """What a run refused by the holder of `fd`'s lock is told: who holds it."""
+        holder = os.pread(fd, 4096, 0).decode("utf-8", "replace").strip().splitlines()
+        pid = holder[0] if holder else "?"
+        what = f": {holder[1]}" if len(holder) > 1 else ""
+        return f"{self.path.parent} is in use by another run (process {pid}{what}); wait for it to end or give another --out"
+
+    def refuse_if_held(self) -> None:
+        """OutputFolderBusy if another run holds this folder's lock now; creates
+        nothing (no lock file: not held). A check made without the lock (the early
+        refusal of a folder of foreign files) sees the holder's files half written,
+        e.g. its staging folder before its mark: the holder, not those files, is
+        then the reason to refuse."""
+        import fcntl
+
+        try:
+            fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | os.O_NONBLOCK)
+        except OSError:  # absent, a link, unreadable: no run of ours holds it
+            return
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                return
+            try:
+                fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise OutputFolderBusy(self._busy(fd)) from None
+        finally:
+            os.close(fd)  # closing releases a lock taken here
 
     def _check_kind(self) -> None:
         """The lock file must be a regular file (or absent): a FIFO, a device, a

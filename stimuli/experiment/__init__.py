@@ -325,7 +325,11 @@ def build_study(plan: StudyPlan, out: str | Path, size=None, jobs: int = 2, jato
 
     log = log or (lambda m: print(m, file=sys.stderr, flush=True))
     out = Path(out)
-    check_output_dir(out, into_existing)
+    try:
+        check_output_dir(out, into_existing)
+    except StudyError:
+        OutputLock(out).refuse_if_held()  # unless a build holds it: what looks foreign may be its files half written
+        raise
     nm = ensure_jspsych(log)
     renders, record = _render(plan, size or DEFAULT_SIZE, jobs, log)
     created = []

@@ -37,6 +37,9 @@ def main(argv=None) -> int:
         plan = ex.plan_study(args.task, args.stimuli, (args.anchor_easy, args.anchor_hard), args.seed, args.order_seed)
         ex.check_output_dir(__import__("pathlib").Path(args.out), args.into_existing)
     except ex.StudyError as e:
+        from lgp.app.manifest import OutputLock
+
+        OutputLock(args.out).refuse_if_held()  # a build holding the folder, not its half-written files, is the reason
         p.error(str(e))
     if not plan.has_pairs:
         print(f"{PROG}: note: no easy/hard pairs (<n>E and <n>H) among the trials: pair counterbalancing is off, "
