@@ -312,25 +312,42 @@ def quick_run(quick_run_started) -> Path:
 
 # ----------------------------------------------------------------------------- the studies, built once per suite run
 
-#: The picture size of the suite's studies: larger than a laptop shows them, so that their size
-#: on screen is set by the layout (tests/test_study_layout.py). LGP_STUDY_LAYOUT_SIZE=960x640
-#: (the study's own size) makes the docs' study_trial_<W>x<H>.png screenshots.
-STUDY_SIZE = os.environ.get("LGP_STUDY_LAYOUT_SIZE", "720x480")
+#: The picture size of the suite's studies: the study's own (stimuli.render.DEFAULT_SIZE), larger
+#: than a laptop shows them, so that their size on screen is set by the layout
+#: (tests/test_study_layout.py), and the size of the README's study build, which then finds
+#: every picture in the suite's render cache (`suite_render_cache`). LGP_STUDY_LAYOUT_SIZE
+#: sets another.
+STUDY_SIZE = os.environ.get("LGP_STUDY_LAYOUT_SIZE", "960x640")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def suite_render_cache(tmp_path_factory) -> Path:
+    """One render cache for every picture the suite renders (its runs, studies and
+    commands, in this process and the ones it starts): a folder of this suite run,
+    shared by the workers (a picture is found by the hash of its scene, camera and
+    code, so sharing is safe). So no test writes into the user's ~/.cache, and a
+    picture one test rendered is not rendered again by the next (on a fresh machine
+    the README's study build alone rendered its 52 pictures, 37 CPU-s, again). A
+    caller's LGP_RENDER_CACHE (bench/commands.py: a cold folder per command) is used
+    as given."""
+    if not os.environ.get("LGP_RENDER_CACHE"):
+        os.environ["LGP_RENDER_CACHE"] = str(suite_folder(tmp_path_factory) / "render-cache")
+    return Path(os.environ["LGP_RENDER_CACHE"])
 
 
 @pytest.fixture(scope="session")
 def suite_studies(tmp_path_factory) -> dict:
     """{task: folder} of the paper's three studies (`python -m stimuli.experiment --task
     T --size STUDY_SIZE`), built once per suite run (`built_once`): the first build
-    renders the pictures into the folder's render cache (or the caller's
-    LGP_RENDER_CACHE), the other two find them there. Read them, do not write into them."""
+    renders the pictures into the suite's render cache (`suite_render_cache`), the
+    other two (and the README's study build) find them there. Read them, do not write
+    into them."""
     from stimuli import experiment as ex
 
     def build(root: Path) -> None:
-        env = {"LGP_RENDER_CACHE": str(root / "renders"), **os.environ}  # a render cache given by the caller is used
         for task in ex.TASKS:
             run = subprocess.run([sys.executable, "-m", "stimuli.experiment", "--task", task, "--out", str(root / task),
-                                  "--size", STUDY_SIZE], capture_output=True, text=True, env=env)
+                                  "--size", STUDY_SIZE], capture_output=True, text=True, env=os.environ.copy())
             assert run.returncode == 0, run.stderr[-3000:]
 
     root = built_once(tmp_path_factory, "studies", build)

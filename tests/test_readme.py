@@ -127,8 +127,10 @@ def test_the_readmes_commands_on_a_runs_results_have_their_cli(command):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("command", _runnable(readme_commands()))
-def test_the_readmes_commands_run_as_written(command, tmp_path):
+def test_the_readmes_commands_run_as_written(command, tmp_path, request):
     module, argv = _argv(command)
+    if module == "stimuli.experiment":  # its pictures are the suite's studies' (conftest.STUDY_SIZE): rendered once
+        request.getfixturevalue("suite_studies")
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     run = subprocess.run([sys.executable, "-m", module, *argv], cwd=tmp_path, env=env,
                          capture_output=True, text=True, timeout=300)

@@ -11,8 +11,8 @@ of the trial, Next included, is visible without scrolling; the slider is answere
 tap (touch screens) or by the arrow keys (laptops), which enables Next and removes
 "Move the slider to answer.". Skipped, saying why, when the browser or playwright is
 missing. LGP_SCREENSHOTS=DIR keeps a screenshot of each screen size: the docs'
-study_trial_<W>x<H>.png are made with LGP_STUDY_LAYOUT_SIZE=960x640 (the study's
-picture size).
+study_trial_<W>x<H>.png are made so (the suite's studies have the study's own
+picture size, 960x640).
 """
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ _MEASURE = """() => {
 @pytest.fixture(scope="module")
 def studies(suite_studies):
     """The Difficulty and Time Estimation studies with pictures of conftest.STUDY_SIZE
-    (720x480, or LGP_STUDY_LAYOUT_SIZE), built once per suite run (conftest.suite_studies)."""
+    (960x640, the study's own, or LGP_STUDY_LAYOUT_SIZE), built once per suite run (conftest.suite_studies)."""
     return suite_studies
 
 
