@@ -103,3 +103,22 @@ def test_an_interrupted_render_leaves_the_earlier_pictures_byte_identical(tmp_pa
     with pytest.raises(KeyboardInterrupt):
         render(out)
     assert snapshot(out) == before and sorted(p.name for p in out.iterdir()) == ["1E-A.png", "1E-B.png", "renders.json"]
+
+
+def test_a_trial_rendered_for_one_set_is_copied_from_the_store_for_another(tmp_path, renders):
+    # The render cache keeps a folder per set of trials (cache_folder); the store keeps
+    # each picture by the hash of its inputs, so a run of {1E, 2E} after one of {1E}
+    # renders 2E's two pictures only, and 1E's copies are byte for byte the first run's.
+    store = tmp_path / "by-key"
+    trials = [stimuli.load_trial(t) for t in ("1E", "2E")]
+    first = run.render_trials(trials[:1], tmp_path / "one", 0, SIZE, jobs=1, log=lambda m: None, store=store)
+    assert first["rendered"] == 2 and renders == [2]
+    assert sorted(p.name for p in store.iterdir()) == sorted(f"{p['key']}.png" for p in first["pictures"])
+    second = run.render_trials(trials, tmp_path / "two", 0, SIZE, jobs=1, log=lambda m: None, store=store)
+    assert second["rendered"] == 2 and renders == [2, 2]  # 2E's pictures only
+    for name in ("1E-A.png", "1E-B.png"):
+        assert (tmp_path / "two" / name).read_bytes() == (tmp_path / "one" / name).read_bytes()
+    assert len(list(store.iterdir())) == 4 and not [p for p in store.iterdir() if p.name.startswith(".")]
+    # another size is another picture: rendered, not copied
+    run.render_trials(trials[:1], tmp_path / "big", 0, (SIZE[0] * 2, SIZE[1] * 2), jobs=1, log=lambda m: None, store=store)
+    assert renders == [2, 2, 2]

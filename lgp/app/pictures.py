@@ -86,11 +86,12 @@ def rendered_trial_pictures(trials, seed: int, out_dir: Path, cache: Cache | Non
 
     from PIL import Image, ImageDraw
 
-    from stimuli.render import cache_folder, render_trials
+    from stimuli.render import cache_folder, picture_store, render_trials
 
     where = cache_folder(trials, seed, CARD_PICTURE)
-    try:
-        record = render_trials(trials, where, seed, CARD_PICTURE, jobs, log=lambda m: None, executor=executor)
+    try:  # a trial's pictures rendered for another set of trials are copied from the store, not rendered again
+        record = render_trials(trials, where, seed, CARD_PICTURE, jobs, log=lambda m: None, executor=executor,
+                               store=picture_store())
     except Exception as e:  # noqa: BLE001 - any failure of VTK/OpenGL: the sketch still serves
         print(f"lgp.reproduce: trial pictures: rendering failed ({type(e).__name__}: {e}); drawing sketches instead",
               file=sys.stderr, flush=True)

@@ -258,13 +258,14 @@ def _trial_entry(t) -> dict:
 
 
 def _render(plan: StudyPlan, size, jobs: int, log) -> tuple[Path, dict]:
-    from stimuli.render import cache_folder, render_trials
+    from stimuli.render import cache_folder, picture_store, render_trials
 
     every = [*plan.trials, *plan.anchors]
     # A of a trial of pair p is sample p - 1 of the seed: a pair's two trials share
     # their Start, no two pairs do (docs/experiment.md, section 8).
     where = cache_folder(every, plan.seed, size, "pair")
-    return where, render_trials(every, where, plan.seed, size, jobs, log=lambda m: log(f"{PROG}: pictures: {m}"), layout="pair")
+    return where, render_trials(every, where, plan.seed, size, jobs, log=lambda m: log(f"{PROG}: pictures: {m}"), layout="pair",
+                                store=picture_store())
 
 
 #: What every build writes at the top of a study folder (besides study.json, lib/ and img/).

@@ -17,10 +17,10 @@ from __future__ import annotations
 from stimuli.render.camera import (AZIMUTH_DEG, DEFAULT_SIZE, ELEVATION_DEG, FOV_Y_DEG, MARGIN, MIN_AREA, WORKSPACE_HI,
                                    WORKSPACE_LO, Camera, fit_camera, parse_size, scene_corners, trial_camera, view_direction)
 from stimuli.render.engine import BACKGROUND_RGB, FIXED_RGB, SEAM, TABLE_RGB, TEXTURE_GAMMA, Renderer
-from stimuli.render.run import (LAYOUTS, PROG, cache_folder, contact_sheet, layout_sample, pictures_of, render_cache_dir,
-                                render_trials)
+from stimuli.render.run import (LAYOUTS, PROG, cache_folder, contact_sheet, layout_sample, pictures_of, picture_store,
+                                render_cache_dir, render_trials)
 
 __all__ = ["AZIMUTH_DEG", "BACKGROUND_RGB", "DEFAULT_SIZE", "ELEVATION_DEG", "FIXED_RGB", "FOV_Y_DEG", "LAYOUTS", "MARGIN",
            "MIN_AREA", "PROG", "SEAM", "TABLE_RGB", "TEXTURE_GAMMA", "WORKSPACE_HI", "WORKSPACE_LO", "Camera", "Renderer",
-           "cache_folder", "contact_sheet", "fit_camera", "layout_sample", "parse_size", "pictures_of", "render_cache_dir",
+           "cache_folder", "contact_sheet", "fit_camera", "layout_sample", "parse_size", "pictures_of", "picture_store", "render_cache_dir",
            "render_trials", "scene_corners", "trial_camera", "view_direction"]

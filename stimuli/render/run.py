@@ -17,7 +17,7 @@ import numpy as np
 from stimuli.render.camera import AZIMUTH_DEG, DEFAULT_SIZE, ELEVATION_DEG, FOV_Y_DEG, MIN_AREA, Camera, trial_camera
 from stimuli.render.engine import Renderer
 from lgp.owned import (ForeignFiles, collisions, describe, foreign_entries, new_staging, own_files, read_manifest,
-                       remove_staging, sha256_of, signals_deferred)
+                       regular_inside, remove_staging, sha256_of, signals_deferred)
 from stimuli.sheet import finished_scene
 
 PROG = "python -m stimuli.render"
@@ -96,7 +96,7 @@ def _render_chunk(jobs: list[tuple[str, str, Camera]]) -> list[float]:
 
 
 def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, int] = DEFAULT_SIZE, jobs: int = 2,
-                  log=None, executor=None, layout: str = "sample0") -> dict:
+                  log=None, executor=None, layout: str = "sample0", store: Path | None = None) -> dict:
     """Render A and B of every trial into `out_dir`, each trial seen by its own camera
     (`trial_camera`: the same for its A and B); `layout`: which sample's layout A shows
     (LAYOUTS). Returns the run's record (the content of renders.json). Pictures whose inputs (scene, camera, code) are
@@ -106,6 +106,11 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
     e.g. lgp.reproduce's, whose workers have pydrake loaded already) renders the
     pictures in its own processes, one chunk per worker; otherwise `jobs` fresh
     processes are started (worth it for many pictures only).
+
+    `store`: a folder of pictures by the hash of their inputs (`picture_store`, in the
+    render cache): a picture found there is copied, not rendered, and a rendered one
+    is added. So a picture rendered for one set of trials (a run's cache folder,
+    `cache_folder`) is not rendered again for another set that holds the same trial.
 
     The folder is the user's: a picture's name, or renders.json, holding what no
     render run wrote (sha256 in renders.json), or a folder of other files and no
@@ -137,6 +142,8 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
             if prev and prev.get("key") == key and name in own:
                 rows[-1]["sha256"] = own[name]
                 continue
+            if store is not None and _from_store(store, key, stage / name):
+                continue
             scene_file = stage / f"{k}.pkl"
             scene_file.write_bytes(pickle.dumps(scene))
             todo.append((str(scene_file), str(stage / name), camera))
@@ -145,11 +152,52 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
         for r in rows:
             if "sha256" not in r:
                 r["sha256"] = sha256_of(stage / r["file"])
+        if store is not None:
+            for _, png, _ in todo:
+                _to_store(store, next(r["key"] for r in rows if r["file"] == Path(png).name), Path(png))
         record = _run_record(seed, layout, size, cameras, code, len(todo), time.perf_counter() - t0, rows)
         _move_in(out, stage, record, names)
     finally:
         remove_staging(stage)
     return record
+
+
+def picture_store() -> Path:
+    """The render cache's pictures by the hash of their inputs (scene, camera, code:
+    `_picture_key`), shared by every set of trials (`render_trials(store=...)`)."""
+    return render_cache_dir() / "by-key"
+
+
+def _from_store(store: Path, key: str, dest: Path) -> bool:
+    """Copy the stored picture of `key` to `dest` (True), or False when the store has
+    none (a regular file only: no link is followed)."""
+    import shutil
+
+    kept = regular_inside(Path(store), f"{key}.png")
+    if kept is None:
+        return False
+    shutil.copyfile(kept, dest)
+    return True
+
+
+def _to_store(store: Path, key: str, png: Path) -> None:
+    """Add a rendered picture to the store (written whole, then renamed in; one already
+    there is left as it is: the same inputs rendered it)."""
+    import shutil
+    import tempfile
+
+    store = Path(store)
+    store.mkdir(parents=True, exist_ok=True)
+    if (store / f"{key}.png").exists():
+        return
+    fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".tmp", dir=store)
+    os.close(fd)
+    try:
+        shutil.copyfile(png, tmp)
+        os.replace(tmp, store / f"{key}.png")
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 def _is_render_record(data) -> bool:
