@@ -214,30 +214,81 @@ def test_allowed_disagreements_is_the_binomial_tail_bound():
     assert tail(8) == pytest.approx(7.1e-4, rel=0.01) and tail(3) == pytest.approx(0.32, abs=0.005)
 
 
-@pytest.mark.slow  # every noisy scene in two engines
+#: The agreement check in two stages (a group-sequential design): first every other
+#: noisy scene (20 of 40, half of each structure's runs); at most EARLY_PASS
+#: disagreements there pass the engine, else all 40 are judged against
+#: allowed_disagreements(40) as before. Its error rates, exactly
+#: (test_the_two_stage_agreement_check_keeps_the_error_rates_of_the_40_scene_check):
+#: an engine at the claim's boundary (95%) fails with probability 7.0e-4 (7.1e-4 with
+#: all 40), one at 70% passes with 0.058 (0.055), and an engine that disagrees on 5%
+#: (2.5%) of scenes stops after the first stage with probability 0.74 (0.91).
+STAGE_1 = range(0, 40, 2)
+EARLY_PASS = 1
+
+
+def staged_agreement(a, b, stage_1=STAGE_1, early_pass=EARLY_PASS):
+    """(disagreements, scenes judged) of two engines' verdicts on the noisy scenes,
+    `a` and `b` callables of a list of scene indices -> verdicts: the first stage's
+    scenes, and every scene only when that stage holds more than `early_pass`."""
+    first = list(stage_1)
+    d1 = int(np.sum(np.array(a(first)) != np.array(b(first))))
+    if d1 <= early_pass:
+        return d1, len(first)
+    every = list(range(len(noisy_scenes())))
+    return int(np.sum(np.array(a(every)) != np.array(b(every)))), len(every)
+
+
+def test_the_two_stage_agreement_check_keeps_the_error_rates_of_the_40_scene_check():
+    """Closed forms of the staged design, summed term by term over the binomial:
+    P(pass) = P(D1 <= 1) + sum over d1 > 1 of P(D1 = d1) P(D2 <= 7 - d1), D1 ~ B(20, p)
+    and D2 ~ B(20, p) the disagreements in the two halves."""
+    from math import comb
+
+    def pmf(n, k, p):
+        return comb(n, k) * p**k * (1 - p) ** (n - k)
+
+    def passes(p, k=allowed_disagreements(40)):
+        early = sum(pmf(20, d, p) for d in range(EARLY_PASS + 1))
+        return early + sum(pmf(20, d1, p) * sum(pmf(20, d2, p) for d2 in range(k - d1 + 1))
+                           for d1 in range(EARLY_PASS + 1, k + 1))
+
+    fixed = lambda p: sum(pmf(40, d, p) for d in range(allowed_disagreements(40) + 1))  # noqa: E731
+    assert 1 - passes(AGREE_CLAIM) == pytest.approx(7.0e-4, rel=0.01) and 1 - passes(AGREE_CLAIM) <= FALSE_FAILURE
+    assert 1 - passes(AGREE_CLAIM) <= 1 - fixed(AGREE_CLAIM)  # never fails a faithful engine more often
+    assert passes(0.30) == pytest.approx(0.058, abs=5e-4) and fixed(0.30) == pytest.approx(0.055, abs=5e-4)
+    assert sum(pmf(20, d, 0.05) for d in range(EARLY_PASS + 1)) == pytest.approx(0.74, abs=0.005)
+    assert sum(pmf(20, d, 0.025) for d in range(EARLY_PASS + 1)) == pytest.approx(0.91, abs=0.005)
+    # the procedure: a first stage over the limit judges all 40 scenes
+    truth = {k: k % 2 == 0 for k in range(40)}
+    same, flipped = (lambda ks: [truth[k] for k in ks]), (lambda ks: [not truth[k] if k in (0, 2) else truth[k] for k in ks])
+    assert staged_agreement(same, same) == (0, 20)
+    assert staged_agreement(same, flipped) == (2, 40)
+    assert staged_agreement(same, flipped, early_pass=2) == (2, 20)
+
+
+@pytest.mark.slow  # the noisy scenes in two engines
 @pytest.mark.parametrize("other", engines(["drake", "physx", GAME]))
 def test_engines_agree_on_the_same_noisy_scenes(other):
-    """The 40 noisy scenes judged by MuJoCo and by `other`: at most
-    allowed_disagreements(40) = 7 verdicts differ. An engine that agrees with MuJoCo
-    on 95% of such scenes (the claim's boundary) fails with probability 7.1e-4
-    (binomial, test_allowed_disagreements_is_the_binomial_tail_bound), one at 98%
-    with 1.1e-6; one at 70% (the unfaithful Drake settings of docs/risk.md: 31-53%)
-    passes with probability 0.055 (at 50%: 2e-5)."""
-    every = range(len(noisy_scenes()))
-    a = np.array(noisy_verdicts("mujoco", every))
-    b = np.array(noisy_verdicts(other, every))
-    assert 0 < a.sum() < len(a), "the check needs both falls and stands"
-    wrong = int(np.sum(a != b))
-    assert wrong <= allowed_disagreements(len(a)), (
-        f"engines disagree on {wrong} of {len(a)} noisy scenes (mujoco {a.sum()} falls, {other} {b.sum()}): "
-        f"P(>= {wrong}) < {FALSE_FAILURE:g} if they disagreed on {AGREE_CLAIM:.0%}")
+    """The noisy scenes judged by MuJoCo and by `other`, in two stages
+    (staged_agreement): at most allowed_disagreements(40) = 7 verdicts of the 40
+    differ, or at most EARLY_PASS of the first stage's 20. An engine that agrees with
+    MuJoCo on 95% of such scenes (the claim's boundary) fails with probability 7.0e-4,
+    one at 70% (the unfaithful Drake settings of docs/risk.md: 31-53%) passes with
+    probability 0.058 (test_the_two_stage_agreement_check_keeps_the_error_rates_of_the_40_scene_check)."""
+    mujoco = noisy_verdicts("mujoco", STAGE_1)
+    assert 0 < sum(mujoco) < len(mujoco), "the check needs both falls and stands"
+    wrong, judged = staged_agreement(lambda ks: noisy_verdicts("mujoco", ks), lambda ks: noisy_verdicts(other, ks))
+    limit = EARLY_PASS if judged == len(STAGE_1) else allowed_disagreements(judged)
+    assert wrong <= limit, (
+        f"engines disagree on {wrong} of {judged} noisy scenes: P(>= {wrong}) < {FALSE_FAILURE:g} if they disagreed "
+        f"on {AGREE_CLAIM:.0%}")
 
 
 #: Which noisy scenes each engine runs in full 4 s: every one (MuJoCo, PhysX), or in
 #: Drake (seconds per full run: 4-6 CPU-s for a 3-block staircase, 10-13 for the
 #: 4-staircase and 6-tower) a standing 4-staircase and a falling and a standing
 #: 3-staircase (MuJoCo's verdicts). Their early-stopped runs are the agreement check's.
-EARLY_STOP_SCENES = {"mujoco": range(40), "drake": (13, 14, 18), "physx": range(40), GAME: range(40)}
+EARLY_STOP_SCENES = {"mujoco": range(40), "drake": (12, 14, 18), "physx": range(40), GAME: range(40)}
 
 
 @pytest.mark.parametrize("engine", [pytest.param(*p.values, marks=[*p.marks, pytest.mark.slow] if p.values[0] == "physx" else p.marks,
