@@ -346,8 +346,9 @@ def suite_studies(tmp_path_factory) -> dict:
 
     def build(root: Path) -> None:
         for task in ex.TASKS:
+            # one rendering process: two would each load pydrake and VTK again (about 6 CPU-s) for 52 pictures
             run = subprocess.run([sys.executable, "-m", "stimuli.experiment", "--task", task, "--out", str(root / task),
-                                  "--size", STUDY_SIZE], capture_output=True, text=True, env=os.environ.copy())
+                                  "--size", STUDY_SIZE, "--jobs", "1"], capture_output=True, text=True, env=os.environ.copy())
             assert run.returncode == 0, run.stderr[-3000:]
 
     root = built_once(tmp_path_factory, "studies", build)
