@@ -208,11 +208,20 @@ def sigma_units(rule: str, sigma: float) -> dict:
 # ----------------------------------------------------------------------------- the whole check
 
 
+def engine_rules(engine: str) -> tuple[str, ...]:
+    """The noise rules `engine` can run: the authors' x-only rule in a 2-D world
+    (box2dweb, box2d), the paper's 3-D rule too in a 3-D one."""
+    return BOX2D_RULES if engine in ENGINES_2D else RULES
+
+
 def analyse(repo, experiment: int, out, sigmas=DEFAULT_GRID, n_runs: int = 100, seed: int = 0, jobs: int = 2,
-            rules=RULES, cache_dir=None, log=None, fixed: dict | None = None, engine: str = "mujoco") -> dict:
-    """The whole check (module docstring). `fixed` ({rule: sigma}, e.g. the best sigmas
-    of another experiment's summary.json): r and RMSE at those sigmas too, the
-    held-out test of a sigma chosen elsewhere."""
+            rules=None, cache_dir=None, log=None, fixed: dict | None = None, engine: str = DEFAULT_ENGINE) -> dict:
+    """The whole check (module docstring), in `engine` (the command's default, the
+    authors' own Box2D) with `rules` (None: every rule the engine can run,
+    `engine_rules`). `fixed` ({rule: sigma}, e.g. the best sigmas of another
+    experiment's summary.json): r and RMSE at those sigmas too, the held-out test of
+    a sigma chosen elsewhere."""
+    rules = engine_rules(engine) if rules is None else tuple(rules)
     repo, out = Path(repo), Path(out)
     scenes = read_scenes(repo, experiment)  # bad input raises here, before anything is written
     pred = read_predictions(repo, experiment)
@@ -341,7 +350,7 @@ def main(argv=None) -> int:
 
         if args.engine not in WORLDS:
             raise MentalJengaError(f"unknown --engine {args.engine!r}; known: {', '.join(WORLDS)}")
-        known = BOX2D_RULES if args.engine in ENGINES_2D else RULES
+        known = engine_rules(args.engine)
         rules = known if args.rules is None else tuple(args.rules.split(","))
         bad = [r for r in rules if r not in known]
         if args.engine == "box2d":

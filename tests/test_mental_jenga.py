@@ -233,6 +233,18 @@ def test_removing_brick_0_reproduces_the_authors_fall_column_better_than_another
 
 
 @pytest.mark.slow
+def test_the_function_and_the_command_share_their_default_engine_and_its_rules():
+    # analyse() defaulted to MuJoCo with both rules while the command ran box2dweb
+    import inspect
+
+    from analysis import mental_jenga as mj
+
+    assert inspect.signature(mj.analyse).parameters["engine"].default == mj.DEFAULT_ENGINE == "box2dweb"
+    assert inspect.signature(mj.analyse).parameters["rules"].default is None  # the engine's own rules
+    assert mj.engine_rules("box2dweb") == mj.engine_rules("box2d") == ("authors-x",)
+    assert mj.engine_rules("mujoco") == mj.engine_rules("physx") == ("authors-x", "paper-3d")
+
+
 def test_the_whole_check_writes_fit_summary_and_figure_from_a_clone(tmp_path):
     """analysis.mental_jenga end to end on three hand-written scenes and four
     SIMULATED participants (made up here for the test, not data)."""
@@ -243,7 +255,7 @@ def test_the_whole_check_writes_fit_summary_and_figure_from_a_clone(tmp_path):
     repo = fake_repo(tmp_path, {1: "lone", 2: "stacked", 3: "overhang"}, pred)
     out = tmp_path / "fit"
     s = analyse(repo, 2, out, sigmas=(0.0, 0.1), n_runs=3, jobs=1, log=open("/dev/null", "w"),
-                fixed={"authors-x": 0.1, "paper-3d": 0.0})
+                fixed={"authors-x": 0.1, "paper-3d": 0.0}, engine="mujoco")  # a 3-D engine: both rules
     fit = pd.read_csv(out / "fit.csv")
     assert len(fit) == 4 and set(fit.rule) == {"authors-x", "paper-3d"}
     assert s["scenes_used"] == 3 and s["participants"] == 4 and s["linear_map"] is False
@@ -251,5 +263,5 @@ def test_the_whole_check_writes_fit_summary_and_figure_from_a_clone(tmp_path):
     assert fit[(fit.sigma == 0)].rmse.iloc[0] == pytest.approx(np.sqrt(np.mean((np.array([0, 1, 1]) - [0.25, 1.25, 1.25]) ** 2)))
     assert s["rules"]["paper-3d"]["at_fixed_sigma"]["sigma"] == 0.0
     assert (out / "scatter.png").stat().st_size > 10_000 and json.loads((out / "summary.json").read_text())["experiment"] == 2
-    again = analyse(repo, 2, out, sigmas=(0.0, 0.1), n_runs=3, jobs=1, log=open("/dev/null", "w"))
+    again = analyse(repo, 2, out, sigmas=(0.0, 0.1), n_runs=3, jobs=1, log=open("/dev/null", "w"), engine="mujoco")
     assert again["timing"]["computed"] == 0 and again["timing"]["cached"] == 6  # second run: every table from the cache
