@@ -345,11 +345,13 @@ def suite_studies(tmp_path_factory) -> dict:
     from stimuli import experiment as ex
 
     def build(root: Path) -> None:
-        for task in ex.TASKS:
-            # one rendering process: two would each load pydrake and VTK again (about 6 CPU-s) for 52 pictures
-            run = subprocess.run([sys.executable, "-m", "stimuli.experiment", "--task", task, "--out", str(root / task),
-                                  "--size", STUDY_SIZE, "--jobs", "1"], capture_output=True, text=True, env=os.environ.copy())
-            assert run.returncode == 0, run.stderr[-3000:]
+        from lgp.cli import run_cli
+        from stimuli.experiment.__main__ import PROG, main
+
+        for task in ex.TASKS:  # the command's own main, in this process: no interpreter, pydrake or VTK loaded
+            # again per study (the README's build runs it as a command); rendering in this process too
+            code = run_cli(main, ["--task", task, "--out", str(root / task), "--size", STUDY_SIZE, "--jobs", "1"], prog=PROG)
+            assert code == 0, f"python -m stimuli.experiment --task {task}: exit {code}"
 
     root = built_once(tmp_path_factory, "studies", build)
     return {task: root / task for task in ex.TASKS}
