@@ -36,14 +36,17 @@ def effort_key(trial, samples: int, seed: int, spec=None) -> str:
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, spec=None, log: bool = True,
-                  verbose: bool = True) -> pd.DataFrame:
+                  verbose: bool = True, replay_trials=(), replays_out: dict | None = None) -> pd.DataFrame:
     """Per (trial, sample) effort, one cached file per trial and lgp.planner.EffortSpec
     (None: the paper's pipeline with the default design).
 
     The layouts of every uncached trial are one stream of work units on the run's
     one executor (warm workers plan across trial boundaries); a trial's file is
     written as soon as its last layout arrives, so an interruption loses at most
-    the trials still in flight.
+    the trials still in flight. For the trials in `replay_trials` whose sample 0 is
+    planned here, the worker also records that plan's replay
+    (lgp.app.replays.effort_job) into `replays_out` {trial id: page}: the replay
+    stage then plans it no second time.
     """
     from models.effort import effort_of_unit, effort_table, effort_units
 
@@ -86,8 +89,22 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, spec=
         if log and verbose and t.id in tables and t.id not in rows:
             _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J s"
                  f" over {len(tables[t.id])} layouts  (cached)")
-    with bar:
-        executor.map(effort_of_unit, units, arrived)
+    replay = [replays_out is not None and u.sample == 0 and u.trial.id in replay_trials for u in units]
+    if any(replay):
+        from lgp.app.replays import effort_job
+
+        def arrived_with_page(k, result):
+            row, page = result
+            if page is not None:
+                replays_out[owner[k].id] = page
+            arrived(k, row)
+
+        first = replay.index(True)  # the one unit that also returns the replays' shared library
+        with bar:
+            executor.map(effort_job, [(u, r, k == first) for k, (u, r) in enumerate(zip(units, replay))], arrived_with_page)
+    else:
+        with bar:
+            executor.map(effort_of_unit, units, arrived)
     return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 

@@ -141,7 +141,12 @@ def effort_of_sample(trial, seed: int, sample: int, spec: EffortSpec = DEFAULT_E
     the paper's pipeline (lgp.planner.plan) or the search (lgp.search, within
     its budget). Raises PlanningError naming the trial, the sample and the failing action.
     """
-    result = plan_of_sample(trial, seed, sample, **spec.planner_options())
+    return effort_row(trial, seed, sample, plan_of_sample(trial, seed, sample, **spec.planner_options()))
+
+
+def effort_row(trial, seed: int, sample: int, result) -> dict:
+    """The effort table's row of the plan `result` of a trial's sample (effort_of_sample,
+    and lgp.app.replays, which records the same plan as the sample's replay)."""
     effort = kinetic_energy(result)
     if not np.isfinite(effort):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): effort is {effort}")
