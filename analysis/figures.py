@@ -338,6 +338,9 @@ def _finish(fig: Figure, title: str, datasets: Iterable[str], out_dir: str | Pat
     flat_title = title.replace("\n", ": ")
     with atomic_path(paths[0]) as tmp:
         fig.savefig(tmp, dpi=150, metadata={"Title": flat_title})
+    # The PDF keeps the layout the PNG's draw solved (axes within 0.2 pt of solving it
+    # again for the PDF's renderer, measured): solving it again was a third of the figure's time.
+    fig.set_layout_engine("none")
     with atomic_path(paths[1]) as tmp:
         fig.savefig(tmp, metadata={"Title": flat_title})
     return paths
