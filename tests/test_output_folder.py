@@ -16,7 +16,10 @@ from lgp.app.manifest import OutputFolderBusy, OutputLock, check_output_folder
 from lgp.atomic import write_bytes_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+def _env() -> dict:
+    """The environment of a subprocess, read when it starts (not at import: the suite's
+    render cache, conftest.suite_render_cache, is set after the modules are collected)."""
+    return {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
 # ----------------------------------------------------------------------------- item 3: the lock
@@ -35,7 +38,7 @@ def test_a_second_lock_on_a_folder_names_the_holder(tmp_path):
 def test_the_lock_is_released_when_its_holder_is_killed(tmp_path):
     holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from lgp.app.manifest import OutputLock\n"
                                f"with OutputLock({str(tmp_path)!r}, 'holder'):\n    print('held', flush=True); time.sleep(60)"],
-                              env=ENV, stdout=subprocess.PIPE, text=True)
+                              env=_env(), stdout=subprocess.PIPE, text=True)
     assert holder.stdout.readline().strip() == "held"
     with pytest.raises(OutputFolderBusy, match=f"process {holder.pid}: holder"):
         with OutputLock(tmp_path):
@@ -56,7 +59,7 @@ def test_a_run_in_a_held_folder_says_who_holds_it_and_touches_nothing(tmp_path):
     with OutputLock(out, "python -m lgp.reproduce --out out (the other run)"):
         t0 = time.monotonic()
         r = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--trials", "1E", "--samples", "1", "--n-sims", "2",
-                            "--out", str(out)], cwd=ROOT, env=ENV, capture_output=True, text=True, timeout=120)
+                            "--out", str(out)], cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=120)
     assert r.returncode == 1, r.stderr[-2000:]
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("python -m lgp.reproduce: error: ") and \
@@ -127,7 +130,7 @@ def test_two_real_runs_in_one_folder_one_runs_the_other_is_refused(tmp_path):
     out = tmp_path / "out"
     first = subprocess.Popen([sys.executable, "-m", "lgp.reproduce", "--trials", "7H", "4H", "--samples", "2", "--n-sims", "10",
                               "--sigmas", "0.05", "0.1", "--jobs", "1", "--no-replays", "--out", str(out)],
-                             cwd=ROOT, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             cwd=ROOT, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     while not (out / OutputLock.NAME).exists() and time.monotonic() < deadline and first.poll() is None:
         time.sleep(0.02)
@@ -137,7 +140,7 @@ def test_two_real_runs_in_one_folder_one_runs_the_other_is_refused(tmp_path):
     try:
         assert (out / OutputLock.NAME).exists(), "the first run never took the folder"
         second = subprocess.run([sys.executable, "-m", "lgp.reproduce", "--trials", "1E", "--samples", "2", "--n-sims", "8",
-                                 "--seed", "1", "--no-replays", "--out", str(out)], cwd=ROOT, env=ENV, capture_output=True,
+                                 "--seed", "1", "--no-replays", "--out", str(out)], cwd=ROOT, env=_env(), capture_output=True,
                                 text=True, timeout=120)
     finally:
         os.kill(first.pid, signal.SIGCONT)

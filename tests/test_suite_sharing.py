@@ -57,3 +57,26 @@ def test_a_failed_build_is_built_again_by_the_next_worker_that_asks(tmp_path_fac
     assert len(calls) == 1 and (folder / "ok").read_text() == "y"
     assert built_once(tmp_path_factory, "sharing-test", fails) == folder and len(calls) == 1  # built: read, not rebuilt
     assert folder.parent == suite_folder(tmp_path_factory)
+
+
+def test_the_suite_renders_into_its_own_cache_and_no_module_freezes_the_environment_before_it():
+    # conftest.suite_render_cache puts LGP_RENDER_CACHE in os.environ when the session
+    # starts; a module that copies os.environ at import (test_output_folder.py's ENV did)
+    # gave its subprocesses the user's ~/.cache instead: no module-level statement of a
+    # test module may read os.environ into a value (os.environ.get of another variable
+    # for a setting is fine).
+    import ast
+
+    from stimuli.render import render_cache_dir
+
+    assert render_cache_dir() == Path(os.environ["LGP_RENDER_CACHE"])
+    assert not str(render_cache_dir()).startswith(str(Path.home() / ".cache"))
+    frozen = []
+    for path in sorted(Path(__file__).parent.glob("*.py")):
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, (ast.Assign, ast.AnnAssign)) and node.value is not None:
+                uses = [n for n in ast.walk(node.value) if isinstance(n, ast.Attribute) and n.attr == "environ"]
+                getter = isinstance(node.value, ast.Call) and getattr(node.value.func, "attr", "") == "get"
+                if uses and not getter:
+                    frozen.append(f"{path.name}:{node.lineno}")
+    assert frozen == [], frozen
