@@ -33,7 +33,8 @@ from lgp.executor.cluster import check_address
 from lgp.app.progress import log as progress_log
 from lgp.app.config import RunConfig
 from lgp import owned
-from lgp.app.manifest import MANIFEST, OutputLock, check_output_folder, manifest_record, write_manifest
+from lgp.app.manifest import (MANIFEST, OutputLock, check_output_folder, checked_before_the_lock, manifest_record,
+                              write_manifest)
 from lgp.app.charts import num
 from lgp.app.result import RunResult
 from lgp.app.run import check_inputs
@@ -254,11 +255,7 @@ def reproduce(config: RunConfig, argv=None) -> RunResult:
     t0 = time.perf_counter()
     inputs = check_inputs(config)  # every input validated before anything is written or computed
     out = Path(config.out)
-    try:  # a folder of foreign files: refused now, before any work
-        check_output_folder(out, config.into_existing)
-    except owned.ForeignFiles:
-        OutputLock(out).refuse_if_held()  # unless a run holds it: what looks foreign may be its files half written
-        raise
+    checked_before_the_lock(check_output_folder, out, config.into_existing)  # a folder of foreign files: refused now, before any work
     created = _missing_folders(out)
     new_cache = not (out / "cache").exists()
     out.mkdir(parents=True, exist_ok=True)

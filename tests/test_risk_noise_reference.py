@@ -24,12 +24,7 @@ def reference_positions(scene, sigma, z):
     p0 = scene.positions
     if n == 0 or sigma == 0:
         return p0.copy()
-    delta_B = sigma * z * np.array([b.size for b in blocks])
-    c, s = np.cos([b.yaw for b in blocks]), np.sin([b.yaw for b in blocks])
-    p = p0.copy()
-    p[:, 0] += c * delta_B[:, 0] - s * delta_B[:, 1]
-    p[:, 1] += s * delta_B[:, 0] + c * delta_B[:, 1]
-    p[:, 2] += delta_B[:, 2]
+    p = perturbed_positions_raw(scene, sigma, z)
     solids = list(blocks) + list(scene.fixed)
     m = len(solids)
     bottom0 = np.array([o.bottom for o in solids])
@@ -96,7 +91,8 @@ TRIALS = {t.id: t.target for t in stimuli.load_paper()}
 
 def perturbed_positions_raw(scene, sigma, z):
     """Block centres moved by the noise alone (sigma * size * z in each block's yawed
-    frame), before any overlap is undone: (runs, n, 3)."""
+    frame), before any overlap is undone: (n, 3) for z (n, 3), (runs, n, 3) for z
+    (runs, n, 3)."""
     d = sigma * np.asarray(z, float) * np.array([b.size for b in scene.blocks])
     c, s = np.cos([b.yaw for b in scene.blocks]), np.sin([b.yaw for b in scene.blocks])
     return scene.positions + np.stack([c * d[..., 0] - s * d[..., 1], s * d[..., 0] + c * d[..., 1], d[..., 2]], axis=-1)

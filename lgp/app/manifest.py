@@ -101,6 +101,19 @@ class OutputFolderBusy(RuntimeError):
     """Another run holds the output folder's lock."""
 
 
+def checked_before_the_lock(check, out, *args):
+    """`check(out, *args)` (a command's refusal of a folder it may not write into),
+    made early, before the command takes the folder's OutputLock. Made without the
+    lock it may see a holder's files half written (its staging folder before its
+    mark): when it refuses and another run holds the folder, that run is named
+    instead (OutputFolderBusy), as the lock itself would."""
+    try:
+        return check(out, *args)
+    except Exception:
+        OutputLock(out).refuse_if_held()
+        raise
+
+
 class OutputLock:
     """An exclusive lock on an output folder for a whole run: ``<out>/.lgp-run.lock``,
     locked with flock (so the kernel releases it on any exit, ``kill -9``
@@ -164,10 +177,7 @@ class OutputLock:
 
     def refuse_if_held(self) -> None:
         """OutputFolderBusy if another run holds this folder's lock now; creates
-        nothing (no lock file: not held). A check made without the lock (the early
-        refusal of a folder of foreign files) sees the holder's files half written,
-        e.g. its staging folder before its mark: the holder, not those files, is
-        then the reason to refuse."""
+        nothing (no lock file: not held). For `checked_before_the_lock`."""
         import fcntl
 
         try:

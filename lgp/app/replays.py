@@ -90,22 +90,23 @@ def replay_cache_paths(trials, seed: int, cache: Cache | None, spec=None) -> dic
             for t in trials}
 
 
-def replays_to_make(trials, seed: int, cache: Cache | None, spec=None) -> set[str]:
-    """Ids of the trials whose replay the run's cache does not hold (the effort stage
-    records these from its own plans of sample 0: `effort_job`)."""
-    cached = replay_cache_paths(trials, seed, cache, spec)
+def replays_to_make(trials, cached: dict[str, Path]) -> set[str]:
+    """Ids of the trials whose replay the run's cache does not hold (`cached`:
+    replay_cache_paths; the effort stage records these from its own plans of sample
+    0: `effort_job`)."""
     return {t.id for t in trials if not (t.id in cached and cached[t.id].exists())}
 
 
 def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, executor=None, log=None,
-                  spec=None, made: dict | None = None) -> dict[str, Path]:
+                  spec=None, made: dict | None = None, cached: dict[str, Path] | None = None) -> dict[str, Path]:
     """``<out_dir>/<trial>.html`` for every trial: the replay of layout sample 0 of `seed`
     (planned with the lgp.planner.EffortSpec `spec`; None: the paper's).
 
     One plan per trial (the one behind row (trial, 0) of effort_samples.csv); a replay
     made before with the same trial, seed and code is copied from `cache`; `made`
     ({trial id: replay_page}) holds the pages the effort stage recorded from its own
-    plans, written as they are; the others are planned again.
+    plans, written as they are; the others are planned again. `cached`: the cache's
+    replay files (replay_cache_paths), if the caller has them.
     """
     from lgp.executor import SerialExecutor
     from lgp.planner import DEFAULT_EFFORT
@@ -115,7 +116,7 @@ def write_replays(trials, seed: int, out_dir, cache: Cache | None = None, execut
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     drake = library_versions(("drake",))["drake"]
-    cached = replay_cache_paths(trials, seed, cache, spec)
+    cached = replay_cache_paths(trials, seed, cache, spec) if cached is None else cached
     paths, todo = {trial.id: out_dir / f"{trial.id}.html" for trial in trials}, []
     lib = out_dir / REPLAY_LIBRARY
     lib_cache = cache.root / f"meshcat-{drake}.min.js" if cache is not None and cache.enabled else None

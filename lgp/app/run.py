@@ -23,7 +23,7 @@ from lgp.app.cache import RECORDED_LIBRARIES, ROOT, library_versions
 from lgp.app.config import RunConfig
 from lgp.app.manifest import TimedCache
 from lgp.app.progress import Stopwatch
-from lgp.app.replays import replays_to_make, write_replays
+from lgp.app.replays import replay_cache_paths, replays_to_make, write_replays
 from lgp.app.stages import check_targets, effort_tables, risk_tables
 from lgp.app.progress import log as _log
 from lgp.app.result import Context, RunRecord, RunResult, Section
@@ -147,7 +147,8 @@ def _compute(ctx: Context, enabled: list, clock: Stopwatch):
         model = config.risk_model
         check_targets(trials, model, cache)  # an unstable B fails now, not after the effort stage
         made: dict = {}  # replays the effort stage records from its own plans of sample 0
-        want = set() if config.no_replays else replays_to_make(trials, config.seed, cache, config.effort_spec)
+        cached = {} if config.no_replays else replay_cache_paths(trials, config.seed, cache, config.effort_spec)
+        want = set() if config.no_replays else replays_to_make(trials, cached)
         effort_samples = effort_tables(trials, config.samples, config.seed, executor, cache, verbose=config.verbose,
                                        spec=config.effort_spec, replay_trials=want, replays_out=made)
         clock.lap("effort")
@@ -161,7 +162,7 @@ def _compute(ctx: Context, enabled: list, clock: Stopwatch):
         replays = None
         if not config.no_replays:
             replays = write_replays(trials, config.seed, ctx.workdir / "replays", cache, executor, _log,
-                                    spec=config.effort_spec, made=made)
+                                    spec=config.effort_spec, made=made, cached=cached)
         clock.lap("replays")
         pictures = None
         if isinstance(executor, (ProcessExecutor, SerialExecutor)):  # local, warm workers: render the page's pictures there

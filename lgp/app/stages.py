@@ -48,7 +48,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, spec=
     (lgp.app.replays.effort_job) into `replays_out` {trial id: page}: the replay
     stage then plans it no second time.
     """
-    from models.effort import effort_of_unit, effort_table, effort_units
+    from lgp.app.replays import effort_job
+    from models.effort import effort_table, effort_units
 
     from lgp.planner import DEFAULT_EFFORT
 
@@ -90,21 +91,16 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, spec=
             _log(f"[effort {trials.index(t) + 1:2d}/{len(trials)}] {t.id:>3}: {tables[t.id]['effort'].mean():9.4f} J s"
                  f" over {len(tables[t.id])} layouts  (cached)")
     replay = [replays_out is not None and u.sample == 0 and u.trial.id in replay_trials for u in units]
-    if any(replay):
-        from lgp.app.replays import effort_job
+    first = replay.index(True) if any(replay) else -1  # the one unit that also returns the replays' shared library
 
-        def arrived_with_page(k, result):
-            row, page = result
-            if page is not None:
-                replays_out[owner[k].id] = page
-            arrived(k, row)
+    def arrived_with_page(k, result):
+        row, page = result
+        if page is not None:
+            replays_out[owner[k].id] = page
+        arrived(k, row)
 
-        first = replay.index(True)  # the one unit that also returns the replays' shared library
-        with bar:
-            executor.map(effort_job, [(u, r, k == first) for k, (u, r) in enumerate(zip(units, replay))], arrived_with_page)
-    else:
-        with bar:
-            executor.map(effort_of_unit, units, arrived)
+    with bar:
+        executor.map(effort_job, [(u, r, k == first) for k, (u, r) in enumerate(zip(units, replay))], arrived_with_page)
     return pd.concat([tables[t.id] for t in trials], ignore_index=True)
 
 

@@ -321,16 +321,12 @@ def build_study(plan: StudyPlan, out: str | Path, size=None, jobs: int = 2, jato
     (lgp/owned.py): a rebuild replaces only the earlier build's own files, and a
     failed build leaves the earlier one byte-identical."""
     from lgp import owned
-    from lgp.app.manifest import OutputLock
+    from lgp.app.manifest import OutputLock, checked_before_the_lock
     from stimuli.render import DEFAULT_SIZE
 
     log = log or (lambda m: print(m, file=sys.stderr, flush=True))
     out = Path(out)
-    try:
-        check_output_dir(out, into_existing)
-    except StudyError:
-        OutputLock(out).refuse_if_held()  # unless a build holds it: what looks foreign may be its files half written
-        raise
+    checked_before_the_lock(check_output_dir, out, into_existing)
     nm = ensure_jspsych(log)
     renders, record = _render(plan, size or DEFAULT_SIZE, jobs, log)
     created = []

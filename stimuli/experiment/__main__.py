@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from lgp import cli
 from stimuli import experiment as ex
@@ -11,6 +12,7 @@ PROG = "python -m stimuli.experiment"
 
 
 def main(argv=None) -> int:
+    from lgp.app.manifest import checked_before_the_lock
     from stimuli.render import DEFAULT_SIZE, parse_size
 
     p = cli.parser(PROG, description=ex.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -35,11 +37,8 @@ def main(argv=None) -> int:
     args.jobs = cli.capped_jobs(args.jobs, p.prog, args.oversubscribe)
     try:  # every input is checked before anything is written: a bad one is a usage error (exit 2)
         plan = ex.plan_study(args.task, args.stimuli, (args.anchor_easy, args.anchor_hard), args.seed, args.order_seed)
-        ex.check_output_dir(__import__("pathlib").Path(args.out), args.into_existing)
+        checked_before_the_lock(ex.check_output_dir, Path(args.out), args.into_existing)
     except ex.StudyError as e:
-        from lgp.app.manifest import OutputLock
-
-        OutputLock(args.out).refuse_if_held()  # a build holding the folder, not its half-written files, is the reason
         p.error(str(e))
     if not plan.has_pairs:
         print(f"{PROG}: note: no easy/hard pairs (<n>E and <n>H) among the trials: pair counterbalancing is off, "

@@ -153,8 +153,9 @@ def render_trials(trials, out_dir: str | Path, seed: int = 0, size: tuple[int, i
             if "sha256" not in r:
                 r["sha256"] = sha256_of(stage / r["file"])
         if store is not None:
+            key_of = {r["file"]: r["key"] for r in rows}
             for _, png, _ in todo:
-                _to_store(store, next(r["key"] for r in rows if r["file"] == Path(png).name), Path(png))
+                _to_store(store, key_of[Path(png).name], Path(png))
         record = _run_record(seed, layout, size, cameras, code, len(todo), time.perf_counter() - t0, rows)
         _move_in(out, stage, record, names)
     finally:
@@ -181,23 +182,17 @@ def _from_store(store: Path, key: str, dest: Path) -> bool:
 
 
 def _to_store(store: Path, key: str, png: Path) -> None:
-    """Add a rendered picture to the store (written whole, then renamed in; one already
-    there is left as it is: the same inputs rendered it)."""
+    """Add a rendered picture to the store (lgp.atomic: written whole, then renamed in;
+    one already there is left as it is: the same inputs rendered it)."""
     import shutil
-    import tempfile
 
-    store = Path(store)
-    store.mkdir(parents=True, exist_ok=True)
-    if (store / f"{key}.png").exists():
+    from lgp.atomic import atomic_path
+
+    kept = Path(store) / f"{key}.png"
+    if kept.exists():
         return
-    fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".tmp", dir=store)
-    os.close(fd)
-    try:
+    with atomic_path(kept) as tmp:
         shutil.copyfile(png, tmp)
-        os.replace(tmp, store / f"{key}.png")
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def _is_render_record(data) -> bool:
