@@ -25,14 +25,17 @@ def effort_key_inputs() -> dict:
             "libraries": library_versions(("drake", "numpy", "scipy", "pandas"))}
 
 
-def effort_key(trial, samples: int, seed: int, spec=None) -> str:
+def effort_key(trial, samples: int, seed: int, spec=None, inputs: dict | None = None) -> str:
     """The cache key of one trial's effort table: the trial file, M, the seed, the
     lgp.planner.EffortSpec (None: the paper's; EffortSpec.key: the design and,
-    for the search, the planner and its budget), and effort_key_inputs()."""
+    for the search, the planner and its budget), and `inputs` (None:
+    effort_key_inputs(); a caller keying many trials computes it once: hashing the
+    code's import closure is most of a key's cost)."""
     from lgp.planner import DEFAULT_EFFORT
 
     spec = DEFAULT_EFFORT if spec is None else spec
-    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, **spec.key(), **effort_key_inputs())
+    inputs = effort_key_inputs() if inputs is None else inputs
+    return input_key(trial=trial.id, digest=trial.digest, samples=samples, seed=seed, **spec.key(), **inputs)
 
 
 def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, spec=None, log: bool = True,
@@ -54,7 +57,8 @@ def effort_tables(trials, samples: int, seed: int, executor, cache: Cache, spec=
     from lgp.planner import DEFAULT_EFFORT
 
     spec = DEFAULT_EFFORT if spec is None else spec
-    keys = {t.id: effort_key(t, samples, seed, spec) for t in trials}
+    inputs = effort_key_inputs()  # once per stage, not per trial (24 import closures hashed: 1 s of a cached run)
+    keys = {t.id: effort_key(t, samples, seed, spec, inputs) for t in trials}
     tables: dict[str, pd.DataFrame] = {}
     for t in trials:
         cached = cache.get("effort", keys[t.id])
