@@ -6,6 +6,7 @@
     python bench/test_times.py after.csv --over 0.4       # fast-subset tests over 0.4 CPU-s (candidates for slow)
     python bench/test_times.py after.csv --over 0.3 --write-slow    # ... added to tests/slow_cases.txt (conftest marks them)
     python bench/test_times.py --count                    # tests and asserts in tests/ (AST), for before/after notes
+    python bench/test_times.py after.csv --write-file-seconds     # each file's wall seconds -> tests/file_seconds.csv
 
 CPU = the test's own CPU seconds plus its children's (subprocesses, pool workers it
 waited for). A test's wall time on idle cores is about its CPU time when it runs
@@ -63,6 +64,20 @@ def count_asserts(folder: Path = ROOT / "tests") -> tuple[int, int, int]:
 
 
 SLOW_CASES = ROOT / "tests" / "slow_cases.txt"
+FILE_SECONDS = ROOT / "tests" / "file_seconds.csv"
+
+
+def write_file_seconds(rows: dict[str, dict], path: Path = FILE_SECONDS) -> None:
+    """Each test file's wall seconds (the sum over its tests) to `path`, longest first:
+    the order tests/conftest.py hands the files to the workers (longest_files_first)."""
+    seconds: dict[str, float] = defaultdict(float)
+    for nodeid, row in rows.items():
+        if nodeid != "<collection>":
+            seconds[nodeid.split("::")[0].split("/")[-1]] += row["wall"]
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["file", "seconds"])
+        w.writerows((name, round(s, 1)) for name, s in sorted(seconds.items(), key=lambda kv: (-kv[1], kv[0])))
 
 
 def write_slow(over: list, source: str, path: Path = SLOW_CASES) -> None:
@@ -87,6 +102,8 @@ def main(argv=None) -> int:
     p.add_argument("--count", action="store_true", help="count test functions and asserts in tests/")
     p.add_argument("--write-slow", action="store_true",
                    help="add the fast-subset cases over --over CPU-s to tests/slow_cases.txt (entries there are kept)")
+    p.add_argument("--write-file-seconds", action="store_true",
+                   help="write each test file's wall seconds of the last CSV (a whole-suite run) to tests/file_seconds.csv")
     args = p.parse_args(argv)
     if args.count:
         f, c, a = count_asserts()
@@ -116,6 +133,8 @@ def main(argv=None) -> int:
             print(f"{v['cpu']:8.2f}  {k}")
         if args.write_slow:
             write_slow(over, args.csv[-1].name)
+    if args.write_file_seconds:
+        write_file_seconds(last)
     return 0
 
 

@@ -69,11 +69,45 @@ def case_key(item) -> str:
     return f"{Path(str(item.fspath)).name}::{item.name}"
 
 
+#: Each test file's wall seconds in a whole-suite run (now: the mean of two in-place
+#: runs' per-test timelines on the two workers; `python bench/test_times.py CSV
+#: --write-file-seconds` writes it from bench/pytest_cpu.py's CSV): the order in which
+#: the files are handed out.
+FILE_SECONDS = Path(__file__).with_name("file_seconds.csv")
+
+
+def file_seconds(path: Path = FILE_SECONDS) -> dict[str, float]:
+    """{test file name: seconds} of FILE_SECONDS ({} if it is missing)."""
+    if not path.exists():
+        return {}
+    import csv
+
+    with path.open() as f:
+        return {row["file"]: float(row["seconds"]) for row in csv.DictReader(f)}
+
+
+def longest_files_first(items) -> None:
+    """Sort `items` (in place) by their file's FILE_SECONDS, longest first, each file's
+    own order kept; a file not listed counts as the median. With pyproject's
+    `--dist loadfile --no-loadscope-reorder` the workers take the files in this order,
+    one at a time: the last files handed out are the short ones, so the two workers end
+    together (xdist's default order, by the number of tests in a file, handed out the
+    long end-to-end files last: in one fresh-clone run one worker ran alone for most of
+    its last minute, 140 idle core-s of 1015)."""
+    seconds = file_seconds()
+    default = float(np.median(list(seconds.values()))) if seconds else 0.0
+    first_seen: dict[str, int] = {}
+    for item in items:
+        first_seen.setdefault(Path(str(item.fspath)).name, len(first_seen))
+    items.sort(key=lambda item: (-seconds.get(Path(str(item.fspath)).name, default), first_seen[Path(str(item.fspath)).name]))
+
+
 def pytest_collection_modifyitems(items):
     """Slow: a case run with the Drake or a PhysX engine (a parameter "drake",
     "physx", "physx:..."): Drake's hydroelastic contact at 1 ms steps costs seconds
     per scene, and PhysX is an optional extra; the fast subset checks MuJoCo. And
-    every case SLOW_CASES lists (measured over the fast subset's share)."""
+    every case SLOW_CASES lists (measured over the fast subset's share). Then the
+    files longest first (`longest_files_first`)."""
     listed = slow_cases()
     for item in items:
         params = getattr(getattr(item, "callspec", None), "params", {})
@@ -81,6 +115,7 @@ def pytest_collection_modifyitems(items):
         if (any(isinstance(v, str) and (v == "drake" or v.split(":")[0] == "physx") for v in params.values())
                 or key in listed or key.split("[", 1)[0] in listed):
             item.add_marker(pytest.mark.slow)
+    longest_files_first(items)
 
 
 @functools.lru_cache(maxsize=None)
