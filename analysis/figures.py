@@ -383,7 +383,7 @@ def plot_model_comparison(summary: pd.DataFrame, out_dir: str | Path, stem: str 
                 if (model, scheme) not in first.index.droplevel("dataset"):
                     continue
                 rows = first.loc[(model, scheme)].reindex(datasets)
-                shown = rows[value].notna().to_numpy() if value in rows else np.zeros(len(datasets), bool)
+                shown = rows[value].notna().to_numpy()
                 if not shown.any():
                     continue
                 rows = rows[shown]
@@ -418,9 +418,9 @@ def plot_model_comparison(summary: pd.DataFrame, out_dir: str | Path, stem: str 
         bars(ax, gain, "gain", "gain_low", "gain_high",
              [m for m in ("full", "effort+height", "effort+stacked") if m in set(gain["model"])])
         ax.set_ylabel("RMSE of effort-only minus\nthe model's (z units)")
-        ax.set_title("Gain over effort-only (Eq. 1 and effort + a heuristic): above 0 it predicts better. In sample it "
+        ax.set_title("Gain over effort-only (Eq. 1 and effort + a heuristic): above 0 it predicts better.\nIn sample it "
                      "cannot fall below 0; out of sample it can. Whiskers: bootstrap interval centred on the gain",
-                     fontsize=9)
+                     fontsize=9)  # two lines: as one, wider than the axes, it ran off the figure's left edge
     n_boot = int(summary["n_boot"].max()) if "n_boot" in summary and summary["n_boot"].notna().any() else 0
     title = ("Models in sample and out of sample (sigma chosen inside each fold); bars: full sample, whiskers: 95% "
              f"interval over {n_boot} bootstrap resamples, centred on the bar")

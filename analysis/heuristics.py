@@ -60,15 +60,13 @@ def target_features(target, block_edge: float | None = None) -> dict[str, float]
 def plan_features(trial, samples: int, seed: int) -> dict[str, float]:
     """distance and actions of one trial, averaged over its layouts of A (one
     layout when A is not random), each layout drawn as the effort stage draws it."""
-    from lgp.assignment import assign_blocks, assignment_distance
-    from lgp.symbolic import symbolic_plan
-    from models.effort import sample_rng
+    from lgp.assignment import assignment_distance
+    from models.effort import skeleton_of_sample
 
     dist, actions = [], []
     for i in (range(samples) if trial.initial.is_random else [0]):
-        initial = trial.sample_initial(sample_rng(seed, i))
-        plan = symbolic_plan(initial, trial.target, assign_blocks(initial, trial.target))
-        dist.append(assignment_distance(initial, trial.target, plan.assignment))
+        plan = skeleton_of_sample(trial, seed, i)
+        dist.append(assignment_distance(plan.initial, trial.target, plan.assignment))
         actions.append(len(plan.actions))
     return {"distance": float(np.mean(dist)), "actions": float(np.mean(actions))}
 

@@ -86,20 +86,25 @@ def file_seconds(path: Path = FILE_SECONDS) -> dict[str, float]:
         return {row["file"]: float(row["seconds"]) for row in csv.DictReader(f)}
 
 
-def longest_files_first(items) -> None:
+def longest_files_first(items, seconds: dict[str, float] | None = None) -> None:
     """Sort `items` (in place) by their file's FILE_SECONDS, longest first, each file's
     own order kept; a file not listed counts as the median. With pyproject's
     `--dist loadfile --no-loadscope-reorder` the workers take the files in this order,
     one at a time: the last files handed out are the short ones, so the two workers end
     together (xdist's default order, by the number of tests in a file, handed out the
     long end-to-end files last: in one fresh-clone run one worker ran alone for most of
-    its last minute, 140 idle core-s of 1015)."""
-    seconds = file_seconds()
+    its last minute, 140 idle core-s of 1015). `seconds`: {file name: s} instead of FILE_SECONDS."""
+    seconds = file_seconds() if seconds is None else seconds
     default = float(np.median(list(seconds.values()))) if seconds else 0.0
     first_seen: dict[str, int] = {}
     for item in items:
         first_seen.setdefault(Path(str(item.fspath)).name, len(first_seen))
-    items.sort(key=lambda item: (-seconds.get(Path(str(item.fspath)).name, default), first_seen[Path(str(item.fspath)).name]))
+
+    def rank(item) -> tuple[float, int]:
+        name = Path(str(item.fspath)).name
+        return -seconds.get(name, default), first_seen[name]
+
+    items.sort(key=rank)
 
 
 def pytest_collection_modifyitems(items):

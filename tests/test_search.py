@@ -16,7 +16,7 @@ from lgp.scene import Block, FixedBox, Scene
 from lgp.planner import EffortSpec
 from lgp.search import Budget, SearchError, carry_bound, search, skeleton_bound
 from lgp.symbolic import Place
-from models.effort import kinetic_energy, sample_rng
+from models.effort import kinetic_energy, sample_rng, skeleton_of_sample
 from plan_checker import box_depth, check_plan
 
 REARRANGE = Path(stimuli.__file__).parent / "rearrange"
@@ -116,23 +116,13 @@ def run_efforts(quick_run) -> dict[tuple[str, int], float]:
     return {(r.trial, int(r.sample)): float(r.effort) for r in table.itertuples()}
 
 
-def _skeleton(trial, sample: int):
-    """The paper pipeline's skeleton of layout `sample` of seed 0 (assignment and
-    symbolic plan, no motion)."""
-    from lgp.assignment import assign_blocks
-    from lgp.symbolic import symbolic_plan
-
-    A = trial.sample_initial(sample_rng(0, sample))
-    return symbolic_plan(A, trial.target, assign_blocks(A, trial.target))
-
-
 @pytest.mark.slow
 def test_lower_bound_is_below_komo_effort_on_every_paper_trial(run_efforts):
     ratios = {}
     for trial_id in stimuli.trial_ids():
         trial = stimuli.load_trial(trial_id)
         for sample in (0, 1):
-            e, b = run_efforts[trial_id, sample], skeleton_bound(_skeleton(trial, sample))
+            e, b = run_efforts[trial_id, sample], skeleton_bound(skeleton_of_sample(trial, 0, sample))
             assert b <= e, (trial_id, sample, b, e)
             ratios[trial_id, sample] = b / e
     # not vacuous: the bound is at least 2/3 of KOMO's effort everywhere

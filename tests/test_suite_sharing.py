@@ -82,25 +82,23 @@ def test_the_suite_renders_into_its_own_cache_and_no_module_freezes_the_environm
     assert frozen == [], frozen
 
 
-def test_the_files_are_handed_out_longest_first_each_in_its_own_order(tmp_path, monkeypatch):
+def test_the_files_are_handed_out_longest_first_each_in_its_own_order(tmp_path):
     import conftest
     from types import SimpleNamespace
 
     table = tmp_path / "seconds.csv"
     table.write_text("file,seconds\ntest_long.py,90\ntest_mid.py,10\ntest_short.py,1\n")
-    monkeypatch.setattr(conftest, "FILE_SECONDS", table)
-    monkeypatch.setattr(conftest.file_seconds, "__defaults__", (table,))
     items = [SimpleNamespace(fspath=f"/x/{f}", name=n) for f, n in
              [("test_short.py", "a"), ("test_new.py", "b"), ("test_long.py", "c"), ("test_long.py", "d"),
               ("test_mid.py", "e"), ("test_new.py", "f")]]
-    conftest.longest_files_first(items)
+    conftest.longest_files_first(items, conftest.file_seconds(table))
     # the unlisted test_new.py counts as the median (10 s), tied with test_mid.py: the
     # file collected first goes first
     assert [(Path(i.fspath).name, i.name) for i in items] == [
         ("test_long.py", "c"), ("test_long.py", "d"), ("test_new.py", "b"), ("test_new.py", "f"), ("test_mid.py", "e"),
         ("test_short.py", "a")]
     # every file of the suite is listed, with a time
-    listed = conftest.file_seconds(Path(__file__).with_name("file_seconds.csv"))
+    listed = conftest.file_seconds()
     missing = {p.name for p in Path(__file__).parent.glob("test_*.py")} - set(listed)
     assert not missing, (f"{sorted(missing)}: not in tests/file_seconds.csv (bench/test_times.py CSV "
                          "--write-file-seconds writes it from a whole-suite run of bench/pytest_cpu.py)")

@@ -134,6 +134,17 @@ def plan_of_sample(trial, seed: int, sample: int, **planner_options):
         raise PlanningError(f"trial {trial.id} sample {sample} (seed {seed}): {e}", e.action) from e
 
 
+def skeleton_of_sample(trial, seed: int, sample: int):
+    """The paper pipeline's symbolic plan (assignment and grasp/place order, no
+    motion) of the layout plan_of_sample draws for (trial, sample): what the work
+    shares, the plan features and the bound read without KOMO."""
+    from lgp.assignment import assign_blocks
+    from lgp.symbolic import symbolic_plan
+
+    initial = trial.sample_initial(sample_rng(seed, sample))
+    return symbolic_plan(initial, trial.target, assign_blocks(initial, trial.target))
+
+
 def effort_of_sample(trial, seed: int, sample: int, spec: EffortSpec = DEFAULT_EFFORT) -> dict:
     """One row of the effort table: plan the sample's layout, integrate kinetic energy.
 

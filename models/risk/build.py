@@ -136,14 +136,11 @@ def plan_stages(trial, seed: int = 0, sample: int = 0, approach_height: float | 
     assignment and the symbolic plan are computed (no KOMO). `approach_height`
     (m; None: lgp.planner.APPROACH) is the effort run's, for the work shares.
     """
-    from lgp.assignment import assign_blocks
-    from lgp.symbolic import Place, symbolic_plan
-    from models.effort import sample_rng
+    from lgp.symbolic import Place
+    from models.effort import skeleton_of_sample
 
-    rng = sample_rng(seed, sample)
-    initial = trial.sample_initial(rng)
-    target = trial.target
-    plan = symbolic_plan(initial, target, assign_blocks(initial, target))
+    plan = skeleton_of_sample(trial, seed, sample)
+    initial, target = plan.initial, plan.target
     if not plan.actions:
         raise BuildStageError(f"trial {trial.id} sample {sample}: the plan has no action, so no stage")
     owner = {b: a for a, b in plan.assignment.items()}  # B name -> A name
