@@ -32,7 +32,7 @@ _SCRIPT = textwrap.dedent("""
 
     MODE, MARK = sys.argv[1], Path(sys.argv[2])
 
-    def busy(seconds):
+    def busy(seconds):  # computes: its worker's CPU time moves
         t = time.monotonic()
         while time.monotonic() - t < seconds:
             pass
@@ -41,7 +41,10 @@ _SCRIPT = textwrap.dedent("""
         if k == 5 and (MODE == "stop-always" or (MODE == "stop-once" and not MARK.exists())):
             MARK.touch()
             os.kill(os.getpid(), signal.SIGSTOP)  # as `kill -STOP <worker>` from another shell
-        busy(4.0 if (MODE == "slow" and k == 5) else 0.1)
+        if MODE == "slow" and k == 5:
+            busy(4.0)  # longer than the stall limit, on the CPU all along
+        else:
+            time.sleep(0.1)  # a unit that takes a while (its index moves: progress; asleep, the suite's other worker keeps the CPU)
         return k * k
 
     if __name__ == "__main__":
