@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
-from common import cpu_model, machine, write_section  # noqa: E402
+from common import cpu_model, machine, speed_probe, write_section  # noqa: E402
 
 from lgp.cli import COMMAND_TIMES, measured_time  # noqa: E402
 
@@ -47,7 +47,8 @@ COMMANDS = {
 #: What a plain `python bench/commands.py` runs: not the tests nor the suite (tests/test_readme.py checks
 #: that the README quotes this file, so they pass only once it does).
 DEFAULT = ("quick", "full", "show", "sheet")
-FIELDS = ["command", "jobs", "cache", "wall_s", "cpu_s", "cores", "cpu_model", "load_before", "load_after", "date"]
+FIELDS = ["command", "jobs", "cache", "wall_s", "cpu_s", "cores", "cpu_model", "load_before", "load_after",
+          "probe_before_s", "probe_after_s", "date"]
 
 
 def _load() -> str:
@@ -63,7 +64,7 @@ def run(command: str, jobs: int, folder: Path) -> dict:
         argv += ["-p", "no:cacheprovider", str(ROOT / "tests")]
     # cold means every cache empty, the render cache (~/.cache/lgp-difficulty/renders) too
     env = {**os.environ, "PYTHONPATH": str(ROOT), "LGP_RENDER_CACHE": str(folder / "render-cache")}
-    load_before = _load()
+    load_before, probe_before = _load(), speed_probe()
     before = os.times()
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", *argv], cwd=folder, env=env, capture_output=True, text=True)
@@ -74,7 +75,7 @@ def run(command: str, jobs: int, folder: Path) -> dict:
     cpu = (after.children_user - before.children_user) + (after.children_system - before.children_system)
     return {"command": command, "jobs": jobs, "wall_s": round(wall, 1), "cpu_s": round(cpu, 1),
             "cores": os.cpu_count(), "cpu_model": cpu_model(), "load_before": load_before, "load_after": _load(),
-            "date": datetime.date.today().isoformat()}
+            "probe_before_s": round(probe_before, 3), "probe_after_s": round(speed_probe(), 3), "date": datetime.date.today().isoformat()}
 
 
 def _write_csv(path: Path, old: list[dict], rows: list[dict]) -> list[dict]:
@@ -88,7 +89,7 @@ def _write_csv(path: Path, old: list[dict], rows: list[dict]) -> list[dict]:
         w = csv.DictWriter(f, fieldnames=FIELDS)
         w.writeheader()
         for r in table:
-            w.writerow({k: r[k] for k in FIELDS})
+            w.writerow({k: r.get(k, "") for k in FIELDS})  # rows from before the probe: none
     return table
 
 
@@ -122,12 +123,17 @@ def main(argv=None) -> int:
              "How long the README's commands take; written by `python bench/commands.py` (rows: "
              f"`{args.csv.relative_to(ROOT)}`). Each row is a fresh subprocess in a fresh folder, one after the other "
              "in one benchmark run; cold = empty cache, warm = the same command again. `--jobs 1` stands for a "
-             "1-core machine. The machine was shared with other jobs: the load average is written per row.", "",
+             "1-core machine. The machine was shared with other jobs: the load average is written per row, and "
+             "the speed probe's CPU seconds before and after (bench/common.py `speed_probe`: a fixed one-thread job; "
+             "the same code took 0.26-0.36 s within a minute here, and a suite's CPU seconds moved by a quarter "
+             "between two hours): a slower machine shows in both.", "",
              f"- before: {start}", f"- after: {end}", "",
-             "| command | --jobs | cache | wall (s) | CPU (s) | load before -> after |", "|---|---|---|---|---|---|"]
+             "| command | --jobs | cache | wall (s) | CPU (s) | load before -> after | probe before -> after (s) |",
+             "|---|---|---|---|---|---|---|"]
     for r in table:
+        probe = f"{r['probe_before_s']} -> {r['probe_after_s']}" if r.get("probe_before_s") else "not measured"
         lines.append(f"| `{r['command']}` | {r['jobs']} | {r['cache']} | {r['wall_s']} | {r['cpu_s']} | "
-                     f"{r['load_before']} -> {r['load_after']} |")
+                     f"{r['load_before']} -> {r['load_after']} | {probe} |")
     lines += ["", "Quoted as (README, `--help`, docs/results.md, through `lgp.cli.measured_time`):", ""]
     lines += [f"- `{COMMANDS[n][0]}`: {measured_time(COMMANDS[n][0], args.csv)}" for n in COMMANDS
               if measured_time(COMMANDS[n][0], args.csv)]

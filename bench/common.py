@@ -10,6 +10,33 @@ import signal
 from pathlib import Path
 
 
+#: The speed probe's work: a fixed mix of interpreted Python and numpy (the two
+#: kinds of work of the suite), one thread.
+PROBE_LOOPS = 4_000_000
+
+
+def speed_probe(repeats: int = 3) -> float:
+    """CPU seconds of a fixed single-thread job (the least of `repeats`): the same
+    code takes more CPU seconds when the machine's cores are slower (a shared host's
+    neighbours, a lower clock), so a timing from another hour can be put beside it.
+    About 0.3 s on this project's 2-core AMD EPYC machine."""
+    import time
+
+    import numpy as np
+
+    a = np.random.default_rng(0).random((30, 30)) + 30 * np.eye(30)  # small: no BLAS threads
+    best = float("inf")
+    for _ in range(repeats):
+        t = time.process_time()
+        x = 0
+        for i in range(PROBE_LOOPS):
+            x += i * i % 7
+        for _ in range(6000):
+            np.linalg.solve(a, a[:, 0])
+        best = min(best, time.process_time() - t)
+    return best
+
+
 def cpu_model() -> str:
     """The CPU's model name from /proc/cpuinfo (the architecture where there is none)."""
     try:
