@@ -93,6 +93,12 @@ def _write_csv(path: Path, old: list[dict], rows: list[dict]) -> list[dict]:
     return table
 
 
+def _shown(path: Path) -> str:
+    """`path` relative to the repository when it lies inside it, else as given."""
+    path = path.resolve()
+    return path.relative_to(ROOT).as_posix() if path.is_relative_to(ROOT) else str(path)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--only", nargs="+", choices=list(COMMANDS), help="run only these (other rows of the CSV are kept)")
@@ -121,7 +127,7 @@ def main(argv=None) -> int:
     table = _write_csv(args.csv, old, rows)
     lines = ["## commands", "",
              "How long the README's commands take; written by `python bench/commands.py` (rows: "
-             f"`{args.csv.relative_to(ROOT)}`). Each row is a fresh subprocess in a fresh folder, one after the other "
+             f"`{_shown(args.csv)}`). Each row is a fresh subprocess in a fresh folder, one after the other "
              "in one benchmark run; cold = empty cache, warm = the same command again. `--jobs 1` stands for a "
              "1-core machine. The machine was shared with other jobs: the load average is written per row, and "
              "the speed probe's CPU seconds before and after (bench/common.py `speed_probe`: a fixed one-thread job; "

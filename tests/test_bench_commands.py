@@ -46,3 +46,26 @@ def test_a_failing_command_keeps_its_earlier_rows_and_a_measured_one_replaces_th
     new_quick = [r for r in kept if r["command"] == quick]
     assert len(new_quick) == len(bench.COMMANDS["quick"][1])
     assert {r["cpu_model"] for r in new_quick} == {"this CPU"}
+
+
+def test_a_table_outside_the_repository_is_written_and_named_as_given(tmp_path, monkeypatch):
+    """--csv and --out in a scratch folder (a trial run of the bench): the rows and the
+    section are written there, the section naming the CSV by its path; rows measured
+    with the speed probe show it, earlier ones say it was not measured."""
+    bench = _commands_module(monkeypatch)
+    quick, sheet = bench.COMMANDS["quick"][0], bench.COMMANDS["sheet"][0]
+    earlier = dict(command=quick, jobs=2, cache="cold", wall_s=9.0, cpu_s=9.0, cores=2, cpu_model="CPU",
+                   load_before="1 1 1", load_after="1 1 1", date="2026-01-01")
+    times = tmp_path / "times.csv"
+    with times.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=[k for k in bench.FIELDS if not k.startswith("probe")])
+        w.writeheader()
+        w.writerow(earlier)
+    monkeypatch.setattr(bench, "run", lambda command, jobs, folder: dict(
+        earlier, command=command, jobs=jobs, wall_s=1.5, cpu_s=1.6, probe_before_s=0.3, probe_after_s=0.31))
+    out = tmp_path / "b.md"
+    assert bench.main(["--only", "sheet", "--csv", str(times), "--out", str(out)]) == 0
+    text = out.read_text()
+    assert f"rows: `{times.resolve()}`" in text
+    assert f"| `{sheet}` | 1 | cold | 1.5 | 1.6 | 1 1 1 -> 1 1 1 | 0.3 -> 0.31 |" in text
+    assert f"| `{quick}` | 2 | cold | 9.0 | 9.0 | 1 1 1 -> 1 1 1 | not measured |" in text
