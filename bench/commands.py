@@ -75,7 +75,8 @@ def run(command: str, jobs: int, folder: Path) -> dict:
     cpu = (after.children_user - before.children_user) + (after.children_system - before.children_system)
     return {"command": command, "jobs": jobs, "wall_s": round(wall, 1), "cpu_s": round(cpu, 1),
             "cores": os.cpu_count(), "cpu_model": cpu_model(), "load_before": load_before, "load_after": _load(),
-            "probe_before_s": round(probe_before, 3), "probe_after_s": round(speed_probe(), 3), "date": datetime.date.today().isoformat()}
+            "probe_before_s": round(probe_before, 3), "probe_after_s": round(speed_probe(), 3),
+            "date": datetime.date.today().isoformat()}
 
 
 def _write_csv(path: Path, old: list[dict], rows: list[dict]) -> list[dict]:
@@ -131,8 +132,8 @@ def main(argv=None) -> int:
              "in one benchmark run; cold = empty cache, warm = the same command again. `--jobs 1` stands for a "
              "1-core machine. The machine was shared with other jobs: the load average is written per row, and "
              "the speed probe's CPU seconds before and after (bench/common.py `speed_probe`: a fixed one-thread job; "
-             "the same code took 0.26-0.36 s within a minute here, and a suite's CPU seconds moved by a quarter "
-             "between two hours): a slower machine shows in both.", "",
+             "it took 0.26-0.41 s within minutes here, while the same suite's CPU seconds moved by up to a "
+             "third between two hours): a much slower machine shows in both.", "",
              f"- before: {start}", f"- after: {end}", "",
              "| command | --jobs | cache | wall (s) | CPU (s) | load before -> after | probe before -> after (s) |",
              "|---|---|---|---|---|---|---|"]
